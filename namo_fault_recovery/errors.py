@@ -1,0 +1,17 @@
+"""Exceptions raised by the numerical core, kept free of ROS."""
+
+
+class ConfigError(ValueError):
+    """
+    A configuration file is missing, unreadable or invalid.
+
+    The message always names the file and the offending key, so that a robot team can
+    fix the file without reading code.
+    """
+
+    def __init__(self, file, key, problem):
+        self.file = str(file) if file is not None else '<memory>'
+        self.key = key
+        self.problem = problem
+        where = f"{self.file}: key '{key}'" if key else self.file
+        super().__init__(f'{where}: {problem}')

@@ -1,0 +1,162 @@
+"""The arm model: the DH table, joint names and limits, loaded from a validated YAML file."""
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import _yaml_checks as chk
+from .errors import ConfigError
+from .resources import config_path, DEFAULT_ROBOT_FILE
+
+ARMS = ('right', 'left')
+N_JOINTS = 7
+_LENGTH_SCALES = {'mm': 1.0, 'm': 1000.0}
+
+
+@dataclass(frozen=True)
+class ArmModel:
+    """One 7-DOF arm: its joint names, limits (rad) and whether it is mirrored."""
+
+    side: str
+    joint_names: tuple
+    lower: np.ndarray
+    upper: np.ndarray
+    mirrored: bool
+
+    def clip(self, q):
+        """Clip joint angles (rad) into this arm's limits."""
+        return np.clip(q, self.lower, self.upper)
+
+
+@dataclass(frozen=True)
+class RobotModel:
+    """
+    Namo's two arms, sharing one modified-DH chain (the left one mirrored).
+
+    Lengths are in millimetres and angles in radians in memory, whatever the file used.
+    """
+
+    name: str
+    theta_offset: np.ndarray
+    d: np.ndarray
+    a_prev: np.ndarray
+    alpha_prev: np.ndarray
+    end_effector: np.ndarray
+    elbow_frame: int
+    wrist_frame: int
+    arms: dict
+    source: str = '<memory>'
+
+    @property
+    def joint_names(self):
+        """All 14 joint names, right arm first."""
+        return self.arms['right'].joint_names + self.arms['left'].joint_names
+
+    def locate_joint(self, name):
+        """Return ``(arm, index)`` for a joint name, or raise KeyError naming the choices."""
+        for side in ARMS:
+            names = self.arms[side].joint_names
+            if name in names:
+                return side, names.index(name)
+        raise KeyError(f'unknown joint {name!r}; expected one of {", ".join(self.joint_names)}')
+
+    def within_limits(self, side, index, angle, tol=1e-9):
+        """Return True if ``angle`` (rad) lies within the limits of that joint."""
+        arm = self.arms[side]
+        return arm.lower[index] - tol <= angle <= arm.upper[index] + tol
+
+
+def load_robot(path=None):
+    """Load and validate a robot file; the packaged Namo model when ``path`` is None."""
+    path = Path(path) if path is not None else config_path(DEFAULT_ROBOT_FILE)
+    data = chk.load_yaml(path)
+    name = str(data.get('name', path.stem))
+
+    units = chk.require(data, 'units', path)
+    length_unit = chk.require(units, 'length', path, 'units')
+    if length_unit not in _LENGTH_SCALES:
+        raise ConfigError(path, 'units.length',
+                          f"unknown length unit {length_unit!r}; expected 'mm' or 'm'")
+    length_scale = _LENGTH_SCALES[length_unit]
+    angle_scale = chk.as_angle_scale(chk.require(units, 'angle', path, 'units'),
+                                     path, 'units.angle')
+
+    dh = chk.require(data, 'dh', path)
+    convention = chk.require(dh, 'convention', path, 'dh')
+    if convention != 'modified':
+        raise ConfigError(path, 'dh.convention',
+                          f"unknown DH convention {convention!r}; expected 'modified'")
+    columns = chk.require(dh, 'columns', path, 'dh')
+    expected_columns = ['theta_offset', 'd', 'a_prev', 'alpha_prev']
+    if columns != expected_columns:
+        raise ConfigError(path, 'dh.columns', f'expected {expected_columns}, got {columns!r}')
+    rows = chk.require(dh, 'joints', path, 'dh')
+    if not isinstance(rows, list) or len(rows) != N_JOINTS:
+        raise ConfigError(path, 'dh.joints',
+                          f'expected a list of {N_JOINTS} rows, got {rows!r}')
+    table = np.array([chk.as_row(r, 4, path, f'dh.joints[{i}]') for i, r in enumerate(rows)])
+    ee = np.array(chk.as_row(chk.require(dh, 'end_effector', path, 'dh'), 4, path,
+                             'dh.end_effector'))
+
+    landmarks = chk.require(data, 'landmarks', path)
+    frames = {}
+    for key in ('elbow', 'wrist'):
+        value = chk.require(landmarks, key, path, 'landmarks')
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= N_JOINTS:
+            raise ConfigError(path, f'landmarks.{key}',
+                              f'expected a frame number 1..{N_JOINTS}, got {value!r}')
+        frames[key] = value
+
+    arms_cfg = chk.require(data, 'arms', path)
+    arms = {}
+    seen = {}
+    for side in ARMS:
+        arm_cfg = chk.require(arms_cfg, side, path, 'arms')
+        where = f'arms.{side}'
+        names = chk.require(arm_cfg, 'joints', path, where)
+        if not isinstance(names, list) or len(names) != N_JOINTS:
+            raise ConfigError(path, f'{where}.joints',
+                              f'expected {N_JOINTS} joint names, got {names!r}')
+        for i, joint in enumerate(names):
+            if not isinstance(joint, str) or not joint:
+                raise ConfigError(path, f'{where}.joints[{i}]',
+                                  f'expected a joint name, got {joint!r}')
+            if joint in seen:
+                raise ConfigError(path, f'{where}.joints[{i}]',
+                                  f'duplicate joint name {joint!r} (also {seen[joint]})')
+            seen[joint] = f'{where}.joints[{i}]'
+        limits = chk.require(arm_cfg, 'limits', path, where)
+        if not isinstance(limits, list) or len(limits) != N_JOINTS:
+            raise ConfigError(path, f'{where}.limits',
+                              f'expected {N_JOINTS} [lower, upper] pairs, got {limits!r}')
+        lims = np.array([chk.as_row(lim, 2, path, f'{where}.limits[{i}]')
+                         for i, lim in enumerate(limits)]) * angle_scale
+        for i, (lo, hi) in enumerate(lims):
+            if lo > hi:
+                raise ConfigError(path, f'{where}.limits[{i}]',
+                                  f'lower limit {limits[i][0]} is above upper limit '
+                                  f'{limits[i][1]}')
+        mirror_of = arm_cfg.get('mirror_of')
+        if mirror_of not in (None, 'right') or (side == 'right' and mirror_of is not None):
+            raise ConfigError(path, f'{where}.mirror_of',
+                              f'only the left arm may mirror the right arm; got {mirror_of!r}')
+        arms[side] = ArmModel(side, tuple(names), lims[:, 0].copy(), lims[:, 1].copy(),
+                              mirrored=mirror_of == 'right')
+    if not arms['left'].mirrored:
+        raise ConfigError(path, 'arms.left.mirror_of',
+                          "missing key: the left arm must be declared 'mirror_of: right'")
+
+    return RobotModel(
+        name=name,
+        theta_offset=table[:, 0] * angle_scale,
+        d=table[:, 1] * length_scale,
+        a_prev=table[:, 2] * length_scale,
+        alpha_prev=table[:, 3] * angle_scale,
+        end_effector=np.array([ee[0] * angle_scale, ee[1] * length_scale,
+                               ee[2] * length_scale, ee[3] * angle_scale]),
+        elbow_frame=frames['elbow'],
+        wrist_frame=frames['wrist'],
+        arms=arms,
+        source=str(path),
+    )

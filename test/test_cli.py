@@ -1,0 +1,65 @@
+"""The namo-recovery command line: happy paths and one-line errors with exit code 2."""
+
+import io
+import json
+import subprocess
+import sys
+
+from namo_fault_recovery.cli import main
+import pytest
+
+
+def run(argv):
+    out = io.StringIO()
+    return main(argv, out), out.getvalue()
+
+
+def test_show_prints_library_and_landmarks():
+    code, text = run(['show'])
+    assert code == 0
+    for name in ('wai', 'bye', 'salute', 'side_invite'):
+        assert f'\n{name}:' in text
+    assert '(  222.66,   -18.89,   -94.33)' in text   # Wai right wrist
+    assert '(  222.66,    18.89,   -94.33)' in text   # its mirror, the left wrist
+    assert '52.50,  -14.25' in text                    # Table 2 lock averages
+
+
+def test_score_check_value():
+    code, text = run(['score', '--gesture', 'wai', '--right', '30', '-14.25', '-45', '90',
+                      '-10', '-45', '45'])
+    assert code == 0
+    assert 'score 61.9614' in text
+    assert 'wrist_lr' in text
+
+
+def test_score_json():
+    code, text = run(['score', '--gesture', 'bye', '--right', '46', '-11', '24', '95', '-53',
+                      '-32', '41', '--json'])
+    doc = json.loads(text)
+    assert code == 0 and doc['score'] == pytest.approx(0, abs=1e-9)
+    assert set(doc['components']) >= {'elbow', 'wrist', 'tip', 'palm'}
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['score', '--gesture', 'hug', '--right'] + ['0'] * 7, "unknown gesture 'hug'"),
+    (['score', '--gesture', 'wai', '--right', '1', '2'], 'expected 7 angles'),
+    (['score', '--gesture', 'wai', '--right'] + ['x'] * 7, 'could not convert'),
+    (['score', '--gesture', 'wai', '--right'] + ['nan'] * 7, 'finite'),
+    (['dance'], 'invalid choice'),
+    (['--robot-file', '/nonexistent.yaml', 'show'], 'cannot read file'),
+])
+def test_bad_arguments_one_line_exit_2(capsys, argv, message):
+    code, _ = run(argv)
+    err = capsys.readouterr().err
+    assert code == 2
+    assert message in err
+    assert err.count('\n') == 1 and 'Traceback' not in err
+
+
+def test_console_entry_point_runs_as_a_process():
+    proc = subprocess.run([sys.executable, '-m', 'namo_fault_recovery.cli', 'score',
+                           '--gesture', 'nope', '--right'] + ['0'] * 7,
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert proc.stderr.startswith('namo-recovery: error:')
+    assert 'Traceback' not in proc.stderr
