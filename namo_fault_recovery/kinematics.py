@@ -13,6 +13,9 @@ import numpy as np
 from .robot_model import ARMS, N_JOINTS
 
 
+_PLANS = {}   # id(robot) -> (robot, link constants); robots are immutable
+
+
 class ArmLandmarks(NamedTuple):
     """Landmarks of one arm for a batch of configurations."""
 
@@ -35,41 +38,64 @@ def as_joint_array(q, name='q'):
     return arr
 
 
-def _chain(robot, q):
-    """Run the right-arm chain on q of shape (N, 7); return landmarks of shape (N, ...)."""
+def _link_plan(robot):
+    """Per-link constants, with exact 0/+-1 for the common right-angle twists."""
+    cached = _PLANS.get(id(robot))
+    if cached is not None and cached[0] is robot:
+        return cached[1]
+    plan = []
+    for i in range(N_JOINTS):
+        ca, sa = np.cos(robot.alpha_prev[i]), np.sin(robot.alpha_prev[i])
+        ca = 0.0 if abs(ca) < 1e-12 else ca
+        sa = 0.0 if abs(sa) < 1e-12 else sa
+        plan.append((float(robot.a_prev[i]), float(robot.d[i]), ca, sa))
+    _PLANS[id(robot)] = (robot, plan)
+    return plan
+
+
+def _chain(robot, q, axes=None, origins=None):
+    """
+    Run the right-arm chain on q of shape (N, 7); return landmarks of shape (N, ...).
+
+    If ``axes``/``origins`` (N, 7, 3) are given, each joint's rotation axis (the z axis
+    of its frame) and a point on it (the frame origin) are written there.
+    """
     n = q.shape[0]
-    ca = np.cos(robot.alpha_prev)
-    sa = np.sin(robot.alpha_prev)
     # Columns of the accumulated rotation, each (N, 3); position (N, 3).
-    x_col = np.zeros((n, 3))
-    x_col[:, 0] = 1.0
-    y_col = np.zeros((n, 3))
-    y_col[:, 1] = 1.0
-    z_col = np.zeros((n, 3))
-    z_col[:, 2] = 1.0
+    eye = np.zeros((3, n, 3))
+    eye[0, :, 0] = eye[1, :, 1] = eye[2, :, 2] = 1.0
+    x_col, y_col, z_col = eye
     pos = np.zeros((n, 3))
-    theta = q + robot.theta_offset
+    theta = (q + robot.theta_offset).T
     cos_t = np.cos(theta)[:, :, None]
     sin_t = np.sin(theta)[:, :, None]
     elbow = wrist = None
-    for i in range(N_JOINTS):
+    for i, (a, d, ca, sa) in enumerate(_link_plan(robot)):
         # R_new = R . RotX(alpha) . RotZ(theta); p_new = p + R . (a, -sa d, ca d).
-        pos = pos + robot.a_prev[i] * x_col
-        y_rot = ca[i] * y_col + sa[i] * z_col
-        z_col = ca[i] * z_col - sa[i] * y_col
-        c, s = cos_t[:, i], sin_t[:, i]
+        if a:
+            pos = pos + a * x_col
+        if ca == 0.0:
+            y_rot, z_col = sa * z_col, -sa * y_col
+        elif sa == 0.0:
+            y_rot, z_col = ca * y_col, ca * z_col
+        else:
+            y_rot, z_col = ca * y_col + sa * z_col, ca * z_col - sa * y_col
+        c, s = cos_t[i], sin_t[i]
         x_col, y_col = c * x_col + s * y_rot, c * y_rot - s * x_col
-        pos = pos + robot.d[i] * z_col
+        if d:
+            pos = pos + d * z_col
+        if axes is not None:
+            axes[:, i] = z_col
+            origins[:, i] = pos
         if i + 1 == robot.elbow_frame:
             elbow = pos
         if i + 1 == robot.wrist_frame:
             wrist = pos
     palm = np.stack((x_col, y_col, z_col), axis=-1)
-    th_e, d_e, a_e, al_e = robot.end_effector
-    # The end-effector frame only moves the origin: tip = p7 + R7 . (a, -sa d, ca d).
-    z_e = np.cos(al_e) * z_col - np.sin(al_e) * y_col
-    tip = pos + a_e * x_col + d_e * z_e
-    del th_e  # a constant rotation about z does not move the tip
+    _, d_e, a_e, al_e = robot.end_effector
+    # The end-effector frame only moves the origin: tip = p7 + R7 . (a, -sa d, ca d);
+    # its constant rotation about z does not move the tip.
+    tip = pos + a_e * x_col + d_e * (np.cos(al_e) * z_col - np.sin(al_e) * y_col)
     return elbow, wrist, tip, palm
 
 
@@ -91,6 +117,11 @@ def forward_kinematics(robot, q, arm='right'):
     if arm not in ARMS:
         raise ValueError(f'arm: expected one of {ARMS}, got {arm!r}')
     q = as_joint_array(q)
+    return _forward(robot, q, arm)
+
+
+def _forward(robot, q, arm):
+    """Forward kinematics without input checks, for callers that already validated q."""
     lead = q.shape[:-1]
     elbow, wrist, tip, palm = _chain(robot, q.reshape(-1, N_JOINTS))
     lm = ArmLandmarks(elbow.reshape(lead + (3,)), wrist.reshape(lead + (3,)),
@@ -107,3 +138,44 @@ def shoulder_position(robot, arm='right'):
     if robot.arms[arm].mirrored:
         pos[1] = -pos[1]
     return pos
+
+
+class ArmJacobian(NamedTuple):
+    """Derivatives of one arm's landmarks with respect to its 7 joint angles."""
+
+    positions: np.ndarray   # (N, 3, 7, 3): d(elbow, wrist, tip) / dq_i
+    axes: np.ndarray        # (N, 7, 3): angular velocity of the palm per unit dq_i
+
+
+def forward_kinematics_jacobian(robot, q, arm='right'):
+    """
+    Return ``(landmarks, jacobian)`` for angles q (N, 7) in one vectorised pass.
+
+    For a revolute joint i with axis z_i through o_i, a point p downstream moves as
+    ``z_i x (p - o_i)`` and the palm rotates about z_i.  For the mirrored left arm the
+    axes become ``-M z_i`` (a reflection reverses the sense of rotation).
+    """
+    q = np.atleast_2d(as_joint_array(q))
+    return _forward_jacobian(robot, q, arm)
+
+
+def _forward_jacobian(robot, q, arm):
+    n = q.shape[0]
+    axes = np.empty((n, N_JOINTS, 3))
+    origins = np.empty((n, N_JOINTS, 3))
+    lm = ArmLandmarks(*_chain(robot, q, axes, origins))
+    pts = np.stack((lm.elbow, lm.wrist, lm.tip), axis=1)            # (N, 3, 3)
+    arm_vec = pts[:, :, None, :] - origins[:, None, :, :]              # (N, 3, 7, 3)
+    ax = axes[:, None]
+    jac = np.empty_like(arm_vec)    # z_i x (p - o_i), written out: np.cross is slower here
+    jac[..., 0] = ax[..., 1] * arm_vec[..., 2] - ax[..., 2] * arm_vec[..., 1]
+    jac[..., 1] = ax[..., 2] * arm_vec[..., 0] - ax[..., 0] * arm_vec[..., 2]
+    jac[..., 2] = ax[..., 0] * arm_vec[..., 1] - ax[..., 1] * arm_vec[..., 0]
+    reach = np.array([robot.elbow_frame, robot.wrist_frame, N_JOINTS])
+    jac[:, np.arange(N_JOINTS)[None, :] >= reach[:, None]] = 0.0     # upstream joints only
+    if robot.arms[arm].mirrored:
+        flip = np.array([1.0, -1.0, 1.0])
+        lm = mirror_landmarks(lm)
+        jac = jac * flip
+        axes = -axes * flip
+    return lm, ArmJacobian(jac, axes)

@@ -15,7 +15,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .kinematics import as_joint_array, forward_kinematics
+from .kinematics import (_forward, _forward_jacobian, ArmLandmarks, as_joint_array,
+                         forward_kinematics)
 
 COMPONENTS = ('elbow', 'wrist', 'tip', 'palm', 'wrist_lr', 'tip_lr')
 _ARM_COMPONENTS = 4
@@ -125,6 +126,9 @@ class SimilarityScore:
         self._ref_wlr = np.linalg.norm(self._ref_r.wrist - self._ref_l.wrist, axis=-1)
         self._ref_tlr = np.linalg.norm(self._ref_r.tip - self._ref_l.tip, axis=-1)
         self._w = np.array([self.weights.vector(t.two_handed) for t in targets])
+        self._ref_stack = {
+            side: (np.stack((lm.elbow, lm.wrist, lm.tip), axis=1), lm.palm)
+            for side, lm in (('right', self._ref_r), ('left', self._ref_l))}
         self._uses_left = bool(np.any(self._arm_mask[:, 1]) or np.any(self._two))
 
     @classmethod
@@ -142,31 +146,61 @@ class SimilarityScore:
         Score candidates; return totals (N,) and, with ``breakdown``, the components.
 
         ``q_right`` and ``q_left`` have shape (N, 7) or (7,) (broadcast); ``q_left=None``
-        uses each target's reference left arm.  ``target`` is an int or an (N,) array of
-        target indices.  The breakdown is a dict of (N,) arrays keyed by COMPONENTS, plus
-        the per-arm parts under ``'right'`` and ``'left'`` as (N, 4) arrays.
+        uses each target's reference left arm.  Instead of angles, an arm that does not
+        move may be given as per-target ArmLandmarks (leading shape (n_targets,)), which
+        saves its forward kinematics.  ``target`` is an int or an (N,) array of target
+        indices.  The breakdown is a dict of (N,) arrays keyed by COMPONENTS, plus the
+        per-arm parts under ``'right'`` and ``'left'`` as (N, 4) arrays.
         """
-        q_right = np.atleast_2d(as_joint_array(q_right, 'q_right'))
         target = np.asarray(target, dtype=int)
-        n = max(q_right.shape[0], target.size)
+        if target.ndim > 1 or np.any(target < 0) or np.any(target >= len(self.targets)):
+            raise ValueError(f'target: expected indices in 0..{len(self.targets) - 1}, '
+                             f'got {target!r}')
+        if not isinstance(q_right, ArmLandmarks):
+            q_right = np.atleast_2d(as_joint_array(q_right, 'q_right'))
+        if q_left is not None and not isinstance(q_left, ArmLandmarks):
+            q_left = np.atleast_2d(as_joint_array(q_left, 'q_left'))
+        rows = [target.size]
+        for q in (q_right, q_left):
+            if q is not None and not isinstance(q, ArmLandmarks):
+                rows.append(q.shape[0])
+        n = max(rows)
         target = np.broadcast_to(target, (n,))
-        lm_r = forward_kinematics(self.robot, q_right, 'right')
+        if not isinstance(q_right, ArmLandmarks):
+            q_right = np.broadcast_to(q_right, (n, q_right.shape[-1]))
+        if q_left is not None and not isinstance(q_left, ArmLandmarks):
+            q_left = np.broadcast_to(q_left, (n, q_left.shape[-1]))
+        return self.evaluate(q_right, q_left, target, breakdown)
+
+    def evaluate(self, q_right, q_left, target, breakdown=False):
+        """
+        Score without input checks: the hot path of the optimisers.
+
+        ``q_right``/``q_left`` are (N, 7) angle arrays, per-target ArmLandmarks, or None
+        for the left arm's reference; ``target`` is an (N,) index array.
+        """
+        n = target.shape[0]
+        lm_r = (_take(q_right, target) if isinstance(q_right, ArmLandmarks)
+                else _forward(self.robot, q_right, 'right'))
         comps = np.zeros((n, len(COMPONENTS)))
-        right = self._arm_terms(lm_r, self._ref_r, target)
+        right = self._arm_terms(lm_r, 'right', target)
         comps[:, :_ARM_COMPONENTS] += right * self._arm_mask[target, 0:1]
         left = np.zeros_like(right)
         if self._uses_left:
             if q_left is None:
                 lm_l = _take(self._ref_l, target)
+            elif isinstance(q_left, ArmLandmarks):
+                lm_l = _take(q_left, target)
             else:
-                q_left = np.atleast_2d(as_joint_array(q_left, 'q_left'))
-                lm_l = forward_kinematics(self.robot, q_left, 'left')
-            left = self._arm_terms(lm_l, self._ref_l, target)
+                lm_l = _forward(self.robot, q_left, 'left')
+            left = self._arm_terms(lm_l, 'left', target)
             comps[:, :_ARM_COMPONENTS] += left * self._arm_mask[target, 1:2]
             two = self._two[target]
             if np.any(two):
-                wlr = np.linalg.norm(lm_r.wrist - lm_l.wrist, axis=-1)
-                tlr = np.linalg.norm(lm_r.tip - lm_l.tip, axis=-1)
+                dw = lm_r.wrist - lm_l.wrist
+                dt = lm_r.tip - lm_l.tip
+                wlr = np.sqrt(np.einsum('ni,ni->n', dw, dw))
+                tlr = np.sqrt(np.einsum('ni,ni->n', dt, dt))
                 comps[:, 4] = np.where(two, np.abs(wlr - self._ref_wlr[target]), 0.0)
                 comps[:, 5] = np.where(two, np.abs(tlr - self._ref_tlr[target]), 0.0)
         total = np.einsum('nc,nc->n', comps, self._w[target])
@@ -177,13 +211,96 @@ class SimilarityScore:
         parts['left'] = left
         return total, parts
 
-    @staticmethod
-    def _arm_terms(lm, ref, target):
-        out = np.empty((np.broadcast_shapes(lm.elbow.shape[:1], target.shape)[0], 4))
-        out[:, 0] = np.linalg.norm(lm.elbow - ref.elbow[target], axis=-1)
-        out[:, 1] = np.linalg.norm(lm.wrist - ref.wrist[target], axis=-1)
-        out[:, 2] = np.linalg.norm(lm.tip - ref.tip[target], axis=-1)
-        out[:, 3] = rotation_angle_deg(lm.palm, ref.palm[target])
+    def value_and_grad(self, q_right, q_left, target, smooth=0.0):
+        """
+        Return totals (N,) and their gradients (N, 7) with respect to each arm's angles.
+
+        Arguments as for :meth:`evaluate`; an arm given as landmarks (or None) does not
+        move and gets a zero gradient.  Where a distance is exactly zero its derivative
+        is taken as 0 (a subgradient).  With ``smooth`` = eps > 0 every distance, angle and
+        left-right gap |t| is replaced by sqrt(t^2 + eps^2) - eps, which removes the kinks
+        at zero (each term moves by less than eps) so that quasi-Newton polishing
+        converges quickly.
+        """
+        n = target.shape[0]
+        lms, jacs = {}, {}
+        for side, q in (('right', q_right), ('left', q_left)):
+            if q is None:
+                lms[side] = _take(self._ref_l if side == 'left' else self._ref_r, target)
+            elif isinstance(q, ArmLandmarks):
+                lms[side] = _take(q, target)
+            else:
+                lms[side], jacs[side] = _forward_jacobian(self.robot, q, side)
+        w = self._w[target]
+        total = np.zeros(n)
+        grads = {side: np.zeros((n, 7)) for side in ('right', 'left')}
+        for k, side in enumerate(('right', 'left')):
+            if k == 1 and not self._uses_left:
+                break
+            mask = self._arm_mask[target, k]
+            terms, d_terms = self._arm_terms_grad(lms[side], side, target, jacs.get(side))
+            if smooth:
+                soft = np.sqrt(terms ** 2 + smooth ** 2)
+                if d_terms is not None:
+                    d_terms = d_terms * (terms / soft)[..., None]
+                terms = soft - smooth
+            total += mask * np.einsum('nc,nc->n', terms, w[:, :_ARM_COMPONENTS])
+            if d_terms is not None:
+                grads[side] += (mask[:, None]
+                                * np.einsum('nc,nci->ni', w[:, :_ARM_COMPONENTS], d_terms))
+        two = self._two[target]
+        if self._uses_left and np.any(two):
+            for c, attr, ref in ((4, 'wrist', self._ref_wlr), (5, 'tip', self._ref_tlr)):
+                diff = getattr(lms['right'], attr) - getattr(lms['left'], attr)
+                dist = np.sqrt(np.einsum('ni,ni->n', diff, diff))
+                gap = dist - ref[target]
+                if smooth:
+                    soft = np.sqrt(gap ** 2 + smooth ** 2)
+                    value, slope = soft - smooth, gap / soft
+                else:
+                    value, slope = np.abs(gap), np.sign(gap)
+                total += np.where(two, w[:, c] * value, 0.0)
+                unit = diff / np.where(dist > 0, dist, 1.0)[:, None]
+                coef = np.where(two, w[:, c] * slope, 0.0)[:, None]
+                row = 1 if attr == 'wrist' else 2
+                for side, sign in (('right', 1.0), ('left', -1.0)):
+                    if side in jacs:
+                        grads[side] += sign * coef * np.einsum(
+                            'nc,nic->ni', unit, jacs[side].positions[:, row])
+        return total, grads['right'], grads['left']
+
+    def _arm_terms_grad(self, lm, side, target, jac):
+        ref_pos, ref_rot = self._ref_stack[side]
+        diff = np.stack((lm.elbow, lm.wrist, lm.tip), axis=1) - ref_pos[target]
+        dist = np.sqrt(np.einsum('nij,nij->ni', diff, diff))
+        rdiff = lm.palm - ref_rot[target]
+        frob = np.sqrt(np.einsum('nij,nij->n', rdiff, rdiff))
+        half = np.minimum(frob * _FROB_TO_ANGLE, 1.0)
+        terms = np.empty((target.shape[0], _ARM_COMPONENTS))
+        terms[:, :3] = dist
+        terms[:, 3] = np.degrees(2.0 * np.arcsin(half))
+        if jac is None:
+            return terms, None
+        d_terms = np.empty((target.shape[0], _ARM_COMPONENTS, 7))
+        unit = diff / np.where(dist > 0, dist, 1.0)[..., None]
+        d_terms[:, :3] = np.einsum('nlc,nlic->nli', unit, jac.positions)
+        # d|R - Rr|_F / dq_i = -tr([z_i]x R Rr^T) / |R - Rr|_F = -z_i . v / |R - Rr|_F.
+        a = lm.palm @ np.swapaxes(ref_rot[target], -1, -2)
+        v = np.stack((a[:, 1, 2] - a[:, 2, 1], a[:, 2, 0] - a[:, 0, 2],
+                      a[:, 0, 1] - a[:, 1, 0]), axis=-1)
+        d_frob = -np.einsum('nic,nc->ni', jac.axes, v) / np.where(frob > 0, frob, 1.0)[:, None]
+        slope = np.degrees(2.0 * _FROB_TO_ANGLE) / np.sqrt(np.maximum(1.0 - half ** 2, 1e-12))
+        d_terms[:, 3] = np.where(frob[:, None] > 0, slope[:, None] * d_frob, 0.0)
+        return terms, d_terms
+
+    def _arm_terms(self, lm, side, target):
+        ref_pos, ref_rot = self._ref_stack[side]
+        diff = np.stack((lm.elbow, lm.wrist, lm.tip), axis=1) - ref_pos[target]
+        out = np.empty((target.shape[0], _ARM_COMPONENTS))
+        out[:, :3] = np.sqrt(np.einsum('nij,nij->ni', diff, diff))
+        rdiff = lm.palm - ref_rot[target]
+        frob = np.sqrt(np.einsum('nij,nij->n', rdiff, rdiff))
+        out[:, 3] = np.degrees(2.0 * np.arcsin(np.minimum(frob * _FROB_TO_ANGLE, 1.0)))
         return out
 
 

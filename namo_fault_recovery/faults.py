@@ -1,0 +1,70 @@
+"""
+Fault sets and lock angles: which joints are locked, and where.
+
+A fault set maps joint names to a lock angle in radians, or to None when the lock
+strategy chooses the angle.  Strategies: ``average`` (the paper's: the mean over the
+gestures the arm takes part in), ``measured`` (where the joint stopped, from the fault
+report or the latest joint state, else the average), ``optimal`` (chosen to be best for
+the whole library; see :mod:`namo_fault_recovery.lock_optimal`).
+"""
+
+import math
+
+import numpy as np
+
+LOCK_STRATEGIES = ('average', 'measured', 'optimal')
+
+
+def check_strategy(strategy):
+    """Return ``strategy`` or raise a ValueError naming the choices."""
+    if strategy not in LOCK_STRATEGIES:
+        raise ValueError(f'unknown lock strategy {strategy!r}; expected one of '
+                         f'{", ".join(LOCK_STRATEGIES)}')
+    return strategy
+
+
+def validate_angle(robot, joint, angle, what='lock angle'):
+    """Return ``(arm, index)`` of ``joint`` after checking ``angle`` (rad) is usable."""
+    try:
+        side, index = robot.locate_joint(joint)
+    except KeyError as exc:
+        raise ValueError(exc.args[0]) from None
+    if angle is None:
+        return side, index
+    if isinstance(angle, bool) or not isinstance(angle, (int, float, np.floating)):
+        raise ValueError(f'{what} of {joint}: expected a number of radians, got {angle!r}')
+    if not math.isfinite(angle):
+        raise ValueError(f'{what} of {joint}: expected a finite angle, got {angle!r}')
+    arm = robot.arms[side]
+    if not robot.within_limits(side, index, angle):
+        raise ValueError(f'{what} of {joint}: {angle:.6g} rad ({math.degrees(angle):.2f} deg) '
+                         f'is outside the joint limits [{arm.lower[index]:.6g}, '
+                         f'{arm.upper[index]:.6g}] rad')
+    return side, index
+
+
+def resolve_locks(robot, library, faults, strategy='average', measured=None):
+    """
+    Return ``{joint: lock angle (rad)}`` for a fault set, and a list of notes.
+
+    Explicit angles in ``faults`` always win.  Otherwise ``measured`` takes the angle
+    from ``measured`` (joint -> rad) when present and falls back to ``average`` with a
+    note; ``optimal`` joints get their average here, as the starting point that
+    :func:`namo_fault_recovery.lock_optimal.optimise_locks` improves on.
+    """
+    check_strategy(strategy)
+    measured = measured or {}
+    locks = {}
+    notes = []
+    for joint, angle in dict(faults).items():
+        side, index = validate_angle(robot, joint, angle)
+        if angle is None and strategy == 'measured':
+            if joint in measured and measured[joint] is not None:
+                angle = float(measured[joint])
+                validate_angle(robot, joint, angle, 'measured angle')
+            else:
+                notes.append(f'{joint}: no measured angle; locked at the library average')
+        if angle is None:
+            angle = float(library.lock_averages(side)[index])
+        locks[joint] = float(angle)
+    return locks, notes

@@ -1,0 +1,242 @@
+"""
+The problem, the result and the deadline-aware driver shared by every optimiser.
+
+Problems are *batched*: ``n_batch`` independent sub-problems with the same bounds are
+solved in lock-step, so that one objective call evaluates every population member of
+every sub-problem (e.g. all gestures of the library at once).
+"""
+
+from dataclasses import dataclass, field
+import time
+
+import numpy as np
+
+STATUS_DONE = 0
+STATUS_DEADLINE = 1
+STATUS_CANCELLED = 2
+_MESSAGES = {
+    STATUS_DONE: 'maximum number of iterations reached',
+    STATUS_DEADLINE: 'deadline reached; best so far returned',
+    STATUS_CANCELLED: 'cancelled; best so far returned',
+}
+
+
+class Problem:
+    """
+    Box-bounded minimisation of a batched objective.
+
+    ``objective(X)`` takes X of shape (n_batch, N, D) and returns (n_batch, N). With
+    ``n_batch = None`` the problem is a single one: results are squeezed to ``x`` (D,)
+    and a scalar ``fun``.  ``value_and_grad`` optionally gives an analytic gradient for
+    local polishing.  ``x0`` (n_batch, D) is an optional known-good start (for a
+    gesture: the reference pose of the free joints), which an algorithm may use.
+    """
+
+    def __init__(self, lower, upper, objective, n_batch=None, x0=None, value_and_grad=None):
+        lower = np.asarray(lower, dtype=float).ravel()
+        upper = np.asarray(upper, dtype=float).ravel()
+        if lower.shape != upper.shape or lower.size == 0:
+            raise ValueError(f'Problem: lower and upper bounds must be non-empty and of the '
+                             f'same length, got {lower.shape} and {upper.shape}')
+        if not (np.all(np.isfinite(lower)) and np.all(np.isfinite(upper))):
+            raise ValueError('Problem: bounds must be finite')
+        if np.any(lower > upper):
+            i = int(np.argmax(lower > upper))
+            raise ValueError(f'Problem: lower bound {lower[i]} > upper bound {upper[i]} '
+                             f'in dimension {i}')
+        if n_batch is not None and (not isinstance(n_batch, (int, np.integer)) or n_batch < 1):
+            raise ValueError(f'Problem: n_batch must be a positive integer or None, '
+                             f'got {n_batch!r}')
+        self.lower = lower
+        self.upper = upper
+        self.objective = objective
+        self.n_batch = n_batch
+        self.nfev = 0
+        # Optional analytic gradient: X (batch, N, D) -> (f (batch, N), g (batch, N, D)).
+        self._value_and_grad = value_and_grad
+        # Optional known-good starting points, (batch, D); algorithms may use them.
+        self.x0 = None if x0 is None else self.clip(
+            np.asarray(x0, dtype=float).reshape(self.batch, self.dim))
+
+    @property
+    def dim(self):
+        """Return the number of variables."""
+        return self.lower.size
+
+    @property
+    def batch(self):
+        """Return the number of sub-problems solved in lock-step (1 for a single one)."""
+        return self.n_batch or 1
+
+    def evaluate(self, x):
+        """Evaluate X of shape (batch, N, D); counts function evaluations per sub-problem."""
+        f = np.asarray(self.objective(x), dtype=float)
+        self.nfev += x.shape[1]
+        # A NaN must never win a comparison: treat it as the worst possible value.
+        return np.where(np.isnan(f), np.inf, f)
+
+    def value_and_grad(self, x):
+        """
+        Return values (batch, N) and gradients (batch, N, D) at X (batch, N, D).
+
+        Uses the problem's analytic gradient when it has one, else central differences
+        (all 2 D + 1 points of every row in one batched objective call).
+        """
+        if self._value_and_grad is not None:
+            f, g = self._value_and_grad(x)
+            self.nfev += x.shape[1]
+            return np.where(np.isnan(f), np.inf, f), g
+        batch, n, dim = x.shape
+        h = 1e-6
+        pts = np.concatenate((x[:, :, None], x[:, :, None] + h * np.eye(dim),
+                              x[:, :, None] - h * np.eye(dim)), axis=2)
+        f = self.evaluate(pts.reshape(batch, n * (2 * dim + 1), dim))
+        f = f.reshape(batch, n, 2 * dim + 1)
+        return f[..., 0], (f[..., 1:dim + 1] - f[..., dim + 1:]) / (2 * h)
+
+    def random(self, rng, n):
+        """Draw ``n`` uniform points per sub-problem, shape (batch, n, D)."""
+        return rng.uniform(self.lower, self.upper, size=(self.batch, n, self.dim))
+
+    def clip(self, x):
+        """Clip into the bounds."""
+        return np.clip(x, self.lower, self.upper)
+
+
+@dataclass
+class OptimizeResult:
+    """What an optimiser returns, in the shape of scipy's ``OptimizeResult``."""
+
+    x: np.ndarray
+    fun: object
+    nfev: int
+    nit: int
+    status: int
+    message: str
+    wall_time: float
+    history: np.ndarray = field(repr=False)
+    seed: int = None
+    algorithm: str = ''
+
+    @property
+    def success(self):
+        """Return True when the run ended on its own, not cut short."""
+        return self.status == STATUS_DONE
+
+    def __getitem__(self, key):
+        return getattr(self, key)
+
+
+class Clock:
+    """
+    The wall-clock budget of one run, on ``time.monotonic()``.
+
+    ``expired()`` is cheap.  ``expired(next_cost)`` also refuses to start a step that
+    is expected to end past the deadline, so the overrun stays near one step's jitter.
+    """
+
+    def __init__(self, deadline=None, cancel=None, start=None):
+        if deadline is not None and (not np.isfinite(deadline) or deadline < 0):
+            raise ValueError(f'deadline: expected a finite number of seconds >= 0 or None, '
+                             f'got {deadline!r}')
+        self.start = time.monotonic() if start is None else start
+        self.end = None if deadline is None else self.start + deadline
+        self.cancel = cancel
+        self.reason = STATUS_DONE
+
+    def expired(self, next_cost=0.0):
+        """Return True (and remember why) if the run must stop now."""
+        if self.cancel is not None and self.cancel():
+            self.reason = STATUS_CANCELLED
+            return True
+        if self.end is not None and time.monotonic() + next_cost >= self.end:
+            self.reason = STATUS_DEADLINE
+            return True
+        return False
+
+    def remaining(self):
+        """Return the seconds left (inf without a deadline)."""
+        return np.inf if self.end is None else self.end - time.monotonic()
+
+    def elapsed(self):
+        """Return the seconds since the start."""
+        return time.monotonic() - self.start
+
+
+class Algorithm:
+    """
+    Base class: subclasses implement :meth:`run` and validate their settings.
+
+    ``run(problem, rng, clock)`` returns ``(x_best (batch, D), f_best (batch,), nit,
+    history list of (batch,) arrays)``.  It must call ``clock.expired(step_cost)``
+    between steps and return the best so far when it says so.
+    """
+
+    name = 'algorithm'
+
+    def run(self, problem, rng, clock):
+        raise NotImplementedError
+
+    def settings(self):
+        """Return the settings as a plain dict (for reports)."""
+        return {k: v for k, v in vars(self).items() if not k.startswith('_')}
+
+
+def check_int(name, value, minimum):
+    """Return ``value`` as an int >= minimum, or raise a ValueError naming it."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f'{name}: expected an integer >= {minimum}, got {value!r}')
+    return int(value)
+
+
+def check_float(name, value, low, high, low_open=False):
+    """Return ``value`` as a float in [low, high] (or (low, high]), or raise naming it."""
+    ok = (not isinstance(value, bool) and isinstance(value, (int, float, np.floating))
+          and np.isfinite(value) and (value > low if low_open else value >= low)
+          and value <= high)
+    if not ok:
+        interval = f'{"(" if low_open else "["}{low}, {high}]'
+        raise ValueError(f'{name}: expected a number in {interval}, got {value!r}')
+    return float(value)
+
+
+class StepTimer:
+    """Running estimate of one step's duration, for :meth:`Clock.expired`."""
+
+    def __init__(self):
+        self.last = time.monotonic()
+        self.cost = 0.0
+
+    def tick(self):
+        """Record the end of a step; return the expected cost of the next one."""
+        now = time.monotonic()
+        self.cost = max(now - self.last, 0.5 * self.cost)
+        self.last = now
+        return self.cost
+
+
+def minimize(problem, algorithm, deadline=None, seed=None, cancel=None):
+    """
+    Minimise ``problem`` with ``algorithm`` within ``deadline`` seconds of wall time.
+
+    ``seed`` makes the run reproducible (None draws one, reported in ``res.seed``);
+    ``cancel`` is an optional callable that stops the run early when it returns True.
+    """
+    if not isinstance(problem, Problem):
+        raise TypeError(f'problem: expected a Problem, got {type(problem).__name__}')
+    if not isinstance(algorithm, Algorithm):
+        raise TypeError(f'algorithm: expected an Algorithm, got {type(algorithm).__name__}')
+    if seed is None:
+        seed = int(np.random.SeedSequence().entropy % (2 ** 63))
+    rng = np.random.default_rng(seed)
+    clock = Clock(deadline, cancel)
+    problem.nfev = 0
+    x, f, nit, history = algorithm.run(problem, rng, clock)
+    wall = clock.elapsed()
+    hist = np.array(history) if history else np.empty((0, problem.batch))
+    if problem.n_batch is None:
+        x, f = x[0], float(f[0])
+        hist = hist[:, 0] if hist.size else hist.reshape(0)
+    return OptimizeResult(x=x, fun=f, nfev=problem.nfev, nit=nit, status=clock.reason,
+                          message=_MESSAGES[clock.reason], wall_time=wall, history=hist,
+                          seed=seed, algorithm=algorithm.name)

@@ -1,0 +1,159 @@
+"""
+Artificial Bee Colony (Karaboga), vectorised across the colony and the batch.
+
+Employed bees each take a neighbour step on one random dimension against a random
+partner (``v_ij = x_ij + phi (x_ij - x_kj)``, phi ~ U(-1, 1)) with greedy selection;
+onlookers pick sources by roulette on fitness 1 / (1 + f); a source that fails to
+improve ``limit`` times is abandoned to a scout.  Every phase is one batched objective
+call.  Optionally, the best sources are polished with a batched L-BFGS-B at the end
+(the colony finds the basin; the polish walks to its floor).
+"""
+
+import numpy as np
+
+from .base import Algorithm, check_float, check_int, StepTimer
+from .polish import polish
+
+
+class ABC(Algorithm):
+    """
+    Artificial Bee Colony settings.
+
+    ``n_sources`` food sources (as many employed and onlooker bees), ``max_cycles``
+    cycles, abandonment ``limit``; ``stall_cycles`` ends the run early after that many
+    cycles without improvement of any sub-problem's best (None: never); ``polish`` is the
+    number of best distinct sources per sub-problem refined locally at the end (0: none);
+    ``use_x0`` places the problem's known-good start (if any) among the first sources.
+    """
+
+    name = 'abc'
+
+    def __init__(self, n_sources=5, max_cycles=500, limit=150, stall_cycles=None, polish=0,
+                 polish_maxiter=100, polish_ftol=1e-10, use_x0=False):
+        self.n_sources = check_int('ABC n_sources', n_sources, 2)
+        self.max_cycles = check_int('ABC max_cycles', max_cycles, 1)
+        self.limit = check_int('ABC limit', limit, 1)
+        self.stall_cycles = (None if stall_cycles is None
+                             else check_int('ABC stall_cycles', stall_cycles, 1))
+        self.polish = check_int('ABC polish', polish, 0)
+        self.polish_maxiter = check_int('ABC polish_maxiter', polish_maxiter, 1)
+        self.polish_ftol = check_float('ABC polish_ftol', polish_ftol, 0.0, 1.0)
+        if not isinstance(use_x0, bool):
+            raise ValueError(f'ABC use_x0: expected true or false, got {use_x0!r}')
+        self.use_x0 = use_x0
+
+    @classmethod
+    def paper(cls):
+        """Return the paper's tuned preset (Table 3): 5 sources, 500 cycles, limit 150."""
+        return cls(n_sources=5, max_cycles=500, limit=150)
+
+    def _neighbours(self, problem, rng, x, src):
+        """Return neighbour candidates of sources ``src`` (batch, m) of colony ``x``."""
+        batch, sn, dim = x.shape
+        m = src.shape[1]
+        rows = np.arange(batch)[:, None]
+        partner = (src + rng.integers(1, sn, size=(batch, m))) % sn
+        j = rng.integers(0, dim, size=(batch, m))
+        phi = rng.uniform(-1.0, 1.0, size=(batch, m))
+        cand = x[rows, src].copy()
+        xij = cand[rows, np.arange(m)[None, :], j]
+        xkj = x[rows, partner, j]
+        cand[rows, np.arange(m)[None, :], j] = xij + phi * (xij - xkj)
+        return problem.clip(cand)
+
+    def run(self, problem, rng, clock):
+        batch, sn = problem.batch, self.n_sources
+        rows = np.arange(batch)[:, None]
+        x = problem.random(rng, sn)
+        if self.use_x0 and problem.x0 is not None:
+            x[:, 0] = problem.x0
+        f = problem.evaluate(x)
+        trials = np.zeros((batch, sn), dtype=int)
+        bi = np.argmin(f, axis=1)
+        best_x = x[np.arange(batch), bi].copy()
+        best_f = f[np.arange(batch), bi].copy()
+        history = [best_f.copy()]
+        timer = StepTimer()
+        stall = 0
+        nit = 0
+        all_src = np.broadcast_to(np.arange(sn), (batch, sn))
+        polish_share = 0.0
+        while nit < self.max_cycles and not clock.expired(timer.cost + polish_share):
+            nit += 1
+            # Employed bees: one neighbour per source, greedy selection.
+            cand = self._neighbours(problem, rng, x, all_src)
+            fc = problem.evaluate(cand)
+            better = fc < f
+            x[better], f[better] = cand[better], fc[better]
+            trials = np.where(better, 0, trials + 1)
+            # Onlookers: roulette on fitness 1 / (1 + f) (f >= 0 for a score).
+            fit = 1.0 / (1.0 + np.maximum(f, 0.0))
+            cum = np.cumsum(fit / fit.sum(axis=1, keepdims=True), axis=1)
+            u = rng.uniform(size=(batch, sn))
+            chosen = np.minimum((u[:, :, None] > cum[:, None, :]).sum(axis=2), sn - 1)
+            cand = self._neighbours(problem, rng, x, chosen)
+            fc = problem.evaluate(cand)
+            # Several onlookers may pick one source: keep the best of their candidates.
+            order = np.argsort(fc, axis=1, kind='stable')
+            first = np.full((batch, sn), -1)
+            for pos in range(sn - 1, -1, -1):   # a loop over bees, not configurations
+                first[rows[:, 0], chosen[rows[:, 0], order[:, pos]]] = order[:, pos]
+            counts = np.zeros((batch, sn), dtype=int)
+            np.add.at(counts, (np.repeat(np.arange(batch), sn), chosen.ravel()), 1)
+            has = first >= 0
+            pick = np.where(has, first, 0)
+            fbest = fc[rows, pick]
+            improved = has & (fbest < f)
+            x[improved] = cand[rows, pick][improved]
+            f[improved] = fbest[improved]
+            trials = np.where(improved, 0, trials + counts)
+            # Memorise the best, then send a scout to the most exhausted source.
+            bi = np.argmin(f, axis=1)
+            fmin = f[np.arange(batch), bi]
+            gain = fmin < best_f
+            if np.any(gain):
+                best_f[gain] = fmin[gain]
+                best_x[gain] = x[np.arange(batch), bi][gain]
+                stall = 0
+            else:
+                stall += 1
+            worn = np.argmax(trials, axis=1)
+            scout = trials[np.arange(batch), worn] > self.limit
+            if np.any(scout):
+                b = np.nonzero(scout)[0]
+                fresh = problem.random(rng, 1)[b, 0]
+                x[b, worn[b]] = fresh
+                f[b, worn[b]] = _eval_rows(problem, fresh, b)
+                trials[b, worn[b]] = 0
+            history.append(best_f.copy())
+            timer.tick()
+            if self.stall_cycles is not None and stall >= self.stall_cycles:
+                break
+        if self.polish and not clock.expired():
+            starts = _distinct_best(x, f, best_x, self.polish)
+            if self.use_x0 and problem.x0 is not None:
+                # The known-good start is always refined too, whatever became of it.
+                starts[:, -1] = problem.x0
+            px, pf = polish(problem, starts, clock, maxiter=self.polish_maxiter,
+                            ftol=self.polish_ftol)
+            k = np.argmin(pf, axis=1)
+            gain = pf[np.arange(batch), k] < best_f
+            best_f[gain] = pf[np.arange(batch), k][gain]
+            best_x[gain] = px[np.arange(batch), k][gain]
+            history.append(best_f.copy())
+        return best_x, best_f, nit, history
+
+
+def _eval_rows(problem, points, batch_rows):
+    """Evaluate one point for each listed sub-problem; other sub-problems get a dummy."""
+    full = np.repeat(problem.clip(((problem.lower + problem.upper) / 2))[None, None, :],
+                     problem.batch, axis=0)
+    full[batch_rows, 0] = points
+    return problem.evaluate(full)[batch_rows, 0]
+
+
+def _distinct_best(x, f, best_x, k):
+    """Return the best memorised point plus the k - 1 best current sources, (batch, k, D)."""
+    order = np.argsort(f, axis=1)[:, :max(k - 1, 0)]
+    rows = np.arange(x.shape[0])[:, None]
+    return np.concatenate((best_x[:, None, :], x[rows, order]), axis=1)
