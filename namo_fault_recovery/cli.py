@@ -17,6 +17,7 @@ from .robot_model import load_robot
 from .score import COMPONENTS, ScoreWeights, SimilarityScore
 
 EXIT_USAGE = 2
+_EXTENSIONS = []   # modules with register(subparsers): benchmarks, ROS clients
 
 
 class UsageError(Exception):
@@ -110,6 +111,103 @@ def cmd_score(args, out):
     return 0
 
 
+def _parse_fault(text, robot):
+    """Parse ``JOINT`` or ``JOINT=DEG`` into (joint, angle rad or None)."""
+    joint, sep, value = text.partition('=')
+    try:
+        robot.locate_joint(joint)
+    except KeyError as exc:
+        raise UsageError(f'--fault: {exc.args[0]}') from None
+    if not sep:
+        return joint, None
+    try:
+        angle = float(value)
+    except ValueError:
+        raise UsageError(f'--fault {text}: expected JOINT=DEG with DEG a number of degrees, '
+                         f'got {value!r}') from None
+    if not np.isfinite(angle):
+        raise UsageError(f'--fault {text}: the angle must be finite')
+    return joint, float(np.radians(angle))
+
+
+def solve_document(report, robot):
+    """Return the stable JSON document of a reconfiguration (schema in the README)."""
+    locks_deg = {j: float(np.degrees(a)) for j, a in report.locks.items()}
+    gestures = []
+    for g in report.gestures:
+        frames = [{'time_from_start': kf.time_from_start,
+                   'right_deg': np.degrees(kf.right).round(6).tolist(),
+                   'left_deg': np.degrees(kf.left).round(6).tolist()} for kf in g.keyframes]
+        gestures.append({
+            'name': g.name,
+            'right_deg': frames[0]['right_deg'],
+            'left_deg': frames[0]['left_deg'],
+            'keyframes': frames,
+            'lock_deg': locks_deg,
+            'free_joints': list(g.free_joints),
+            'score_before': g.score_before,
+            'score_after': g.score_after,
+            'breakdown': g.breakdown,
+            'wall_time_s': g.wall_time,
+            'status': g.status,
+            'stage': g.stage,
+            'collides': g.collides,
+        })
+    return {
+        'schema': 'namo_fault_recovery.solve/1',
+        'robot': robot.name,
+        'algorithm': report.algorithm,
+        'preset': report.preset,
+        'seed': report.seed,
+        'deadline_s': report.deadline,
+        'faults': locks_deg,
+        'frozen_arms': list(report.frozen_arms),
+        'notes': list(report.notes),
+        'wall_time_s': report.wall_time,
+        'success': report.success,
+        'gestures': gestures,
+    }
+
+
+def cmd_solve(args, out):
+    """Reconfigure gestures for a fault set and print the result."""
+    from .reconfigure import reconfigure_library
+    robot, library = _load_models(args)
+    faults = dict(_parse_fault(f, robot) for f in args.fault)
+    for name in args.gesture or []:
+        if name not in library.names:
+            raise UsageError(f'--gesture: unknown gesture {name!r}; expected one of '
+                             f'{", ".join(library.names)}')
+    if args.deadline is not None and not (np.isfinite(args.deadline) and args.deadline > 0):
+        raise UsageError(f'--deadline: expected a positive number of seconds, '
+                         f'got {args.deadline}')
+    try:
+        report = reconfigure_library(
+            robot, library, faults, algorithm=args.algorithm, preset=args.preset,
+            deadline=args.deadline, seed=args.seed, gestures=args.gesture,
+            lock_strategy=args.lock_strategy)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if args.json:
+        out.write(json.dumps(solve_document(report, robot), indent=2) + '\n')
+        return 0
+    out.write(f'algorithm {report.algorithm} ({report.preset}), seed {report.seed}, '
+              f'deadline {report.deadline} s, library time {report.wall_time * 1000:.1f} ms\n')
+    out.write('locks (deg): ' + ', '.join(f'{j} = {np.degrees(a):.2f}'
+                                          for j, a in report.locks.items()) + '\n')
+    for note in report.notes:
+        out.write(f'note: {note}\n')
+    for g in report.gestures:
+        out.write(f'\n{g.name}: score {g.score_before:.4f} -> {g.score_after:.4f} '
+                  f'[{g.status}], {g.wall_time * 1000:.1f} ms\n')
+        for k, kf in enumerate(g.keyframes):
+            out.write(f'  keyframe {k} right (deg) {_fmt_deg(kf.right)}\n')
+            out.write(f'  keyframe {k} left  (deg) {_fmt_deg(kf.left)}\n')
+        out.write('  breakdown: ' + ', '.join(f'{c} {v:.3f}' for c, v in g.breakdown.items())
+                  + '\n')
+    return 0
+
+
 def build_parser():
     """Build the argument parser; later issues register more subcommands here."""
     parser = _Parser(prog='namo-recovery',
@@ -133,6 +231,27 @@ def build_parser():
                    help="left-arm angles q1..q7 in degrees (default: the gesture's)")
     p.add_argument('--json', action='store_true', help='print one JSON document')
     p.set_defaults(func=cmd_score)
+
+    from .faults import LOCK_STRATEGIES
+    from .optimize import ALGORITHMS, PRESETS
+    p = sub.add_parser('solve', help='reconfigure the library for a fault set')
+    p.add_argument('--fault', action='append', required=True, metavar='JOINT[=DEG]',
+                   help='a failed joint, optionally with the angle (deg) it is held at; '
+                        'repeat for several')
+    p.add_argument('--gesture', action='append', metavar='G',
+                   help='only this gesture (repeatable; default: the whole library)')
+    p.add_argument('--algorithm', choices=sorted(ALGORITHMS), default='abc')
+    p.add_argument('--preset', choices=PRESETS, default='default',
+                   help="'default' (our tuned ABC) or 'paper' (the paper's Table 3)")
+    p.add_argument('--lock-strategy', choices=LOCK_STRATEGIES, default='average')
+    p.add_argument('--seed', type=int, default=None, help='seed for a reproducible run')
+    p.add_argument('--deadline', type=float, default=1.0,
+                   help='budget for the whole library in seconds (default 1.0)')
+    p.add_argument('--json', action='store_true',
+                   help='print one JSON document (schema in the README)')
+    p.set_defaults(func=cmd_solve)
+    for module in _EXTENSIONS:
+        module.register(sub)
     return parser
 
 

@@ -106,7 +106,8 @@ class GestureReconfiguration:
     status: str
     message: str
     free_joints: tuple = ()
-    collides: object = None
+    stage: int = 1
+    collides: object = None   # None: not checked (the collision model is not enabled)
 
 
 @dataclass
@@ -120,6 +121,7 @@ class LibraryReconfiguration:
     deadline: object
     seed: int
     algorithm: str
+    preset: str = 'default'
     notes: list = field(default_factory=list)
 
     @property
@@ -233,7 +235,7 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
             wall_time=wall, status=st, message=_message(gesture.name, st),
             free_joints=tuple(robot.arms[s].joint_names[j] for s, j in free_of[ks[0]])))
     return LibraryReconfiguration(results, locks, frozen, wall, deadline, seed, algo.name,
-                                  notes)
+                                  preset, notes)
 
 
 _STATUS_ORDER = ('cancelled', 'deadline', 'frozen', 'converged', 'unchanged')

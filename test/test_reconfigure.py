@@ -1,0 +1,166 @@
+"""Library reconfiguration: locks, fault layouts, frozen arms, reproducibility, CLI."""
+
+import io
+import json
+
+from namo_fault_recovery.cli import main
+from namo_fault_recovery.reconfigure import reconfigure_library
+from namo_fault_recovery.score import SimilarityScore, gesture_targets
+import numpy as np
+import pytest
+
+
+def _check_locks(robot, report):
+    for g in report.gestures:
+        for kf in g.keyframes:
+            for joint, angle in report.locks.items():
+                side, j = robot.locate_joint(joint)
+                assert kf.arm(side)[j] == angle, (g.name, joint)
+            for side in ('right', 'left'):
+                arm = robot.arms[side]
+                assert np.all(kf.arm(side) >= arm.lower) and np.all(kf.arm(side) <= arm.upper)
+
+
+@pytest.mark.parametrize('joint', [f'right_arm_joint{k}' for k in range(1, 8)])
+def test_single_fault_locks_and_improves(robot, library, joint):
+    report = reconfigure_library(robot, library, {joint: None}, seed=0)
+    side, j = robot.locate_joint(joint)
+    assert report.locks[joint] == pytest.approx(library.lock_averages(side)[j])
+    _check_locks(robot, report)
+    scorer = SimilarityScore(robot, [t for g in library for t in gesture_targets(g)])
+    for k, g in enumerate(report.gestures):
+        assert g.score_after <= g.score_before + 1e-12
+        assert np.isfinite(g.score_after)
+        kf = g.keyframes[0]
+        assert scorer(kf.right, kf.left, target=k)[0] == pytest.approx(g.score_after)
+        assert g.status == 'converged'
+    assert report.success
+
+
+def test_explicit_lock_angle_is_used(robot, library):
+    report = reconfigure_library(robot, library, {'right_arm_joint5': 0.3}, seed=0,
+                                 gestures=['bye'])
+    assert report.locks == {'right_arm_joint5': 0.3}
+    assert report['bye'].keyframes[0].right[4] == 0.3
+    assert [g.name for g in report.gestures] == ['bye']
+
+
+def test_same_seed_same_library(robot, library):
+    a = reconfigure_library(robot, library, {'right_arm_joint3': None}, seed=7, deadline=None)
+    b = reconfigure_library(robot, library, {'right_arm_joint3': None}, seed=7, deadline=None)
+    for ga, gb in zip(a.gestures, b.gestures):
+        np.testing.assert_array_equal(ga.keyframes[0].right, gb.keyframes[0].right)
+
+
+def test_multiple_faults_both_arms(robot, library):
+    faults = {'right_arm_joint1': None, 'right_arm_joint6': -0.2, 'left_arm_joint2': None}
+    report = reconfigure_library(robot, library, faults, seed=1)
+    _check_locks(robot, report)
+    wai = report['wai']
+    assert set(wai.free_joints) == ({f'right_arm_joint{k}' for k in (2, 3, 4, 5, 7)}
+                                    | {f'left_arm_joint{k}' for k in (1, 3, 4, 5, 6, 7)})
+    # One-arm gestures only move the right arm: the left is not part of them.
+    assert all(j.startswith('right') for j in report['bye'].free_joints)
+    assert all(g.score_after <= g.score_before for g in report.gestures)
+
+
+def test_left_fault_leaves_one_arm_gestures_unchanged(robot, library):
+    report = reconfigure_library(robot, library, {'left_arm_joint4': 1.0}, seed=1)
+    assert report['bye'].status == 'unchanged'
+    assert report['bye'].score_after == report['bye'].score_before == 0.0
+    assert report['wai'].status == 'converged'
+    assert report['wai'].score_after < report['wai'].score_before
+
+
+def test_fully_failed_arm_is_frozen_other_arm_served(robot, library):
+    faults = {f'right_arm_joint{k}': None for k in range(1, 8)}
+    faults['left_arm_joint2'] = 0.4
+    report = reconfigure_library(robot, library, faults, seed=2)
+    assert report.frozen_arms == ('right',)
+    assert any('frozen' in n for n in report.notes)
+    assert report['bye'].status == 'frozen'
+    np.testing.assert_allclose(report['bye'].keyframes[0].right,
+                               library.lock_averages('right'))
+    wai = report['wai']   # the left arm still moves to do its best
+    assert wai.status == 'converged'
+    assert all(j.startswith('left') for j in wai.free_joints)
+    assert wai.score_after < wai.score_before
+    _check_locks(robot, report)
+
+
+def test_no_fault_returns_the_reference(robot, library):
+    report = reconfigure_library(robot, library, {}, seed=0)
+    for g, ref in zip(report.gestures, library):
+        assert g.status == 'unchanged' and g.score_after == 0.0
+        np.testing.assert_array_equal(g.keyframes[0].right, ref.keyframes[0].right)
+
+
+@pytest.mark.parametrize('faults, message', [
+    ({'elbow': None}, "unknown joint 'elbow'"),
+    ({'right_arm_joint1': float('nan')}, 'finite'),
+    ({'right_arm_joint1': 7.0}, 'outside the joint limits'),
+])
+def test_bad_faults_raise(robot, library, faults, message):
+    with pytest.raises(ValueError, match=message):
+        reconfigure_library(robot, library, faults)
+
+
+def test_deadline_status_and_finite_result(robot, library):
+    report = reconfigure_library(robot, library, {'right_arm_joint2': None}, preset='paper',
+                                 deadline=0.02, seed=0)
+    assert not report.deadline_met and not report.success
+    for g in report.gestures:
+        assert g.status == 'deadline' and np.isfinite(g.score_after)
+        assert g.score_after <= g.score_before
+    _check_locks(robot, report)
+
+
+def test_gradient_matches_finite_differences(robot, library):
+    scorer = SimilarityScore(robot, [t for g in library for t in gesture_targets(g)])
+    rng = np.random.default_rng(4)
+    qr, ql = rng.uniform(-3, 3, (8, 7)), rng.uniform(-3, 3, (8, 7))
+    target = np.array([0, 1, 2, 3, 0, 0, 1, 2])
+    f, g_right, g_left = scorer.value_and_grad(qr, ql, target)
+    np.testing.assert_allclose(f, scorer.evaluate(qr, ql, target))
+    h = 1e-6
+    for i in range(7):
+        dq = np.zeros(7)
+        dq[i] = h
+        fd_r = (scorer.evaluate(qr + dq, ql, target) - scorer.evaluate(qr - dq, ql, target))
+        fd_l = (scorer.evaluate(qr, ql + dq, target) - scorer.evaluate(qr, ql - dq, target))
+        np.testing.assert_allclose(g_right[:, i], fd_r / (2 * h), atol=1e-5)
+        np.testing.assert_allclose(g_left[:, i], fd_l / (2 * h), atol=1e-5)
+
+
+def test_cli_solve_json_schema(robot):
+    out = io.StringIO()
+    code = main(['solve', '--fault', 'right_arm_joint2', '--fault', 'left_arm_joint1=20',
+                 '--seed', '3', '--json'], out)
+    doc = json.loads(out.getvalue())
+    assert code == 0 and doc['schema'] == 'namo_fault_recovery.solve/1'
+    assert doc['faults']['left_arm_joint1'] == pytest.approx(20.0)
+    assert doc['faults']['right_arm_joint2'] == pytest.approx(-14.25)
+    assert [g['name'] for g in doc['gestures']] == ['wai', 'bye', 'salute', 'side_invite']
+    for g in doc['gestures']:
+        assert {'name', 'right_deg', 'left_deg', 'score_before', 'score_after', 'wall_time_s',
+                'status', 'lock_deg', 'stage', 'collides'} <= set(g)
+        assert g['right_deg'][1] == pytest.approx(-14.25)
+        assert g['score_after'] <= g['score_before']
+
+
+def test_cli_solve_text_and_errors(capsys):
+    out = io.StringIO()
+    assert main(['solve', '--fault', 'right_arm_joint4', '--gesture', 'wai', '--algorithm',
+                 'ga', '--preset', 'paper', '--seed', '1'], out) == 0
+    assert 'wai: score 1.3974 ->' in out.getvalue()
+    for argv, message in ((['solve', '--fault', 'right_arm_joint9'], "unknown joint"),
+                          (['solve', '--fault', 'right_arm_joint1=abc'], 'JOINT=DEG'),
+                          (['solve', '--fault', 'right_arm_joint1', '--gesture', 'hug'],
+                           "unknown gesture 'hug'"),
+                          (['solve', '--fault', 'right_arm_joint1', '--algorithm', 'pso'],
+                           'invalid choice'),
+                          (['solve', '--fault', 'right_arm_joint1', '--deadline', '0'],
+                           '--deadline')):
+        assert main(argv, io.StringIO()) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count('\n') == 1
