@@ -5,7 +5,7 @@ import json
 
 from namo_fault_recovery.cli import main
 from namo_fault_recovery.reconfigure import reconfigure_library
-from namo_fault_recovery.score import SimilarityScore, gesture_targets
+from namo_fault_recovery.score import gesture_targets, SimilarityScore
 import numpy as np
 import pytest
 
@@ -153,7 +153,7 @@ def test_cli_solve_text_and_errors(capsys):
     assert main(['solve', '--fault', 'right_arm_joint4', '--gesture', 'wai', '--algorithm',
                  'ga', '--preset', 'paper', '--seed', '1'], out) == 0
     assert 'wai: score 1.3974 ->' in out.getvalue()
-    for argv, message in ((['solve', '--fault', 'right_arm_joint9'], "unknown joint"),
+    for argv, message in ((['solve', '--fault', 'right_arm_joint9'], 'unknown joint'),
                           (['solve', '--fault', 'right_arm_joint1=abc'], 'JOINT=DEG'),
                           (['solve', '--fault', 'right_arm_joint1', '--gesture', 'hug'],
                            "unknown gesture 'hug'"),
