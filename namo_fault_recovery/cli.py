@@ -151,7 +151,9 @@ def solve_document(report, robot):
             'wall_time_s': g.wall_time,
             'status': g.status,
             'stage': g.stage,
+            'stage1_score': g.stage1_score,
             'collides': g.collides,
+            'colliding_pairs': list(g.colliding_pairs),
         })
     return {
         'schema': 'namo_fault_recovery.solve/1',
@@ -160,6 +162,7 @@ def solve_document(report, robot):
         'preset': report.preset,
         'seed': report.seed,
         'deadline_s': report.deadline,
+        'lock_strategy': report.lock_strategy,
         'faults': locks_deg,
         'frozen_arms': list(report.frozen_arms),
         'notes': list(report.notes),
@@ -185,7 +188,8 @@ def cmd_solve(args, out):
         report = reconfigure_library(
             robot, library, faults, algorithm=args.algorithm, preset=args.preset,
             deadline=args.deadline, seed=args.seed, gestures=args.gesture,
-            lock_strategy=args.lock_strategy)
+            lock_strategy=args.lock_strategy, bimanual=args.bimanual,
+            collision=not args.no_collision)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     if args.json:
@@ -198,8 +202,11 @@ def cmd_solve(args, out):
     for note in report.notes:
         out.write(f'note: {note}\n')
     for g in report.gestures:
+        extra = ' stage 2 (both arms)' if g.stage == 2 else ''
+        if g.collides:
+            extra += ' COLLIDES: ' + ', '.join(g.colliding_pairs)
         out.write(f'\n{g.name}: score {g.score_before:.4f} -> {g.score_after:.4f} '
-                  f'[{g.status}], {g.wall_time * 1000:.1f} ms\n')
+                  f'[{g.status}]{extra}, {g.wall_time * 1000:.1f} ms\n')
         for k, kf in enumerate(g.keyframes):
             out.write(f'  keyframe {k} right (deg) {_fmt_deg(kf.right)}\n')
             out.write(f'  keyframe {k} left  (deg) {_fmt_deg(kf.left)}\n')
@@ -234,6 +241,7 @@ def build_parser():
 
     from .faults import LOCK_STRATEGIES
     from .optimize import ALGORITHMS, PRESETS
+    from .reconfigure import BIMANUAL_MODES
     p = sub.add_parser('solve', help='reconfigure the library for a fault set')
     p.add_argument('--fault', action='append', required=True, metavar='JOINT[=DEG]',
                    help='a failed joint, optionally with the angle (deg) it is held at; '
@@ -244,6 +252,11 @@ def build_parser():
     p.add_argument('--preset', choices=PRESETS, default='default',
                    help="'default' (our tuned ABC) or 'paper' (the paper's Table 3)")
     p.add_argument('--lock-strategy', choices=LOCK_STRATEGIES, default='average')
+    p.add_argument('--bimanual', choices=BIMANUAL_MODES, default='auto',
+                   help='stage 2 for two-handed gestures: the healthy arm moves too '
+                        "('auto': when stage 1 scores above the threshold)")
+    p.add_argument('--no-collision', action='store_true',
+                   help='ignore self-collision (for comparison with the paper)')
     p.add_argument('--seed', type=int, default=None, help='seed for a reproducible run')
     p.add_argument('--deadline', type=float, default=1.0,
                    help='budget for the whole library in seconds (default 1.0)')

@@ -5,7 +5,13 @@ For every keyframe of every gesture the failed joints are set to their lock angl
 the remaining joints of the faulted arms that take part in the gesture become the free
 variables.  Keyframes with the same free-variable layout are solved together as one
 batched problem (one objective call per optimiser phase for all of them), within one
-wall-clock budget for the whole library.
+wall-clock budget for the whole library.  On top of the paper's method:
+
+- lock strategies (``average``, ``measured``, ``optimal``; see :mod:`.faults`);
+- stage 2 of a staged DOF expansion (the second source paper): when a two-handed
+  gesture still scores above a threshold, the healthy arm moves too;
+- capsule self-collision (:mod:`.collision`) as a penalty inside the optimisation, with
+  a final check reported per gesture.
 """
 
 from dataclasses import dataclass, field
@@ -13,53 +19,62 @@ import time
 
 import numpy as np
 
+from .collision import CollisionModel
 from .faults import resolve_locks
 from .gestures import Keyframe
-from .kinematics import forward_kinematics
+from .kinematics import _forward, _forward_jacobian, ArmLandmarks
 from .optimize import make_algorithm, minimize, Problem, STATUS_CANCELLED, STATUS_DEADLINE
 from .robot_model import ARMS, N_JOINTS
 from .score import gesture_targets, SimilarityScore
 
 _STATUS_NAMES = {0: 'converged', STATUS_DEADLINE: 'deadline', STATUS_CANCELLED: 'cancelled'}
+BIMANUAL_MODES = ('auto', 'off', 'on')
+DEFAULT_BIMANUAL_THRESHOLD = 10.0
+_STAGE1_SHARE = 0.6        # of the budget, when stage 2 may follow
+_OPTIMAL_SHARE = 0.6       # of the budget spent choosing optimal lock angles
+_LOCK_CANDIDATES = 12      # coarse lock angles per optimal joint (plus the average)
+
+
+def _take(lm, index):
+    return ArmLandmarks(*(a[index] for a in lm))
 
 
 class PoseProblem(Problem):
     """
     The free joints of some arms, for a batch of targets, scored against each target.
 
-    ``base_right``/``base_left`` (T, 7) are the reference poses with failed joints at
-    their locks; ``free`` is a tuple of ``(arm, joint index)`` giving the variables.
+    ``base_right``/``base_left`` (B, 7) are the starting poses (reference angles with
+    failed joints at their locks); ``free`` is a tuple of ``(arm, joint index)`` giving
+    the variables.  With a ``collision`` model the capsule penalty is added to the score.
+    ``smooth`` (mm or deg) rounds the kinks of the score for the gradient-based polish.
     """
 
-    def __init__(self, robot, scorer, target_ids, base_right, base_left, free, smooth=0.01):
+    def __init__(self, robot, scorer, target_ids, base_right, base_left, free,
+                 collision=None, smooth=0.01, x0=None):
         if not free:
             raise ValueError('PoseProblem: no free joint to optimise')
         self.robot = robot
         self.scorer = scorer
+        self.collision = collision
         self.smooth = float(smooth)
         self.target_ids = np.asarray(target_ids, dtype=int)
-        self.base = {'right': np.asarray(base_right, dtype=float),
-                     'left': np.asarray(base_left, dtype=float)}
-        # base holds the reference angles, so x0 (the free joints' reference) is a start.
+        self.base = {'right': np.array(base_right, dtype=float),
+                     'left': np.array(base_left, dtype=float)}
         self.free = tuple(free)
         self.columns = {side: [(k, j) for k, (s, j) in enumerate(self.free) if s == side]
                         for side in ARMS}
         lower = [robot.arms[s].lower[j] for s, j in self.free]
         upper = [robot.arms[s].upper[j] for s, j in self.free]
         # An arm without free joints does not move: its landmarks are computed once.
-        # It is indexed by target id, as the scorer indexes per-target landmarks.
-        self.fixed = {}
-        for side in ARMS:
-            if not self.columns[side]:
-                q = np.zeros((self.target_ids.max() + 1, N_JOINTS))
-                q[self.target_ids] = self.base[side]
-                self.fixed[side] = forward_kinematics(robot, q, side)
-        x0 = [[self.base[s][t, j] for s, j in self.free] for t in range(len(self.target_ids))]
+        self.fixed = {side: _forward(robot, self.base[side], side)
+                      for side in ARMS if not self.columns[side]}
+        if x0 is None:   # the starting poses' free joints: a known-good start
+            x0 = [[self.base[s][b, j] for s, j in self.free] for b in range(len(target_ids))]
         super().__init__(lower, upper, self._objective, n_batch=len(self.target_ids), x0=x0,
                          value_and_grad=self._value_and_grad)
 
     def assemble(self, x):
-        """Return full (right, left) angles of shape (..., 7) for variables x (T, ..., D)."""
+        """Return full (right, left) angles of shape (..., 7) for variables x (B, ..., D)."""
         x = np.asarray(x, dtype=float)
         extra = x.ndim - 2
         out = {}
@@ -71,25 +86,46 @@ class PoseProblem(Problem):
             out[side] = q
         return out['right'], out['left']
 
-    def _objective(self, x):
+    def _arms(self, x, jacobian):
         batch, n, _ = x.shape
-        q_right, q_left = self.assemble(x)
-        target = np.repeat(self.target_ids, n)
-        right = self.fixed.get('right', q_right.reshape(-1, N_JOINTS))
-        left = self.fixed.get('left', q_left.reshape(-1, N_JOINTS))
-        return self.scorer.evaluate(right, left, target).reshape(batch, n)
+        q = dict(zip(ARMS, self.assemble(x)))
+        rows = np.repeat(np.arange(batch), n)
+        arms = {}
+        for side in ARMS:
+            if side in self.fixed:
+                arms[side] = _take(self.fixed[side], rows)
+            elif jacobian:
+                arms[side] = _forward_jacobian(self.robot, q[side].reshape(-1, N_JOINTS), side)
+            else:
+                arms[side] = _forward(self.robot, q[side].reshape(-1, N_JOINTS), side)
+        return arms, np.repeat(self.target_ids, n)
+
+    def _objective(self, x):
+        arms, target = self._arms(x, jacobian=False)
+        f = self.scorer.evaluate(arms['right'], arms['left'], target)
+        if self.collision is not None:
+            f = f + self.collision.penalty(arms['right'], arms['left'], target)[0]
+        return f.reshape(x.shape[:2])
 
     def _value_and_grad(self, x):
         batch, n, dim = x.shape
-        q_right, q_left = self.assemble(x)
-        target = np.repeat(self.target_ids, n)
-        right = self.fixed.get('right', q_right.reshape(-1, N_JOINTS))
-        left = self.fixed.get('left', q_left.reshape(-1, N_JOINTS))
-        f, g_right, g_left = self.scorer.value_and_grad(right, left, target, self.smooth)
+        arms, target = self._arms(x, jacobian=True)
+        f, g_right, g_left = self.scorer.value_and_grad(arms['right'], arms['left'], target,
+                                                        self.smooth)
+        grads = {'right': g_right, 'left': g_left}
+        if self.collision is not None:
+            moving = {s: not isinstance(a, ArmLandmarks) for s, a in arms.items()}
+            lm = {s: a[0] if moving[s] else a for s, a in arms.items()}
+            jac = {s: a[1] if moving[s] else None for s, a in arms.items()}
+            pen, pen_grad = self.collision.penalty(lm['right'], lm['left'], target,
+                                                   jac['right'], jac['left'])
+            f = f + pen
+            for side, g in pen_grad.items():
+                grads[side] = grads[side] + g
         grad = np.empty((batch * n, dim))
-        for side, g in (('right', g_right), ('left', g_left)):
+        for side in ARMS:
             for k, j in self.columns[side]:
-                grad[:, k] = g[:, j]
+                grad[:, k] = grads[side][:, j]
         return f.reshape(batch, n), grad.reshape(batch, n, dim)
 
 
@@ -107,7 +143,9 @@ class GestureReconfiguration:
     message: str
     free_joints: tuple = ()
     stage: int = 1
-    collides: object = None   # None: not checked (the collision model is not enabled)
+    stage1_score: float = None
+    collides: object = None    # None when the collision check is off
+    colliding_pairs: tuple = ()
 
 
 @dataclass
@@ -123,6 +161,7 @@ class LibraryReconfiguration:
     algorithm: str
     preset: str = 'default'
     notes: list = field(default_factory=list)
+    lock_strategy: str = 'average'
 
     @property
     def cancelled(self):
@@ -139,6 +178,11 @@ class LibraryReconfiguration:
         """Return True if every gesture has a finite score within the deadline."""
         return self.deadline_met and all(np.isfinite(g.score_after) for g in self.gestures)
 
+    @property
+    def total_score(self):
+        """Return the sum of the gestures' scores after reconfiguration."""
+        return float(sum(g.score_after for g in self.gestures))
+
     def __getitem__(self, name):
         for g in self.gestures:
             if g.name == name:
@@ -146,27 +190,127 @@ class LibraryReconfiguration:
         raise KeyError(f'unknown gesture {name!r}')
 
 
+class _Batch:
+    """Rows to solve: starting poses, target ids and free-variable layouts."""
+
+    def __init__(self, base_right, base_left, target_ids, layouts, x0=None):
+        self.right = np.array(base_right, dtype=float)
+        self.left = np.array(base_left, dtype=float)
+        self.target_ids = np.asarray(target_ids, dtype=int)
+        self.layouts = list(layouts)
+        self.x0 = x0   # optional {row: start vector in the row's layout}
+
+
+def _solve(robot, scorer, checker, batch, algo, clock_end, cancel, rng):
+    """
+    Solve every row of ``batch``; with a collision ``checker``, keep poses apart.
+
+    The collision constraint is lazy: the plain score is optimised first (fast, and
+    most results do not collide), the results are checked, and only the rows that
+    collide are solved again with the capsule penalty, from their collision-free
+    starting pose.  A row keeps the penalised result if it no longer collides (or
+    collides less).  Return (best right, best left, status names).
+    """
+    best_r, best_l, status = _solve_once(robot, scorer, None, batch, algo, clock_end, cancel,
+                                         rng)
+    if checker is None:
+        return best_r, best_l, status
+    ids = batch.target_ids
+    pen = checker.penetration(_forward(robot, best_r, 'right'), _forward(robot, best_l, 'left'),
+                              ids).sum(axis=1)
+    rows = np.nonzero(checker.collides(_forward(robot, best_r, 'right'),
+                                       _forward(robot, best_l, 'left'), ids))[0]
+    if rows.size == 0:
+        return best_r, best_l, status
+    sub = _Batch(batch.right[rows], batch.left[rows], ids[rows],
+                 [batch.layouts[k] for k in rows])
+    r2, l2, st2 = _solve_once(robot, scorer, checker, sub, algo, clock_end, cancel, rng)
+    pen2 = checker.penetration(_forward(robot, r2, 'right'), _forward(robot, l2, 'left'),
+                               ids[rows]).sum(axis=1)
+    for i, k in enumerate(rows):
+        if pen2[i] < pen[k]:
+            best_r[k], best_l[k] = r2[i], l2[i]
+        if st2[i] in ('deadline', 'cancelled'):
+            status[k] = st2[i]
+    return best_r, best_l, status
+
+
+def _solve_once(robot, scorer, collision, batch, algo, clock_end, cancel, rng):
+    """
+    Solve every row of ``batch`` (rows sharing a layout in one batched problem).
+
+    Return (best right, best left, status names); a row never ends worse than its
+    starting pose (by the objective, which includes the penalty when ``collision``).
+    """
+    m = len(batch.target_ids)
+    best_r, best_l = batch.right.copy(), batch.left.copy()
+    status = ['unchanged'] * m
+    groups = {}
+    for k, free in enumerate(batch.layouts):
+        if free:
+            groups.setdefault(free, []).append(k)
+    remaining = sum(len(v) for v in groups.values())
+    for free, members in groups.items():
+        budget = None
+        if clock_end is not None:
+            budget = max((clock_end - time.monotonic()) * len(members) / remaining, 0.0)
+        remaining -= len(members)
+        x0 = None
+        if batch.x0 is not None:
+            x0 = np.array([batch.x0[k] for k in members])
+        problem = PoseProblem(robot, scorer, batch.target_ids[members], batch.right[members],
+                              batch.left[members], free, collision=collision, x0=x0)
+        start = problem.evaluate(problem.x0[:, None, :])[:, 0]
+        res = minimize(problem, algo, deadline=budget, cancel=cancel,
+                       seed=int(rng.integers(2 ** 63)))
+        x = np.atleast_2d(res.x)
+        f = np.atleast_1d(res.fun)
+        keep = f <= start
+        x = np.where(keep[:, None], x, problem.x0)
+        qr, ql = problem.assemble(x)
+        for i, k in enumerate(members):
+            best_r[k], best_l[k] = qr[i], ql[i]
+            status[k] = _STATUS_NAMES[res.status]
+    return best_r, best_l, status
+
+
+def _layout(robot, arms_used, locked, moving):
+    return tuple((s, j) for s in ARMS if s in moving and s in arms_used
+                 for j in range(N_JOINTS) if j not in locked[s])
+
+
 def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='default',
                         deadline=1.0, seed=None, weights=None, lock_strategy='average',
-                        measured=None, cancel=None, gestures=None, settings=None):
+                        measured=None, cancel=None, gestures=None, settings=None,
+                        bimanual='auto', bimanual_threshold=DEFAULT_BIMANUAL_THRESHOLD,
+                        collision=False, capsules=None):
     """
     Reconfigure every gesture (or those named in ``gestures``) for a fault set.
 
     ``faults`` maps joint names to lock angles (rad) or None (chosen by
-    ``lock_strategy``).  ``deadline`` (s) is the budget for the whole library.  The
-    result is a pure function of the inputs and ``seed`` (None draws one, reported in
-    the result), up to where a deadline cuts the search.
+    ``lock_strategy``).  ``deadline`` (s) is the budget for the whole library.
+    ``bimanual`` ('auto', 'on', 'off') controls stage 2 for two-handed gestures: with
+    'auto' it runs when stage 1 scores above ``bimanual_threshold``.  ``collision``
+    keeps the arms and torso apart (``capsules`` or the robot's capsule model) and
+    reports any pose that still collides; it is off here by default, so that the plain
+    score is the paper's objective, and on by default in the node and ``solve``.
+    The result is a pure function of the inputs and ``seed`` (None draws one, reported
+    in the result), up to where a deadline cuts the search.
     """
     start = time.monotonic()
+    if bimanual not in BIMANUAL_MODES:
+        raise ValueError(f'unknown bimanual mode {bimanual!r}; expected one of '
+                         f'{", ".join(BIMANUAL_MODES)}')
+    if deadline is not None and not (np.isfinite(deadline) and deadline > 0):
+        raise ValueError(f'deadline: expected a positive number of seconds or None, '
+                         f'got {deadline!r}')
     if seed is None:
         seed = int(np.random.SeedSequence().entropy % (2 ** 63))
+    rng = np.random.default_rng(seed)
     algo = make_algorithm(algorithm, preset, **(settings or {}))
     locks, notes = resolve_locks(robot, library, faults, lock_strategy, measured)
     selected = list(library) if gestures is None else [library[g] for g in gestures]
-    frozen = tuple(side for side in ARMS
-                   if all(j in locks for j in robot.arms[side].joint_names))
-    for side in frozen:
-        notes.append(f'all joints of the {side} arm failed: it is frozen at its lock angles')
+    end = None if deadline is None else start + deadline
 
     targets, owners = [], []
     for gi, gesture in enumerate(selected):
@@ -174,50 +318,85 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
             targets.append(t)
             owners.append(gi)
     scorer = SimilarityScore(robot, targets, weights)
-    base = {side: np.array([getattr(t, f'q_{side}') for t in targets]) for side in ARMS}
-    locked = {side: [] for side in ARMS}
-    for joint, angle in locks.items():
-        side, j = robot.locate_joint(joint)
-        base[side][:, j] = angle
-        locked[side].append(j)
+    checker = None
+    if collision:
+        checker = CollisionModel(robot, targets, capsules or robot.capsules)
     ids = np.arange(len(targets))
-    before = scorer(base['right'], base['left'], target=ids)
-    after = before.copy()
-    best_r, best_l = base['right'].copy(), base['left'].copy()
-    status = ['unchanged'] * len(targets)
-    free_of = []
-    for t in targets:
-        moving = [s for s in ARMS if s in t.arms and locked[s]]
-        free_of.append(tuple((s, j) for s in moving for j in range(N_JOINTS)
-                             if j not in locked[s]))
-        if moving and not free_of[-1]:
-            status[len(free_of) - 1] = 'frozen'
+    ref_r = np.array([t.q_right for t in targets])
+    ref_l = np.array([t.q_left for t in targets])
 
-    groups = {}
-    for k, free in enumerate(free_of):
-        if free:
-            groups.setdefault(free, []).append(k)
-    rng = np.random.default_rng(seed)
-    remaining_targets = sum(len(v) for v in groups.values())
-    for free, members in groups.items():
-        budget = None
-        if deadline is not None:
-            left = deadline - (time.monotonic() - start)
-            budget = max(left * len(members) / remaining_targets, 0.0)
-        remaining_targets -= len(members)
-        problem = PoseProblem(robot, scorer, members, base['right'][members],
-                              base['left'][members], free)
-        res = minimize(problem, algo, deadline=budget, cancel=cancel,
-                       seed=int(rng.integers(2 ** 63)))
-        x = np.atleast_2d(res.x)
-        qr, ql = problem.assemble(x)
-        f = np.atleast_1d(res.fun)
-        for i, k in enumerate(members):
-            if f[i] <= after[k]:
-                after[k], best_r[k], best_l[k] = f[i], qr[i], ql[i]
-            status[k] = _STATUS_NAMES[res.status]
+    faulted = {side for side in ARMS
+               if any(robot.locate_joint(j)[0] == side for j in locks)}
+    start_poses = None
+    if lock_strategy == 'optimal':
+        optimal = [j for j, a in faults.items() if a is None]
+        if optimal:
+            budget_end = None if end is None else start + _OPTIMAL_SHARE * deadline
+            locks, chosen_note, start_poses = _optimise_locks(
+                robot, scorer, checker, targets, ref_r, ref_l, locks, optimal, algo,
+                budget_end, cancel, rng)
+            notes.append(chosen_note)
 
-    _, parts = scorer(best_r, best_l, target=ids, breakdown=True)
+    def locked_sets(lk):
+        out = {side: [] for side in ARMS}
+        for joint in lk:
+            side, j = robot.locate_joint(joint)
+            out[side].append(j)
+        return out
+
+    locked = locked_sets(locks)
+    base_r, base_l = _apply_locks(robot, ref_r, ref_l, locks)
+    start_r, start_l = base_r, base_l
+    if start_poses is not None:   # the optimal sweep's solution at the chosen locks
+        start_r, start_l = _apply_locks(robot, *start_poses, locks)
+    frozen = tuple(side for side in ARMS if len(locked[side]) == N_JOINTS)
+    for side in frozen:
+        notes.append(f'all joints of the {side} arm failed: it is frozen at its lock angles')
+
+    layouts = [_layout(robot, t.arms, locked, faulted) for t in targets]
+    status0 = ['frozen' if any(s in faulted for s in t.arms) and not lay else 'unchanged'
+               for t, lay in zip(targets, layouts)]
+    two_stage = [k for k, t in enumerate(targets)
+                 if bimanual != 'off' and t.two_handed and len(faulted) == 1]
+    stage1_end = end
+    if end is not None and two_stage:
+        stage1_end = time.monotonic() + _STAGE1_SHARE * (end - time.monotonic())
+    best_r, best_l, status = _solve(robot, scorer, checker,
+                                    _Batch(start_r, start_l, ids, layouts), algo,
+                                    stage1_end, cancel, rng)
+    status = [s0 if s0 == 'frozen' else s for s0, s in zip(status0, status)]
+    after = scorer.evaluate(best_r, best_l, ids)
+    stage = np.ones(len(targets), dtype=int)
+    stage1 = after.copy()
+
+    # Stage 2: the healthy arm joins in for two-handed gestures that are still poor.
+    if two_stage:
+        rows = [k for k in two_stage
+                if bimanual == 'on' or after[k] > bimanual_threshold]
+        if rows:
+            lay2 = [_layout(robot, targets[k].arms, locked, set(ARMS)) for k in rows]
+            x0 = {}
+            for i, k in enumerate(rows):
+                x0[i] = [(best_r if s == 'right' else best_l)[k, j] for s, j in lay2[i]]
+            batch = _Batch(best_r[rows], best_l[rows], ids[rows], lay2, x0)
+            r2, l2, st2 = _solve(robot, scorer, checker, batch, algo, end, cancel, rng)
+            f2 = scorer.evaluate(r2, l2, ids[rows])
+            for i, k in enumerate(rows):
+                if f2[i] < after[k] and _no_worse_collision(checker, r2[i], l2[i],
+                                                            best_r[k], best_l[k], k):
+                    best_r[k], best_l[k], after[k] = r2[i], l2[i], f2[i]
+                    stage[k] = 2
+                if st2[i] in ('deadline', 'cancelled'):
+                    status[k] = st2[i]
+
+    before = scorer.evaluate(base_r, base_l, ids)
+    _, parts = scorer.evaluate(best_r, best_l, ids, breakdown=True)
+    collides = [None] * len(targets)
+    pairs = [()] * len(targets)
+    if checker is not None:
+        lm_r, lm_l = _forward(robot, best_r, 'right'), _forward(robot, best_l, 'left')
+        collides = [bool(c) for c in checker.collides(lm_r, lm_l, ids)]
+        pairs = [tuple(p) for p in checker.colliding_pairs(lm_r, lm_l, ids)]
     wall = time.monotonic() - start
     results = []
     for gi, gesture in enumerate(selected):
@@ -226,16 +405,97 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
         frames = tuple(Keyframe(kf.time_from_start, best_r[k].copy(), best_l[k].copy())
                        for kf, k in zip(gesture.keyframes, ks))
         st = _worst_status([status[k] for k in ks])
+        stage_used = int(max(stage[k] for k in ks))
+        free = (layouts[ks[0]] if stage_used == 1
+                else _layout(robot, gesture.arms, locked, set(ARMS)))
+        hit = None if checker is None else any(collides[k] for k in ks)
         results.append(GestureReconfiguration(
             name=gesture.name, keyframes=frames,
             score_before=float(max(before[k] for k in ks)),
             score_after=float(after[worst]),
             breakdown={c: float(v[worst]) for c, v in parts.items()
                        if c not in ('right', 'left')},
-            wall_time=wall, status=st, message=_message(gesture.name, st),
-            free_joints=tuple(robot.arms[s].joint_names[j] for s, j in free_of[ks[0]])))
+            wall_time=wall, status=st, message=_message(gesture.name, st, stage_used, hit),
+            free_joints=tuple(robot.arms[s].joint_names[j] for s, j in free),
+            stage=stage_used, stage1_score=float(max(stage1[k] for k in ks)),
+            collides=hit, colliding_pairs=tuple(p for k in ks for p in pairs[k])))
     return LibraryReconfiguration(results, locks, frozen, wall, deadline, seed, algo.name,
-                                  preset, notes)
+                                  preset, notes, lock_strategy)
+
+
+def _apply_locks(robot, ref_r, ref_l, locks):
+    base = {'right': ref_r.copy(), 'left': ref_l.copy()}
+    for joint, angle in locks.items():
+        side, j = robot.locate_joint(joint)
+        base[side][..., j] = angle
+    return base['right'], base['left']
+
+
+def _no_worse_collision(checker, r_new, l_new, r_old, l_old, k):
+    if checker is None:
+        return True
+    pen = [checker.penetration(_forward(checker.robot, r[None], 'right'),
+                               _forward(checker.robot, left[None], 'left'), np.array([k]))
+           .sum() for r, left in ((r_new, l_new), (r_old, l_old))]
+    return pen[0] <= pen[1] + 1e-9
+
+
+def _optimise_locks(robot, scorer, checker, targets, ref_r, ref_l, locks, joints, algo,
+                    end, cancel, rng):
+    """
+    Choose lock angles for ``joints`` that minimise the library's total score.
+
+    Each joint in turn: a coarse sweep of candidate angles over its range, then a finer
+    one around the best, every candidate's whole library reconfigured in one batched
+    run.  Returns the new locks, a note naming the chosen angles, and the (right, left)
+    poses found at the chosen locks (a start for the final run).
+    """
+    locks = dict(locks)
+    faulted = {robot.locate_joint(j)[0] for j in locks}
+    chosen = []
+    poses = None
+    n_t = len(targets)
+    for jn, joint in enumerate(joints):
+        side, j = robot.locate_joint(joint)
+        lo, hi = robot.arms[side].lower[j], robot.arms[side].upper[j]
+        span = hi - lo
+        centre = locks[joint]
+        candidates = np.concatenate(([centre], np.linspace(lo, hi, _LOCK_CANDIDATES,
+                                                           endpoint=span < 2 * np.pi - 1e-9)))
+        totals = {}
+        for sweep in range(2):
+            joint_end = None
+            if end is not None:   # the time left, shared evenly by the sweeps left
+                sweeps_left = 2 * len(joints) - (2 * jn + sweep)
+                joint_end = time.monotonic() + (end - time.monotonic()) / sweeps_left
+            base_r, base_l, layouts, tid = [], [], [], []
+            for a in candidates:
+                trial = dict(locks, **{joint: float(a)})
+                locked = {s: [robot.locate_joint(x)[1] for x in trial
+                              if robot.locate_joint(x)[0] == s] for s in ARMS}
+                br, bl = _apply_locks(robot, ref_r, ref_l, trial)
+                base_r.append(br)
+                base_l.append(bl)
+                layouts += [_layout(robot, t.arms, locked, faulted) for t in targets]
+                tid.append(np.arange(n_t))
+            batch = _Batch(np.concatenate(base_r), np.concatenate(base_l),
+                           np.concatenate(tid), layouts)
+            r, left, _ = _solve(robot, scorer, checker, batch, algo, joint_end, cancel, rng)
+            f = scorer.evaluate(r, left, batch.target_ids).reshape(len(candidates), n_t)
+            r = r.reshape(len(candidates), n_t, N_JOINTS)
+            left = left.reshape(len(candidates), n_t, N_JOINTS)
+            for c, (a, total) in enumerate(zip(candidates, f.sum(axis=1))):
+                if float(total) < totals.get(float(a), (np.inf,))[0]:
+                    totals[float(a)] = (float(total), r[c], left[c])
+            best = min(totals, key=lambda a: totals[a][0])
+            step = span / _LOCK_CANDIDATES
+            candidates = np.clip(best + np.linspace(-step, step, 7), lo, hi)
+        best = min(totals, key=lambda a: totals[a][0])
+        locks[joint] = best
+        poses = totals[best][1:]
+        chosen.append(f'{joint} = {np.degrees(best):.2f} deg (library total '
+                      f'{totals[best][0]:.3f})')
+    return locks, 'optimal lock: ' + ', '.join(chosen), poses
 
 
 _STATUS_ORDER = ('cancelled', 'deadline', 'frozen', 'converged', 'unchanged')
@@ -245,11 +505,16 @@ def _worst_status(statuses):
     return min(statuses, key=_STATUS_ORDER.index)
 
 
-def _message(name, status):
-    return {
+def _message(name, status, stage, collides):
+    text = {
         'converged': f'{name}: reconfigured',
         'deadline': f'{name}: deadline reached, best result so far used',
         'cancelled': f'{name}: cancelled, best result so far used',
         'frozen': f'{name}: the faulted arm has no free joint left; frozen at its locks',
         'unchanged': f'{name}: not affected by the faults',
     }[status]
+    if stage == 2:
+        text += '; the healthy arm moves too (stage 2)'
+    if collides:
+        text += '; WARNING: the pose still collides'
+    return text

@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from . import _yaml_checks as chk
+from .capsules import CapsuleModel
 from .errors import ConfigError
 from .resources import config_path, DEFAULT_ROBOT_FILE
 
@@ -47,6 +48,7 @@ class RobotModel:
     wrist_frame: int
     arms: dict
     source: str = '<memory>'
+    capsules: CapsuleModel = CapsuleModel()
 
     @property
     def joint_names(self):
@@ -147,6 +149,31 @@ def load_robot(path=None):
         raise ConfigError(path, 'arms.left.mirror_of',
                           "missing key: the left arm must be declared 'mirror_of: right'")
 
+    capsules = CapsuleModel()
+    if 'capsules' in data:
+        cap = data['capsules']
+        if not isinstance(cap, dict):
+            raise ConfigError(path, 'capsules', f'expected a mapping, got {cap!r}')
+        known = {'upper_arm', 'forearm', 'hand', 'torso_radius', 'torso_top', 'torso_bottom',
+                 'weight'}
+        for key in cap:
+            if key not in known:
+                raise ConfigError(path, f'capsules.{key}',
+                                  f'unknown key; expected some of {", ".join(sorted(known))}')
+        values = {}
+        for key, value in cap.items():
+            if key in ('torso_top', 'torso_bottom'):
+                values[key] = tuple(v * length_scale for v in
+                                    chk.as_row(value, 3, path, f'capsules.{key}'))
+            elif key == 'weight':
+                values[key] = chk.as_number(value, path, f'capsules.{key}')
+            else:
+                values[key] = chk.as_number(value, path, f'capsules.{key}') * length_scale
+        try:
+            capsules = CapsuleModel(**values)
+        except ValueError as exc:
+            raise ConfigError(path, 'capsules', str(exc)) from None
+
     return RobotModel(
         name=name,
         theta_offset=table[:, 0] * angle_scale,
@@ -159,4 +186,5 @@ def load_robot(path=None):
         wrist_frame=frames['wrist'],
         arms=arms,
         source=str(path),
+        capsules=capsules,
     )

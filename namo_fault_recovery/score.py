@@ -166,9 +166,13 @@ class SimilarityScore:
                 rows.append(q.shape[0])
         n = max(rows)
         target = np.broadcast_to(target, (n,))
-        if not isinstance(q_right, ArmLandmarks):
+        if isinstance(q_right, ArmLandmarks):
+            q_right = _take(q_right, target)
+        else:
             q_right = np.broadcast_to(q_right, (n, q_right.shape[-1]))
-        if q_left is not None and not isinstance(q_left, ArmLandmarks):
+        if isinstance(q_left, ArmLandmarks):
+            q_left = _take(q_left, target)
+        elif q_left is not None:
             q_left = np.broadcast_to(q_left, (n, q_left.shape[-1]))
         return self.evaluate(q_right, q_left, target, breakdown)
 
@@ -176,12 +180,13 @@ class SimilarityScore:
         """
         Score without input checks: the hot path of the optimisers.
 
-        ``q_right``/``q_left`` are (N, 7) angle arrays, per-target ArmLandmarks, or None
-        for the left arm's reference; ``target`` is an (N,) index array.
+        ``q_right``/``q_left`` are (N, 7) angle arrays, or ArmLandmarks already computed
+        for each of the N rows, or None for the left arm's reference; ``target`` is an
+        (N,) index array.
         """
         n = target.shape[0]
-        lm_r = (_take(q_right, target) if isinstance(q_right, ArmLandmarks)
-                else _forward(self.robot, q_right, 'right'))
+        lm_r = q_right if isinstance(q_right, ArmLandmarks) else _forward(self.robot, q_right,
+                                                                          'right')
         comps = np.zeros((n, len(COMPONENTS)))
         right = self._arm_terms(lm_r, 'right', target)
         comps[:, :_ARM_COMPONENTS] += right * self._arm_mask[target, 0:1]
@@ -190,7 +195,7 @@ class SimilarityScore:
             if q_left is None:
                 lm_l = _take(self._ref_l, target)
             elif isinstance(q_left, ArmLandmarks):
-                lm_l = _take(q_left, target)
+                lm_l = q_left
             else:
                 lm_l = _forward(self.robot, q_left, 'left')
             left = self._arm_terms(lm_l, 'left', target)
@@ -215,9 +220,10 @@ class SimilarityScore:
         """
         Return totals (N,) and their gradients (N, 7) with respect to each arm's angles.
 
-        Arguments as for :meth:`evaluate`; an arm given as landmarks (or None) does not
-        move and gets a zero gradient.  Where a distance is exactly zero its derivative
-        is taken as 0 (a subgradient).  With ``smooth`` = eps > 0 every distance, angle and
+        Arguments as for :meth:`evaluate`, and an arm may also be given as a pair
+        ``(ArmLandmarks, ArmJacobian)`` computed by the caller; an arm given as landmarks
+        alone (or None) does not move and gets a zero gradient.  Where a distance is
+        exactly zero its derivative is taken as 0 (a subgradient).  With ``smooth`` = eps > 0 every distance, angle and
         left-right gap |t| is replaced by sqrt(t^2 + eps^2) - eps, which removes the kinks
         at zero (each term moves by less than eps) so that quasi-Newton polishing
         converges quickly.
@@ -228,7 +234,9 @@ class SimilarityScore:
             if q is None:
                 lms[side] = _take(self._ref_l if side == 'left' else self._ref_r, target)
             elif isinstance(q, ArmLandmarks):
-                lms[side] = _take(q, target)
+                lms[side] = q
+            elif isinstance(q, tuple):
+                lms[side], jacs[side] = q
             else:
                 lms[side], jacs[side] = _forward_jacobian(self.robot, q, side)
         w = self._w[target]
