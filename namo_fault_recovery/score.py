@@ -223,10 +223,10 @@ class SimilarityScore:
         Arguments as for :meth:`evaluate`, and an arm may also be given as a pair
         ``(ArmLandmarks, ArmJacobian)`` computed by the caller; an arm given as landmarks
         alone (or None) does not move and gets a zero gradient.  Where a distance is
-        exactly zero its derivative is taken as 0 (a subgradient).  With ``smooth`` = eps > 0 every distance, angle and
-        left-right gap |t| is replaced by sqrt(t^2 + eps^2) - eps, which removes the kinks
-        at zero (each term moves by less than eps) so that quasi-Newton polishing
-        converges quickly.
+        exactly zero its derivative is taken as 0 (a subgradient).  With ``smooth`` =
+        eps > 0 every distance, angle and left-right gap |t| is replaced by
+        sqrt(t^2 + eps^2) - eps, which removes the kinks at zero (each term moves by
+        less than eps) so that quasi-Newton polishing converges quickly.
         """
         n = target.shape[0]
         lms, jacs = {}, {}
