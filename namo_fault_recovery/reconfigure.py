@@ -282,7 +282,7 @@ def _layout(robot, arms_used, locked, moving):
 def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='default',
                         deadline=1.0, seed=None, weights=None, lock_strategy='average',
                         measured=None, cancel=None, gestures=None, settings=None,
-                        bimanual='auto', bimanual_threshold=DEFAULT_BIMANUAL_THRESHOLD,
+                        bimanual='off', bimanual_threshold=DEFAULT_BIMANUAL_THRESHOLD,
                         collision=False, capsules=None):
     """
     Reconfigure every gesture (or those named in ``gestures``) for a fault set.
@@ -292,8 +292,9 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
     ``bimanual`` ('auto', 'on', 'off') controls stage 2 for two-handed gestures: with
     'auto' it runs when stage 1 scores above ``bimanual_threshold``.  ``collision``
     keeps the arms and torso apart (``capsules`` or the robot's capsule model) and
-    reports any pose that still collides; it is off here by default, so that the plain
-    score is the paper's objective, and on by default in the node and ``solve``.
+    reports any pose that still collides.  Both extensions are off here by default, so
+    that the library API solves exactly the paper's problem; the node and ``solve``
+    turn them on (``bimanual='auto'``, ``collision=True``).
     The result is a pure function of the inputs and ``seed`` (None draws one, reported
     in the result), up to where a deadline cuts the search.
     """
