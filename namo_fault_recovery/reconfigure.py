@@ -208,16 +208,13 @@ def _solve(robot, scorer, checker, batch, algo, clock_end, cancel, rng):
     The collision constraint is lazy: the plain score is optimised first (fast, and
     most results do not collide), the results are checked, and only the rows that
     collide are solved again with the capsule penalty, from their collision-free
-    starting pose.  A row keeps the penalised result if it no longer collides (or
-    collides less).  Return (best right, best left, status names).
+    starting pose.  Return (best right, best left, status names).
     """
     best_r, best_l, status = _solve_once(robot, scorer, None, batch, algo, clock_end, cancel,
                                          rng)
     if checker is None:
         return best_r, best_l, status
     ids = batch.target_ids
-    pen = checker.penetration(_forward(robot, best_r, 'right'), _forward(robot, best_l, 'left'),
-                              ids).sum(axis=1)
     rows = np.nonzero(checker.collides(_forward(robot, best_r, 'right'),
                                        _forward(robot, best_l, 'left'), ids))[0]
     if rows.size == 0:
@@ -225,11 +222,23 @@ def _solve(robot, scorer, checker, batch, algo, clock_end, cancel, rng):
     sub = _Batch(batch.right[rows], batch.left[rows], ids[rows],
                  [batch.layouts[k] for k in rows])
     r2, l2, st2 = _solve_once(robot, scorer, checker, sub, algo, clock_end, cancel, rng)
-    pen2 = checker.penetration(_forward(robot, r2, 'right'), _forward(robot, l2, 'left'),
-                               ids[rows]).sum(axis=1)
+    # Candidates per row: the plain result, the penalised one, and the starting pose
+    # (collision-free unless the locks themselves force a contact).  The best score
+    # among those that do not collide wins; if all collide, the least penetration.
+    candidates = [(best_r[rows], best_l[rows]), (r2, l2), (batch.right[rows],
+                                                           batch.left[rows])]
+    scores, pens, hits = [], [], []
+    for qr, ql in candidates:
+        lm_r, lm_l = _forward(robot, qr, 'right'), _forward(robot, ql, 'left')
+        scores.append(scorer.evaluate(lm_r, lm_l, ids[rows]))
+        pens.append(checker.penetration(lm_r, lm_l, ids[rows]).sum(axis=1))
+        hits.append(checker.collides(lm_r, lm_l, ids[rows]))
+    scores, pens, hits = np.array(scores), np.array(pens), np.array(hits)
     for i, k in enumerate(rows):
-        if pen2[i] < pen[k]:
-            best_r[k], best_l[k] = r2[i], l2[i]
+        free = ~hits[:, i]
+        pick = (int(np.argmin(np.where(free, scores[:, i], np.inf))) if free.any()
+                else int(np.argmin(pens[:, i])))
+        best_r[k], best_l[k] = candidates[pick][0][i], candidates[pick][1][i]
         if st2[i] in ('deadline', 'cancelled'):
             status[k] = st2[i]
     return best_r, best_l, status

@@ -1,0 +1,349 @@
+"""
+The ``bench`` and ``plot`` commands of ``namo-recovery``.
+
+:func:`register` adds them to the main parser's subcommands.  The benchmarks print
+their figures on stdout (progress goes to stderr) and write their files under
+``bench_out/`` unless told otherwise.  Until the main CLI registers them they also run
+standalone: ``python -m namo_fault_recovery.cli_bench bench speed``.
+"""
+
+import math
+from pathlib import Path
+import sys
+
+import numpy as np
+
+EXIT_USAGE = 2
+
+
+def _cli_names():
+    """Return ``(_Parser, UsageError)`` of the main CLI (imported late: no import cycle)."""
+    try:
+        from .cli_common import _Parser, UsageError
+    except ImportError:
+        from .cli import _Parser, UsageError
+    return _Parser, UsageError
+
+
+def _usage(message):
+    return _cli_names()[1](message)
+
+
+def _positive_int(option, value, minimum=1):
+    if value is None or value < minimum:
+        raise _usage(f'{option}: expected an integer >= {minimum}, got {value}')
+    return value
+
+
+def _models(args):
+    from .benchmarks import common
+    return common.models(getattr(args, 'robot_file', None), getattr(args, 'gesture_file', None))
+
+
+def _cases_or_usage(robot, library, gestures, joints):
+    from .benchmarks import common
+    try:
+        return common.select_cases(robot, library, gestures, joints)
+    except (KeyError, ValueError) as exc:
+        raise _usage(exc.args[0]) from None
+
+
+def _keys_or_usage(keys, option='--algorithms'):
+    from .benchmarks import common
+    try:
+        return [common.lookup_spec(k).key for k in keys]
+    except ValueError as exc:
+        raise _usage(f'{option}: {exc}') from None
+
+
+def _out_dir(args, name):
+    from .benchmarks import common
+    return Path(args.out) if args.out else Path(common.DEFAULT_OUT_ROOT) / name
+
+
+def cmd_bench_paper(args, out):
+    """Reproduce the paper's Tables 3-6 (resumable; see benchmarks.paper)."""
+    from .benchmarks import paper
+    reps = args.reps if args.reps is not None else (paper.QUICK_REPS if args.quick else 100)
+    _positive_int('--reps', reps)
+    _positive_int('--jobs', args.jobs)
+    joints = args.joints or (list(paper.QUICK_JOINTS) if args.quick else None)
+    robot, library = _models(args)
+    _cases_or_usage(robot, library, args.gestures, joints)
+    keys = _keys_or_usage(args.algorithms)
+    if args.deadline is not None and not (math.isfinite(args.deadline) and args.deadline > 0):
+        raise _usage(f'--deadline: expected a number of seconds > 0, got {args.deadline}')
+    out_dir = _out_dir(args, 'paper-quick' if args.quick else 'paper')
+    paper.run_paper(out, out_dir, reps=reps, jobs=args.jobs, keys=keys, gestures=args.gestures,
+                    joints=joints, seed_base=args.seed_base, deadline=args.deadline,
+                    robot_file=args.robot_file, gesture_file=args.gesture_file,
+                    plots=not args.no_plots, progress=not args.quiet)
+    return 0
+
+
+def cmd_bench_optimum(args, out):
+    """Find (or load) the best-known optimum of every case and print the gaps to it."""
+    from .benchmarks import common, optimum
+    _positive_int('--starts', args.starts, 0)
+    _positive_int('--seeds', args.seeds, 0)
+    _positive_int('--maxiter', args.maxiter)
+    robot, library = _models(args)
+    cases = _cases_or_usage(robot, library, args.gestures, args.joints)
+    keys = _keys_or_usage(args.algorithms)
+    write = None
+    if args.write_to:
+        write = Path(args.write_to)
+    elif args.write:
+        write = optimum.best_known_path()
+    if write is not None and args.stored:
+        raise _usage('--write/--write-to: nothing to write with --stored')
+    try:
+        doc = optimum.run_optimum(robot, library, out, cases, starts=args.starts,
+                                  seed=args.seed, maxiter=args.maxiter, write=write, keys=keys,
+                                  seeds=args.seeds, use_stored=args.stored,
+                                  progress=not args.quiet)
+    except FileNotFoundError as exc:
+        raise _usage(f'--stored: {exc}') from None
+    out_dir = _out_dir(args, 'optimum')
+    common.write_json(out_dir / 'summary.json', doc)
+    out.write(f'written: {out_dir / "summary.json"}\n')
+    return 0
+
+
+def cmd_bench_speed(args, out):
+    """Time the whole library: our default against the paper ABC, with quality."""
+    from .benchmarks import speed
+    _positive_int('--reps', args.reps)
+    _positive_int('--sequential-reps', args.sequential_reps, 0)
+    robot, library = _models(args)
+    _cases_or_usage(robot, library, None, args.joints)
+    if args.deadline is not None and not (math.isfinite(args.deadline) and args.deadline > 0):
+        raise _usage(f'--deadline: expected a number of seconds > 0, got {args.deadline}')
+    speed.run_speed(out, _out_dir(args, 'speed'), reps=args.reps, joints=args.joints,
+                    seed_base=args.seed_base, deadline=args.deadline,
+                    robot_file=args.robot_file, gesture_file=args.gesture_file,
+                    progress=not args.quiet, sequential_reps=args.sequential_reps)
+    return 0
+
+
+def cmd_bench_deadline(args, out):
+    """Measure the worst deadline overrun, idle and with a CPU burner."""
+    from .benchmarks import deadline
+    _positive_int('--reps', args.reps)
+    for d in args.deadlines:
+        if not (math.isfinite(d) and d > 0):
+            raise _usage(f'--deadlines: expected seconds > 0, got {d}')
+    unknown = [k for k in args.algorithms if k not in deadline.UNBOUNDED]
+    if unknown:
+        raise _usage(f'--algorithms: unknown key {unknown[0]!r}; expected some of '
+                     f'{", ".join(deadline.UNBOUNDED)}')
+    deadline.run_deadline(out, _out_dir(args, 'deadline'), deadlines=tuple(args.deadlines),
+                          reps=args.reps, keys=tuple(args.algorithms), burner=not args.no_burner,
+                          robot_file=args.robot_file, gesture_file=args.gesture_file,
+                          progress=not args.quiet)
+    return 0
+
+
+def _parse_faults(robot, specs):
+    faults = {}
+    for spec in specs:
+        joint, sep, value = spec.partition('=')
+        try:
+            robot.locate_joint(joint)
+        except KeyError as exc:
+            raise _usage(f'--fault: {exc.args[0]}') from None
+        angle = None
+        if sep:
+            try:
+                angle = math.radians(float(value))
+            except ValueError:
+                raise _usage(f'--fault {spec}: expected JOINT=DEGREES, e.g. '
+                             f'right_arm_joint2=-14.25') from None
+            if not math.isfinite(angle):
+                raise _usage(f'--fault {spec}: the lock angle must be finite')
+        faults[joint] = angle
+    return faults
+
+
+def cmd_plot(args, out):
+    """Draw the reference and reconfigured arms of one gesture (matplotlib optional)."""
+    from . import plotting
+    from .reconfigure import reconfigure_library
+    robot, library = _models(args)
+    try:
+        gesture = library[args.gesture]
+    except KeyError as exc:
+        raise _usage(f'--gesture: {exc.args[0]}') from None
+    faults = _parse_faults(robot, args.fault)
+    if not 0 <= args.keyframe < len(gesture.keyframes):
+        raise _usage(f'--keyframe: gesture {gesture.name} has keyframes '
+                     f'0..{len(gesture.keyframes) - 1}, got {args.keyframe}')
+    try:
+        plotting._figure((1, 1))
+    except plotting.MatplotlibMissing as exc:
+        sys.stderr.write(f'namo-recovery: error: {exc}\n')
+        return EXIT_USAGE
+    try:
+        report = reconfigure_library(robot, library, faults, algorithm=args.algorithm,
+                                     preset=args.preset, deadline=args.deadline,
+                                     seed=args.seed, gestures=[gesture.name])
+    except ValueError as exc:
+        raise _usage(str(exc)) from None
+    tag = '_'.join(j.replace('_arm_joint', '') for j in faults)
+    path = Path(args.out) if args.out else Path(f'{gesture.name}_{tag}.png')
+    plotting.plot_reconfiguration(robot, library, report, gesture.name, path,
+                                  keyframe=args.keyframe)
+    g = report[gesture.name]
+    kf = g.keyframes[args.keyframe]
+    for joint, angle in report.locks.items():
+        out.write(f'lock {joint} = {math.degrees(angle):.2f} deg\n')
+    out.write(f'{gesture.name}: score {g.score_before:.4f} -> {g.score_after:.4f} '
+              f'({report.algorithm}, {g.status}, {1000 * g.wall_time:.1f} ms)\n')
+    for side in gesture.arms:
+        out.write(f'  {side:5s} reference    (deg) '
+                  f'{_deg(gesture.keyframes[args.keyframe].arm(side))}\n')
+        out.write(f'  {side:5s} reconfigured (deg) {_deg(kf.arm(side))}\n')
+    out.write(f'written: {path}\n')
+    return 0
+
+
+def _deg(q):
+    return '[' + ', '.join(f'{x:7.2f}' for x in np.degrees(q)) + ']'
+
+
+def _add_common(p):
+    p.add_argument('--out', default=None, metavar='DIR',
+                   help='output directory (default: bench_out/<benchmark>)')
+    p.add_argument('--quiet', action='store_true', help='no progress lines on stderr')
+
+
+def register(subparsers):
+    """
+    Add the ``bench`` and ``plot`` commands to the main parser's subparsers.
+
+    Returns the ``bench`` command's own subparsers, so that more benchmarks can be
+    added to it (``add_parser(...)`` with ``set_defaults(func=...)``).
+    """
+    from .benchmarks.common import ALGORITHM_SPECS, PAPER_LINEUP
+    from .benchmarks.deadline import DEADLINES, DEFAULT_KEYS
+    _Parser = _cli_names()[0]
+    keys = ', '.join(ALGORITHM_SPECS)
+
+    bench = subparsers.add_parser('bench', help='benchmarks that print figures')
+    bench_sub = bench.add_subparsers(dest='bench_command', metavar='BENCHMARK',
+                                     parser_class=_Parser)
+    bench_sub.required = True
+
+    p = bench_sub.add_parser('paper', help="reproduce the paper's Tables 3-6 (resumable)")
+    p.add_argument('--reps', type=int, default=None,
+                   help='repetitions per case (default 100; 5 with --quick)')
+    p.add_argument('--quick', action='store_true',
+                   help='a short version (5 reps, joint 2 only; under 2 minutes)')
+    p.add_argument('--jobs', type=int, default=1, help='worker processes (default 1)')
+    p.add_argument('--algorithms', nargs='+', default=list(PAPER_LINEUP), metavar='KEY',
+                   help=f'algorithm keys (default: {" ".join(PAPER_LINEUP)}); from {keys}')
+    p.add_argument('--gestures', nargs='+', default=None, metavar='G',
+                   help='gestures (default: the whole library)')
+    p.add_argument('--joints', nargs='+', default=None, metavar='J',
+                   help='failed right-arm joints, names or numbers 1-7 (default: all)')
+    p.add_argument('--seed-base', type=int, default=0, help='seed of repetition 0')
+    p.add_argument('--deadline', type=float, default=None,
+                   help='deadline per gesture in s (default: none, as in the paper)')
+    p.add_argument('--no-plots', action='store_true', help='skip the box plots')
+    _add_common(p)
+    p.set_defaults(func=cmd_bench_paper)
+
+    p = bench_sub.add_parser('optimum', help='best-known optimum of every case, and the gaps')
+    p.add_argument('--starts', type=int, default=1000,
+                   help='random starts per case besides the reference start (default 1000)')
+    p.add_argument('--seed', type=int, default=0, help='seed of the random starts')
+    p.add_argument('--maxiter', type=int, default=300, help='polish iterations per start')
+    p.add_argument('--write', action='store_true',
+                   help='store the optima in the package config (best_known_optima.yaml)')
+    p.add_argument('--write-to', default=None, metavar='FILE',
+                   help='store the optima in FILE instead')
+    p.add_argument('--stored', action='store_true',
+                   help='use the stored optima instead of searching (prints the gaps only)')
+    p.add_argument('--seeds', type=int, default=3,
+                   help='seeds per algorithm and case for the gaps (default 3; 0: none)')
+    p.add_argument('--algorithms', nargs='+', default=list(PAPER_LINEUP), metavar='KEY',
+                   help=f'algorithms whose gap is printed; from {keys}')
+    p.add_argument('--gestures', nargs='+', default=None, metavar='G', help='gestures')
+    p.add_argument('--joints', nargs='+', default=None, metavar='J',
+                   help='failed right-arm joints, names or numbers 1-7')
+    _add_common(p)
+    p.set_defaults(func=cmd_bench_optimum)
+
+    p = bench_sub.add_parser('speed', help='whole-library time and quality: ours vs paper ABC')
+    p.add_argument('--reps', type=int, default=100, help='seeds per failed joint (default 100)')
+    p.add_argument('--joints', nargs='+', default=None, metavar='J',
+                   help='failed right-arm joints, names or numbers 1-7 (default: all)')
+    p.add_argument('--seed-base', type=int, default=0, help='seed of repetition 0')
+    p.add_argument('--deadline', type=float, default=1.0,
+                   help="our default's library deadline in s (default 1.0)")
+    p.add_argument('--sequential-reps', type=int, default=10,
+                   help='seeds per joint on which the paper ABC is also timed one gesture '
+                        'at a time, as the paper ran it (default 10; 0: skip)')
+    _add_common(p)
+    p.set_defaults(func=cmd_bench_speed)
+
+    p = bench_sub.add_parser('deadline', help='worst deadline overrun, idle and with a burner')
+    p.add_argument('--deadlines', nargs='+', type=float, default=list(DEADLINES),
+                   metavar='S', help='deadlines in s (default 0.05 0.1 0.25 1)')
+    p.add_argument('--reps', type=int, default=10,
+                   help='runs per deadline and algorithm (default 10)')
+    p.add_argument('--algorithms', nargs='+', default=list(DEFAULT_KEYS), metavar='KEY',
+                   help=f'algorithms (default: {" ".join(DEFAULT_KEYS)})')
+    p.add_argument('--no-burner', action='store_true', help='skip the CPU-burner pass')
+    _add_common(p)
+    p.set_defaults(func=cmd_bench_deadline)
+
+    p = subparsers.add_parser('plot', help='draw reference and reconfigured arms (PNG)')
+    p.add_argument('--gesture', required=True, help='gesture name, e.g. wai')
+    p.add_argument('--fault', action='append', required=True, metavar='JOINT[=DEG]',
+                   help='failed joint, optionally with its lock angle in degrees '
+                        '(default: the library average); repeatable')
+    p.add_argument('--out', default=None, metavar='FILE',
+                   help='PNG file (default: <gesture>_<faults>.png)')
+    p.add_argument('--algorithm', default='abc', choices=['abc', 'ga', 'bfoa', 'gd'])
+    p.add_argument('--preset', default='default', choices=['default', 'paper'])
+    p.add_argument('--seed', type=int, default=0, help='seed (default 0)')
+    p.add_argument('--deadline', type=float, default=1.0, help='deadline in s (default 1)')
+    p.add_argument('--keyframe', type=int, default=0, help='keyframe index (default 0)')
+    p.set_defaults(func=cmd_plot)
+    return bench_sub
+
+
+def build_parser():
+    """Return a standalone parser with the main options and these commands."""
+    _Parser = _cli_names()[0]
+    parser = _Parser(prog='namo-recovery', description='Benchmarks and figures.')
+    parser.add_argument('--robot-file', default=None, help='robot model YAML')
+    parser.add_argument('--gesture-file', default=None, help='gesture library YAML')
+    sub = parser.add_subparsers(dest='command', metavar='COMMAND', parser_class=_Parser)
+    sub.required = True
+    register(sub)
+    return parser
+
+
+def main(argv=None, out=None):
+    """Run the bench/plot commands standalone; returns the exit code."""
+    UsageError = _cli_names()[1]
+    from .errors import ConfigError
+    out = out or sys.stdout
+    try:
+        args = build_parser().parse_args(argv)
+        return args.func(args, out)
+    except UsageError as exc:
+        sys.stderr.write(f'namo-recovery: error: {exc}\n')
+        return EXIT_USAGE
+    except (ConfigError, FileNotFoundError) as exc:
+        sys.stderr.write(f'namo-recovery: error: {exc}\n')
+        return EXIT_USAGE
+    except BrokenPipeError:
+        sys.stderr.close()
+        return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,105 @@
+"""
+Validation of the node's inputs (fault reports and measured joint states), free of ROS.
+
+Each function takes the plain arrays of a ``sensor_msgs/JointState`` and either returns
+the parsed content or raises :class:`BadInput` with a one-line reason.  A rejected
+message changes nothing: the caller keeps its previous state.
+"""
+
+import math
+
+from .robot_model import ARMS
+
+
+class BadInput(ValueError):
+    """An input message that is rejected as a whole; the message is the reason."""
+
+
+def _fmt(value):
+    return f'{value:g}' if isinstance(value, float) else repr(value)
+
+
+def _check_lengths(names, arrays):
+    for label, values in arrays.items():
+        if len(values) and len(values) != len(names):
+            raise BadInput(f'mismatched lengths: {len(names)} names but {len(values)} '
+                           f'{label} values (must be empty or one per name)')
+
+
+def parse_fault(robot, names, positions=(), velocities=(), efforts=()):
+    """
+    Parse a fault report; return an ordered dict joint -> lock angle (rad) or None.
+
+    ``position[i]``, when present and finite, is the lock angle of ``name[i]``; when the
+    position array is empty or the entry is NaN the lock strategy chooses the angle
+    (None).  Rejected with :class:`BadInput`: an empty message, an unknown or repeated
+    joint name, arrays whose length does not match ``name``, an infinite position, and
+    a position outside the joint's limits.
+    """
+    names = list(names)
+    positions = list(positions)
+    if not names:
+        raise BadInput('empty fault message: no joint names (name[] is empty)')
+    _check_lengths(names, {'position': positions, 'velocity': list(velocities),
+                           'effort': list(efforts)})
+    faults = {}
+    for i, name in enumerate(names):
+        try:
+            side, index = robot.locate_joint(name)
+        except KeyError as exc:
+            raise BadInput(exc.args[0]) from None
+        if name in faults:
+            raise BadInput(f'joint {name!r} appears twice in one fault message')
+        angle = None
+        if positions:
+            value = float(positions[i])
+            if math.isinf(value):
+                raise BadInput(f'non-finite position {_fmt(value)} for joint {name!r} '
+                               f'(use NaN or an empty position array to let the lock '
+                               f'strategy choose)')
+            if not math.isnan(value):
+                if not robot.within_limits(side, index, value):
+                    arm = robot.arms[side]
+                    raise BadInput(
+                        f'position {value:.6g} rad ({math.degrees(value):.4g} deg) of joint '
+                        f'{name!r} is outside its limits [{arm.lower[index]:.6g}, '
+                        f'{arm.upper[index]:.6g}] rad')
+                angle = value
+        faults[name] = angle
+    return faults
+
+
+def parse_joint_state(robot, names, positions):
+    """
+    Parse a measured joint state; return a dict joint -> angle (rad) for the arm joints.
+
+    Joints the robot model does not know (head, wheels, grippers...) are ignored, as on a
+    real robot's ``/joint_states``.  Rejected with :class:`BadInput`: a message without
+    names or positions, mismatched lengths, and a non-finite or out-of-limit angle of an
+    arm joint.
+    """
+    names = list(names)
+    positions = list(positions)
+    if not names or not positions:
+        raise BadInput('empty joint state: no names or no positions')
+    _check_lengths(names, {'position': positions})
+    measured = {}
+    for name, value in zip(names, positions):
+        try:
+            side, index = robot.locate_joint(name)
+        except KeyError:
+            continue
+        value = float(value)
+        if not math.isfinite(value):
+            raise BadInput(f'non-finite measured position {_fmt(value)} for joint {name!r}')
+        if not robot.within_limits(side, index, value):
+            raise BadInput(f'measured position {value:.6g} rad of joint {name!r} is outside '
+                           f'its limits')
+        measured[name] = value
+    return measured
+
+
+def frozen_arms(robot, joints):
+    """Return the arms (in robot order) whose joints are all in ``joints``."""
+    joints = set(joints)
+    return tuple(side for side in ARMS if set(robot.arms[side].joint_names) <= joints)

@@ -1,0 +1,218 @@
+"""
+Conversions between the ROS messages of the contract and the numerical core.
+
+Library versions <-> ``trajectory_msgs/JointTrajectory`` (one per gesture), the RViz
+skeleton markers, and the ``diagnostic_msgs`` statuses.  Only the node and the ROS
+command line import this module; the numerical core stays free of ROS.
+"""
+
+import math
+
+from builtin_interfaces.msg import Duration
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Point
+import numpy as np
+from std_msgs.msg import ColorRGBA
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from visualization_msgs.msg import Marker
+
+from .kinematics import forward_kinematics, shoulder_position
+from .robot_model import ARMS, N_JOINTS
+from .state_store import GestureResult, LibraryResult
+
+DIAG_PREFIX = 'recovery_node: '
+_MM = 1e-3
+
+
+def duration_msg(seconds):
+    """Return a builtin_interfaces/Duration for a non-negative time in seconds."""
+    sec = int(math.floor(seconds))
+    nanosec = int(round((seconds - sec) * 1e9))
+    if nanosec >= 1_000_000_000:
+        sec, nanosec = sec + 1, nanosec - 1_000_000_000
+    return Duration(sec=sec, nanosec=nanosec)
+
+
+def duration_seconds(msg):
+    """Return a Duration message as float seconds."""
+    return msg.sec + msg.nanosec * 1e-9
+
+
+def reference_result(library, deadline=0.0, settings=None):
+    """Return the reference library as a LibraryResult (no faults, every score 0)."""
+    gestures = tuple(
+        GestureResult(name=g.name,
+                      times=tuple(float(kf.time_from_start) for kf in g.keyframes),
+                      positions=tuple(tuple(float(a) for a in kf.positions())
+                                      for kf in g.keyframes),
+                      status='unchanged', message='reference gesture')
+        for g in library)
+    return LibraryResult(gestures=gestures, deadline=deadline, settings=dict(settings or {}))
+
+
+def library_to_msgs(joint_names, result, stamp):
+    """Return one JointTrajectory per gesture, all with the same header stamp."""
+    msgs = []
+    for gesture in result.gestures:
+        msg = JointTrajectory()
+        msg.header.stamp = stamp
+        msg.header.frame_id = gesture.name
+        msg.joint_names = list(joint_names)
+        for t, q in zip(gesture.times, gesture.positions):
+            msg.points.append(JointTrajectoryPoint(positions=[float(a) for a in q],
+                                                   time_from_start=duration_msg(t)))
+        msgs.append(msg)
+    return msgs
+
+
+def stamp_key(stamp):
+    """Return a header stamp as an integer number of nanoseconds (a version key)."""
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def trajectory_angles(msg, joint_names=None):
+    """
+    Return a JointTrajectory's positions as an array (keyframes, joints) and times.
+
+    With ``joint_names`` the columns are reordered to that order (KeyError if missing).
+    """
+    q = np.array([list(p.positions) for p in msg.points], dtype=float)
+    times = [duration_seconds(p.time_from_start) for p in msg.points]
+    if joint_names is not None:
+        index = [list(msg.joint_names).index(j) for j in joint_names]
+        q = q[:, index]
+    return q, times
+
+
+# --- summaries -----------------------------------------------------------------------
+
+
+def fmt_angle(rad):
+    """Return an angle as 'X.XXXX rad (Y.YY deg)'."""
+    return f'{rad:.4f} rad ({math.degrees(rad):.2f} deg)'
+
+
+def summary(result):
+    """Return the one-line summary of a library version that a person reads."""
+    if not result.faults and not result.locks:
+        return (f'no faults: the reference library is published '
+                f'({len(result.gestures)} gestures, unchanged)')
+    locks = ', '.join(f'{j} at {math.degrees(a):.2f} deg'
+                      for j, a in result.locks.items())
+    finite = sum(1 for g in result.gestures if math.isfinite(g.score_after))
+    timing = (f'deadline {result.deadline:.3f} s '
+              f"{'met' if result.deadline_met else 'MISSED, best found so far used'}")
+    parts = [f'{g.name} {g.score_before:.2f} -> {g.score_after:.2f} in {g.wall_time:.3f} s'
+             + ('' if g.status in ('converged', 'unchanged') else f' ({g.status})')
+             + (' (both arms)' if g.stage == 2 else '')
+             + (f" COLLIDES ({', '.join(g.colliding_pairs)})" if g.collides else '')
+             for g in result.gestures]
+    text = (f"{'reconfigured' if result.success else 'FAILED to fully reconfigure'} "
+            f'{finite}/{len(result.gestures)} gestures in {result.wall_time:.3f} s '
+            f'({timing}) for {locks}')
+    if result.frozen_arms:
+        text += f"; frozen arm(s): {', '.join(result.frozen_arms)}"
+    if result.cancelled:
+        text += '; run was cancelled'
+    return text + ': ' + '; '.join(parts)
+
+
+# --- markers -------------------------------------------------------------------------
+
+_REF_COLOR = ColorRGBA(r=0.6, g=0.6, b=0.6, a=0.8)
+_NEW_COLOR = {'right': ColorRGBA(r=1.0, g=0.45, b=0.0, a=1.0),
+              'left': ColorRGBA(r=0.1, g=0.6, b=1.0, a=1.0)}
+_AXIS_COLORS = (ColorRGBA(r=1.0, a=1.0), ColorRGBA(g=1.0, a=1.0), ColorRGBA(b=1.0, a=1.0))
+
+
+def _point(p_mm, offset):
+    return Point(x=float(p_mm[0] * _MM + offset[0]), y=float(p_mm[1] * _MM + offset[1]),
+                 z=float(p_mm[2] * _MM + offset[2]))
+
+
+def _arm_markers(robot, q14, side, offset, base, ident, color, width, label):
+    """Return the skeleton line strip and palm-axes line list of one arm."""
+    index = ARMS.index(side)
+    q = np.asarray(q14[index * N_JOINTS:(index + 1) * N_JOINTS], dtype=float)
+    lm = forward_kinematics(robot, q, side)
+    skeleton = Marker(header=base.header, ns=base.ns, id=ident, type=Marker.LINE_STRIP,
+                      action=Marker.ADD)
+    skeleton.pose.orientation.w = 1.0
+    skeleton.scale.x = width
+    skeleton.color = color
+    skeleton.text = label
+    skeleton.points = [_point(p, offset) for p in
+                       (shoulder_position(robot, side), lm.elbow, lm.wrist, lm.tip)]
+    axes = Marker(header=base.header, ns=base.ns, id=ident + 1, type=Marker.LINE_LIST,
+                  action=Marker.ADD)
+    axes.pose.orientation.w = 1.0
+    axes.scale.x = width * 0.6
+    axes.color = color
+    axis_length = 60.0  # mm
+    for k in range(3):
+        axes.points.append(_point(lm.tip, offset))
+        axes.points.append(_point(lm.tip + axis_length * lm.palm[:, k], offset))
+        axes.colors.extend([_AXIS_COLORS[k], _AXIS_COLORS[k]])
+    return [skeleton, axes]
+
+
+def library_markers(robot, reference, current, stamp, frame_id='base_link', spacing=0.8):
+    """
+    Return the RViz markers comparing the reference and the current library.
+
+    The first marker deletes everything previously shown.  Each gesture has its own
+    namespace and sits ``spacing`` metres further along -y than the previous one; per
+    keyframe and arm there is a grey reference skeleton and a coloured reconfigured one
+    (shoulder-elbow-wrist-fingertip, with palm axes at the fingertip), and a text label.
+    """
+    clear = Marker(action=Marker.DELETEALL)
+    clear.header.stamp = stamp
+    clear.header.frame_id = frame_id
+    markers = [clear]
+    ref_by_name = {g.name: g for g in reference.gestures}
+    for gi, gesture in enumerate(current.gestures):
+        ref = ref_by_name.get(gesture.name)
+        offset = (0.0, -gi * spacing, 0.0)
+        base = Marker()
+        base.header.stamp = stamp
+        base.header.frame_id = frame_id
+        base.ns = gesture.name
+        for k, q in enumerate(gesture.positions):
+            for ai, side in enumerate(ARMS):
+                ident = k * 100 + ai * 10
+                if ref is not None and k < len(ref.positions):
+                    markers += _arm_markers(robot, ref.positions[k], side, offset, base,
+                                            ident, _REF_COLOR, 0.008, 'reference')
+                markers += _arm_markers(robot, q, side, offset, base, ident + 2,
+                                        _NEW_COLOR[side], 0.015, 'reconfigured')
+        text = Marker(header=base.header, ns=base.ns, id=99999, type=Marker.TEXT_VIEW_FACING,
+                      action=Marker.ADD)
+        text.pose.position.y = offset[1]
+        text.pose.position.z = 0.35
+        text.pose.orientation.w = 1.0
+        text.scale.z = 0.06
+        text.color = ColorRGBA(r=1.0, g=1.0, b=1.0, a=1.0)
+        text.text = (f'{gesture.name}: {gesture.score_before:.1f} -> '
+                     f'{gesture.score_after:.1f}' if current.locks else gesture.name)
+        markers.append(text)
+    return markers
+
+
+# --- diagnostics ---------------------------------------------------------------------
+
+
+def key_values(pairs):
+    """Return a list of diagnostic KeyValue from (key, value) pairs."""
+    return [KeyValue(key=str(k), value=str(v)) for k, v in pairs]
+
+
+def status(name, level, message, hardware_id, pairs=()):
+    """Return one DiagnosticStatus (level is one of OK, WARN, ERROR, STALE)."""
+    return DiagnosticStatus(level=getattr(DiagnosticStatus, level), name=DIAG_PREFIX + name,
+                            message=message, hardware_id=hardware_id,
+                            values=key_values(pairs))
+
+
+def status_values(status_msg):
+    """Return a DiagnosticStatus' key-values as a dict."""
+    return {kv.key: kv.value for kv in status_msg.values}

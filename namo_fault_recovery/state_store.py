@@ -1,0 +1,330 @@
+"""
+Persistence of the node's state: the fault set and the last published library.
+
+Free of ROS.  The state is one JSON document, ``state.json`` in the state directory.  It
+is written atomically: to a temporary file in the same directory, flushed and synced,
+then renamed over the old file with ``os.replace``, so a reader (or a node restarted
+after SIGKILL or a power cut) sees either the old state or the new one, never half of
+one.  A state file that cannot be read back is *set aside* (renamed to
+``state.json.corrupt-<time>``) and reported; it is never fatal.
+"""
+
+from dataclasses import dataclass, field
+import hashlib
+import json
+import math
+import os
+from pathlib import Path
+import tempfile
+import threading
+import time
+
+STATE_FILE = 'state.json'
+FORMAT = 'namo_fault_recovery/state'
+FORMAT_VERSION = 1
+
+
+class StateFileError(ValueError):
+    """The state file exists but its content is unusable."""
+
+
+@dataclass(frozen=True)
+class Fault:
+    """
+    One failed joint.
+
+    ``angle`` is the lock angle (rad) given in the fault report, or None when the lock
+    strategy chooses it.  ``measured`` is the joint's measured angle (rad) when the fault
+    arrived, from ``/joint_states``, or None if none had been received.
+    """
+
+    angle: float = None
+    measured: float = None
+
+    def to_dict(self):
+        """Return a JSON-ready dict."""
+        return {'angle': self.angle, 'measured': self.measured}
+
+
+@dataclass(frozen=True)
+class GestureResult:
+    """One gesture of a published library version, with its reconfiguration figures."""
+
+    name: str
+    times: tuple            # time_from_start (s) per keyframe
+    positions: tuple        # per keyframe: 14 angles (rad), right arm first
+    score_before: float = 0.0
+    score_after: float = 0.0
+    wall_time: float = 0.0
+    status: str = 'unchanged'
+    message: str = ''
+    collides: bool = False
+    breakdown: dict = field(default_factory=dict)
+    stage: int = 1
+    colliding_pairs: tuple = ()
+
+    def to_dict(self):
+        """Return a JSON-ready dict."""
+        return {
+            'name': self.name, 'times': list(self.times),
+            'positions': [list(p) for p in self.positions],
+            'score_before': self.score_before, 'score_after': self.score_after,
+            'wall_time': self.wall_time, 'status': self.status, 'message': self.message,
+            'collides': self.collides, 'breakdown': dict(self.breakdown),
+            'stage': self.stage, 'colliding_pairs': list(self.colliding_pairs),
+        }
+
+    @classmethod
+    def from_dict(cls, doc):
+        """Rebuild from :meth:`to_dict` output; raise StateFileError if malformed."""
+        try:
+            times = tuple(_finite(t, 'time') for t in doc['times'])
+            positions = tuple(tuple(_finite(a, 'angle') for a in p) for p in doc['positions'])
+            if len(times) != len(positions) or not times:
+                raise StateFileError(f"gesture {doc.get('name')!r}: {len(times)} times for "
+                                     f'{len(positions)} keyframes')
+            return cls(
+                name=str(doc['name']), times=times, positions=positions,
+                score_before=_number(doc.get('score_before', 0.0)),
+                score_after=_number(doc.get('score_after', 0.0)),
+                wall_time=_number(doc.get('wall_time', 0.0)),
+                status=str(doc.get('status', '')), message=str(doc.get('message', '')),
+                collides=bool(doc.get('collides', False)),
+                breakdown={str(k): _number(v) for k, v in dict(doc.get('breakdown', {})).items()},
+                stage=int(doc.get('stage', 1)),
+                colliding_pairs=tuple(str(p) for p in doc.get('colliding_pairs', ())),
+            )
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            if isinstance(exc, StateFileError):
+                raise
+            raise StateFileError(f'malformed gesture entry: {exc!r}') from None
+
+
+@dataclass(frozen=True)
+class LibraryResult:
+    """
+    One version of the gesture library, as published on ``/gesture_library``.
+
+    ``faults`` is the fault set it was computed for (joint -> requested lock angle or
+    None), ``locks`` the lock angles actually used (rad).
+    """
+
+    gestures: tuple
+    faults: dict = field(default_factory=dict)
+    locks: dict = field(default_factory=dict)
+    frozen_arms: tuple = ()
+    wall_time: float = 0.0
+    deadline: float = 0.0
+    deadline_met: bool = True
+    success: bool = True
+    cancelled: bool = False
+    settings: dict = field(default_factory=dict)
+
+    @property
+    def names(self):
+        """Gesture names in library order."""
+        return tuple(g.name for g in self.gestures)
+
+    def to_dict(self):
+        """Return a JSON-ready dict."""
+        return {
+            'gestures': [g.to_dict() for g in self.gestures],
+            'faults': dict(self.faults), 'locks': dict(self.locks),
+            'frozen_arms': list(self.frozen_arms), 'wall_time': self.wall_time,
+            'deadline': self.deadline, 'deadline_met': self.deadline_met,
+            'success': self.success, 'cancelled': self.cancelled,
+            'settings': dict(self.settings),
+        }
+
+    @classmethod
+    def from_dict(cls, doc):
+        """Rebuild from :meth:`to_dict` output; raise StateFileError if malformed."""
+        try:
+            gestures = tuple(GestureResult.from_dict(g) for g in doc['gestures'])
+            if not gestures:
+                raise StateFileError('library: no gestures')
+            faults = {str(k): (None if v is None else _finite(v, 'fault angle'))
+                      for k, v in dict(doc.get('faults', {})).items()}
+            locks = {str(k): _finite(v, 'lock angle') for k, v in dict(doc['locks']).items()}
+            return cls(
+                gestures=gestures, faults=faults, locks=locks,
+                frozen_arms=tuple(str(a) for a in doc.get('frozen_arms', ())),
+                wall_time=_number(doc.get('wall_time', 0.0)),
+                deadline=_number(doc.get('deadline', 0.0)),
+                deadline_met=bool(doc.get('deadline_met', True)),
+                success=bool(doc.get('success', True)),
+                cancelled=bool(doc.get('cancelled', False)),
+                settings=dict(doc.get('settings', {})),
+            )
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            if isinstance(exc, StateFileError):
+                raise
+            raise StateFileError(f'malformed library: {exc!r}') from None
+
+
+@dataclass(frozen=True)
+class PersistedState:
+    """What survives a restart: the fault set, the last library and a config fingerprint."""
+
+    faults: dict
+    library: LibraryResult = None
+    fingerprint: str = ''
+    saved_at: float = 0.0
+
+
+def _number(value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise StateFileError(f'expected a number, got {value!r}')
+    return float(value)
+
+
+def _finite(value, what):
+    value = _number(value)
+    if not math.isfinite(value):
+        raise StateFileError(f'{what}: expected a finite number, got {value!r}')
+    return value
+
+
+def fingerprint(*paths):
+    """Return a hash of the content of the config files a library was computed from."""
+    digest = hashlib.sha256()
+    for path in paths:
+        digest.update(str(path).encode() + b'\0')
+        try:
+            digest.update(Path(path).read_bytes())
+        except OSError:
+            digest.update(b'<unreadable>')
+    return digest.hexdigest()
+
+
+def encode_state(faults, library, fingerprint_=''):
+    """Return the JSON text of a state (faults: joint -> Fault)."""
+    doc = {
+        'format': FORMAT, 'version': FORMAT_VERSION, 'saved_at': time.time(),
+        'fingerprint': fingerprint_,
+        'faults': {name: f.to_dict() for name, f in faults.items()},
+        'library': library.to_dict() if library is not None else None,
+    }
+    return json.dumps(doc, indent=1, allow_nan=False) + '\n'
+
+
+def decode_state(text):
+    """Parse the JSON text of a state; raise StateFileError naming what is wrong."""
+    try:
+        doc = json.loads(text)
+    except ValueError as exc:
+        raise StateFileError(f'not valid JSON ({exc})') from None
+    if not isinstance(doc, dict) or doc.get('format') != FORMAT:
+        raise StateFileError(f"not a {FORMAT} document (missing or wrong 'format' key)")
+    if doc.get('version') != FORMAT_VERSION:
+        raise StateFileError(f"unsupported version {doc.get('version')!r}; "
+                             f'expected {FORMAT_VERSION}')
+    raw = doc.get('faults')
+    if not isinstance(raw, dict):
+        raise StateFileError(f"'faults': expected a mapping, got {raw!r}")
+    faults = {}
+    for name, entry in raw.items():
+        if not isinstance(entry, dict):
+            raise StateFileError(f'fault {name!r}: expected a mapping, got {entry!r}')
+        angle, measured = entry.get('angle'), entry.get('measured')
+        faults[str(name)] = Fault(
+            None if angle is None else _finite(angle, f'fault {name!r} angle'),
+            None if measured is None else _finite(measured, f'fault {name!r} measured'))
+    library = doc.get('library')
+    library = LibraryResult.from_dict(library) if library is not None else None
+    return PersistedState(faults, library, str(doc.get('fingerprint', '')),
+                          float(doc.get('saved_at', 0.0) or 0.0))
+
+
+class StateStore:
+    """
+    The state file in one directory, written atomically and read back defensively.
+
+    Thread-safe: concurrent saves are serialised, and a save carrying an older sequence
+    number than one already written is dropped, so the file never goes back in time.
+    """
+
+    def __init__(self, directory):
+        self.directory = Path(os.path.expandvars(os.path.expanduser(str(directory))))
+        self.path = self.directory / STATE_FILE
+        self._lock = threading.Lock()
+        self._written_seq = -1
+
+    def load(self):
+        """
+        Read the state back.
+
+        Return ``(state, problem)``: ``(None, None)`` when there is no file,
+        ``(PersistedState, None)`` when it is good, and ``(None, message)`` when it was
+        corrupted; the corrupted file has then been renamed aside and the message says
+        where to.
+        """
+        try:
+            text = self.path.read_text(encoding='utf-8')
+        except FileNotFoundError:
+            return None, None
+        except (OSError, UnicodeDecodeError) as exc:
+            return None, self.set_aside(f'cannot read it ({exc})')
+        try:
+            return decode_state(text), None
+        except StateFileError as exc:
+            return None, self.set_aside(str(exc))
+
+    def set_aside(self, reason):
+        """Rename the state file aside; return a message naming the reason and new name."""
+        stamp = time.strftime('%Y%m%dT%H%M%S')
+        target = self.path.with_name(f'{STATE_FILE}.corrupt-{stamp}')
+        n = 1
+        while target.exists():
+            target = self.path.with_name(f'{STATE_FILE}.corrupt-{stamp}-{n}')
+            n += 1
+        try:
+            os.replace(self.path, target)
+            where = f'set aside as {target}'
+        except OSError as exc:
+            where = f'and could not be set aside ({exc})'
+        return f'state file {self.path} is corrupted: {reason}; {where}'
+
+    def save(self, faults, library, fingerprint_='', seq=None):
+        """
+        Write the state atomically; return True if written.
+
+        ``seq`` orders saves made from several threads: a save older than the last one
+        written is skipped.  Raises OSError if the directory cannot be written.
+        """
+        text = encode_state(faults, library, fingerprint_)
+        with self._lock:
+            if seq is not None and seq < self._written_seq:
+                return False
+            self.directory.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(prefix=f'.{STATE_FILE}.', suffix='.tmp',
+                                       dir=self.directory)
+            try:
+                with os.fdopen(fd, 'w', encoding='utf-8') as handle:
+                    handle.write(text)
+                    handle.flush()
+                    os.fsync(handle.fileno())
+                os.replace(tmp, self.path)
+            except BaseException:
+                try:
+                    os.unlink(tmp)
+                except OSError:
+                    pass
+                raise
+            _fsync_dir(self.directory)
+            if seq is not None:
+                self._written_seq = seq
+            return True
+
+
+def _fsync_dir(directory):
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)

@@ -1,0 +1,372 @@
+"""
+Drive the real ``recovery_node`` process over DDS from the tests.
+
+Every test module gets its own ROS domain (derived from the test session's pid and a
+per-module offset) so parallel sessions and modules never see each other; the node
+subprocess and the rclpy client of the test share it.
+"""
+
+import atexit
+import math
+import os
+from pathlib import Path
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter, parameter_value_to_python
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import MarkerArray
+
+ROOT = Path(__file__).resolve().parent.parent
+NODE_PREFIX = 'recovery_node: '
+TIMEOUT = 20.0
+NODE = '/recovery_node'
+# rcl writes a log file per process: keep the tests' out of ~/.ros/log (and tidy up).
+if 'ROS_LOG_DIR' not in os.environ:
+    os.environ['ROS_LOG_DIR'] = tempfile.mkdtemp(prefix='namo_test_roslog_')
+    atexit.register(shutil.rmtree, os.environ['ROS_LOG_DIR'], ignore_errors=True)
+
+
+def session_domain(offset):
+    """Return this test session's ROS domain id for a module (offset 0..4)."""
+    base = int(os.environ.get('NAMO_TEST_DOMAIN_BASE', 1 + (os.getpid() % 20) * 5))
+    return base + offset
+
+
+def node_command():
+    """Return the command that starts the installed ``recovery_node`` executable."""
+    beside = Path(sys.executable).parent / 'recovery_node'
+    if beside.is_file():
+        return [str(beside)]
+    found = shutil.which('recovery_node')
+    if found:
+        return [found]
+    return [sys.executable, '-m', 'namo_fault_recovery.recovery_node']
+
+
+def ros_env(domain, extra=None):
+    """Return an environment for a ROS process in ``domain`` (localhost discovery)."""
+    env = dict(os.environ)
+    env['ROS_DOMAIN_ID'] = str(domain)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    env.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
+    env['PYTHONUNBUFFERED'] = '1'
+    env.update(extra or {})
+    return env
+
+
+class NodeProcess:
+    """The node as a subprocess, with its output captured to files."""
+
+    def __init__(self, domain, state_dir=None, args=(), command=None, env=None):
+        self.domain = domain
+        self.state_dir = state_dir
+        self._logdir = tempfile.mkdtemp(prefix='namo_node_log_')
+        self._out = open(os.path.join(self._logdir, 'out'), 'w+b')
+        self._err = open(os.path.join(self._logdir, 'err'), 'w+b')
+        ros_args = list(args)
+        if state_dir is not None:
+            ros_args += ['-p', f'state_dir:={state_dir}']
+        cmd = list(command or node_command())
+        if ros_args:
+            cmd += ['--ros-args'] + ros_args
+        self.proc = subprocess.Popen(cmd, stdout=self._out, stderr=self._err,
+                                     env=env or ros_env(domain))
+
+    @property
+    def stdout(self):
+        """Return everything the node wrote on stdout so far."""
+        if self._out.closed:
+            return self._text[0]
+        self._out.flush()
+        return Path(self._out.name).read_text(errors='replace')
+
+    @property
+    def stderr(self):
+        """Return everything the node wrote on stderr so far."""
+        if self._err.closed:
+            return self._text[1]
+        self._err.flush()
+        return Path(self._err.name).read_text(errors='replace')
+
+    def alive(self):
+        """Return True while the process runs."""
+        return self.proc.poll() is None
+
+    def send(self, sig):
+        """Send a signal to the process."""
+        self.proc.send_signal(sig)
+
+    def wait(self, timeout=TIMEOUT):
+        """Wait for the process to exit; return its exit code."""
+        return self.proc.wait(timeout=timeout)
+
+    def describe(self):
+        """Return the exit code and output, for assertion messages."""
+        return (f'exit code {self.proc.returncode}\n--- stdout\n{self.stdout}'
+                f'\n--- stderr\n{self.stderr}')
+
+    def stop(self, sig=signal.SIGTERM, timeout=TIMEOUT):
+        """Stop the process with ``sig`` (SIGKILL if it does not exit); return the code."""
+        if self.alive():
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout=timeout)
+        if not self._out.closed:
+            self._text = (self.stdout, self.stderr)
+            self._out.close()
+            self._err.close()
+            shutil.rmtree(self._logdir, ignore_errors=True)
+        return self.proc.returncode
+
+
+class LibraryVersion:
+    """One version of the library received on /gesture_library (same header stamp)."""
+
+    def __init__(self, stamp):
+        self.stamp = stamp
+        self.msgs = {}
+        self.received = None
+
+    @property
+    def names(self):
+        """Return the gesture names in arrival order."""
+        return list(self.msgs)
+
+    def positions(self, gesture):
+        """Return the points' positions of one gesture, as lists."""
+        return [list(p.positions) for p in self.msgs[gesture].points]
+
+    def column(self, joint):
+        """Return every angle of ``joint`` over every point of every gesture."""
+        out = []
+        for msg in self.msgs.values():
+            index = list(msg.joint_names).index(joint)
+            out += [p.positions[index] for p in msg.points]
+        return out
+
+
+def _stamp_ns(stamp):
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+class RosClient:
+    """An rclpy client of the node in its own context and domain, spun in a thread."""
+
+    def __init__(self, domain, name='namo_test_client', gestures=4):
+        os.environ['ROS_DOMAIN_ID'] = str(domain)
+        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        self.gestures = gestures
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node(name, context=self.context)
+        self._lock = threading.Condition()
+        self.versions = {}            # stamp ns -> LibraryVersion
+        self.order = []               # stamps in order of first arrival
+        self.diagnostics = []         # node's DiagnosticArray messages
+        self.markers = []
+        latched = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
+                             reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.node.create_subscription(JointTrajectory, '/gesture_library', self._on_library,
+                                      latched)
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 50)
+        self.node.create_subscription(MarkerArray, '/gesture_markers', self._on_markers,
+                                      latched)
+        self.fault_pub = self.node.create_publisher(JointState, '/actuator_fault', 10)
+        self.state_pub = self.node.create_publisher(JointState, '/joint_states', 10)
+        self._clients = {}
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _spin(self):
+        try:
+            self.executor.spin()
+        except Exception:  # noqa: B902 - the context is shut down at the end of a test
+            pass
+
+    def close(self):
+        """Shut the client down."""
+        self.executor.shutdown(timeout_sec=2.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self._thread.join(timeout=5.0)
+
+    # --- callbacks ---
+
+    def _on_library(self, msg):
+        with self._lock:
+            key = _stamp_ns(msg.header.stamp)
+            version = self.versions.get(key)
+            if version is None:
+                version = self.versions[key] = LibraryVersion(key)
+                self.order.append(key)
+            version.msgs[msg.header.frame_id] = msg
+            if len(version.msgs) == self.gestures and version.received is None:
+                version.received = time.monotonic()
+            self._lock.notify_all()
+
+    def _on_diag(self, msg):
+        if not any(s.name.startswith(NODE_PREFIX) for s in msg.status):
+            return
+        with self._lock:
+            self.diagnostics.append(msg)
+            self._lock.notify_all()
+
+    def _on_markers(self, msg):
+        with self._lock:
+            self.markers.append(msg)
+            self._lock.notify_all()
+
+    # --- waiting ---
+
+    def wait_for(self, predicate, timeout=TIMEOUT, what='condition'):
+        """Wait until ``predicate()`` (called under the lock) is truthy; return it."""
+        end = time.monotonic() + timeout
+        with self._lock:
+            while True:
+                value = predicate()
+                if value:
+                    return value
+                remaining = end - time.monotonic()
+                if remaining <= 0:
+                    raise AssertionError(f'timed out after {timeout:.0f} s waiting for {what}')
+                self._lock.wait(min(remaining, 0.1))
+
+    def complete_versions(self):
+        """Return the complete library versions in order of arrival."""
+        with self._lock:
+            return [self.versions[k] for k in self.order
+                    if len(self.versions[k].msgs) == self.gestures]
+
+    def latest(self):
+        """Return the newest complete library version (by stamp), or None."""
+        versions = self.complete_versions()
+        return max(versions, key=lambda v: v.stamp) if versions else None
+
+    def wait_library(self, predicate=lambda v: True, after=None, timeout=TIMEOUT,
+                     what='a library version'):
+        """Wait for a complete version newer than ``after`` (a stamp) matching predicate."""
+        def find():
+            for key in sorted(self.versions, reverse=True):
+                version = self.versions[key]
+                if after is not None and key <= after:
+                    break
+                if len(version.msgs) == self.gestures and predicate(version):
+                    return version
+            return None
+        return self.wait_for(find, timeout, what)
+
+    def wait_diag(self, predicate, timeout=TIMEOUT, what='a diagnostics message',
+                  since=0):
+        """Wait for a node diagnostics message (index >= since) matching ``predicate``."""
+        def find():
+            for msg in reversed(self.diagnostics[since:]):
+                statuses = {s.name[len(NODE_PREFIX):]: s for s in msg.status
+                            if s.name.startswith(NODE_PREFIX)}
+                if predicate(statuses):
+                    return statuses
+            return None
+        return self.wait_for(find, timeout, what)
+
+    def diag_count(self):
+        """Return how many node diagnostics messages were received."""
+        with self._lock:
+            return len(self.diagnostics)
+
+    # --- actions ---
+
+    def wait_subscribers(self, publisher, timeout=TIMEOUT):
+        """Wait until ``publisher`` is matched by at least one subscription."""
+        end = time.monotonic() + timeout
+        while publisher.get_subscription_count() < 1:
+            if time.monotonic() > end:
+                raise AssertionError('no subscriber matched ' + publisher.topic_name)
+            time.sleep(0.02)
+
+    def publish_fault(self, names, positions=(), velocity=(), effort=()):
+        """Publish a fault report on /actuator_fault (once a subscriber is matched)."""
+        self.wait_subscribers(self.fault_pub)
+        msg = JointState(name=list(names), position=[float(p) for p in positions],
+                         velocity=[float(v) for v in velocity],
+                         effort=[float(e) for e in effort])
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        self.fault_pub.publish(msg)
+
+    def publish_joint_state(self, names, positions):
+        """Publish a measured joint state on /joint_states."""
+        self.wait_subscribers(self.state_pub)
+        msg = JointState(name=list(names), position=[float(p) for p in positions])
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        self.state_pub.publish(msg)
+
+    def client(self, srv_type, name):
+        """Return a (cached) service client."""
+        if name not in self._clients:
+            self._clients[name] = self.node.create_client(srv_type, name)
+        return self._clients[name]
+
+    def call(self, srv_type, name, request=None, timeout=TIMEOUT):
+        """Call a service and return the response (AssertionError on timeout)."""
+        client = self.client(srv_type, name)
+        if not client.wait_for_service(timeout_sec=timeout):
+            raise AssertionError(f'service {name} is not available')
+        done = threading.Event()
+        future = client.call_async(request if request is not None else srv_type.Request())
+        future.add_done_callback(lambda _: done.set())
+        if not done.wait(timeout):
+            raise AssertionError(f'no answer from {name} within {timeout:.0f} s')
+        return future.result()
+
+    def trigger(self, name, timeout=TIMEOUT):
+        """Call a std_srvs/Trigger service."""
+        return self.call(Trigger, name, timeout=timeout)
+
+    def set_parameters(self, **values):
+        """Set node parameters at run time; return the list of SetParametersResult."""
+        request = SetParameters.Request(
+            parameters=[Parameter(name.replace('__', '.'), value=v).to_parameter_msg()
+                        for name, v in values.items()])
+        return self.call(SetParameters, f'{NODE}/set_parameters', request).results
+
+    def set_parameters_atomically(self, **values):
+        """Set several parameters all at once or not at all; return the result."""
+        request = SetParametersAtomically.Request(
+            parameters=[Parameter(name.replace('__', '.'), value=v).to_parameter_msg()
+                        for name, v in values.items()])
+        return self.call(SetParametersAtomically, f'{NODE}/set_parameters_atomically',
+                         request).result
+
+    def get_parameters(self, *names):
+        """Return the node's values of ``names`` as Python values."""
+        response = self.call(GetParameters, f'{NODE}/get_parameters',
+                             GetParameters.Request(names=list(names)))
+        return [parameter_value_to_python(v) for v in response.values]
+
+
+def statuses_values(status):
+    """Return a DiagnosticStatus' values as a dict."""
+    return {kv.key: kv.value for kv in status.values}
+
+
+def close_to(a, b, tol=1e-12):
+    """Return True if two angles agree to ``tol``."""
+    return math.isclose(a, b, rel_tol=0.0, abs_tol=tol)

@@ -1,0 +1,176 @@
+"""Tiny versions of every benchmark: they run and write their outputs (no wall-time asserts)."""
+
+import csv
+import io
+import json
+import math
+
+from namo_fault_recovery.benchmarks import common, deadline, load_best_known, optimum, paper
+from namo_fault_recovery.benchmarks import speed
+from namo_fault_recovery.benchmarks.paper_data import TABLE6
+from namo_fault_recovery.cli_bench import main
+from namo_fault_recovery.reconfigure import reconfigure_library
+from namo_fault_recovery.score import gesture_targets, SimilarityScore
+import numpy as np
+import pytest
+
+PNG_MAGIC = b'\x89PNG\r\n\x1a\n'
+
+
+def run_cli(argv):
+    out = io.StringIO()
+    return main(argv, out), out.getvalue()
+
+
+def _finite(x):
+    return isinstance(x, float) and math.isfinite(x)
+
+
+def test_paper_bench_writes_outputs_and_resumes(tmp_path):
+    argv = ['bench', 'paper', '--reps', '2', '--gestures', 'bye', '--joints', '2',
+            '--algorithms', 'ga-paper', 'bfoa-paper', 'abc-default', '--out', str(tmp_path),
+            '--quiet']
+    code, text = run_cli(argv)
+    assert code == 0
+    assert '6 new run(s)' in text
+    assert 'paper Table 6 ABC minimum beside ours' in text
+    assert len(list((tmp_path / 'cases').glob('*.json'))) == 3
+    for name in ('runs.csv', 'summary.csv', 'summary.json', 'tables.md'):
+        assert (tmp_path / name).is_file(), name
+    with open(tmp_path / 'runs.csv') as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 6
+    assert all(math.isfinite(float(r['score'])) and float(r['time_s']) > 0 for r in rows)
+    summary = json.loads((tmp_path / 'summary.json').read_text())
+    for s in summary['stats']:
+        assert s['score']['n'] == 2
+        assert all(_finite(s['score'][k]) for k in ('min', 'max', 'mean', 'sd', 'median', 'iqr'))
+        assert s['score']['min'] <= s['score']['median'] <= s['score']['max']
+    kw = summary['kruskal'][0]
+    assert kw['score_all']['df'] == 2 and kw['score_paper3']['df'] == 1
+    assert 'Table 4' in (tmp_path / 'tables.md').read_text()
+    if summary.get('plots'):
+        for p in summary['plots']:
+            with open(p, 'rb') as fh:
+                assert fh.read(8) == PNG_MAGIC
+    # Resumable: the same command runs nothing new; one more rep runs only that.
+    code, text = run_cli(argv)
+    assert code == 0 and '0 new run(s)' in text
+    argv[3] = '3'
+    code, text = run_cli(argv + ['--no-plots'])
+    assert code == 0 and '3 new run(s)' in text
+
+
+def test_run_gesture_matches_reconfigure_library(robot, library):
+    for key in ('abc-default', 'ga-paper'):
+        spec = common.lookup_spec(key)
+        run = common.run_gesture(spec, robot, library, 'bye', 'right_arm_joint2', 3)
+        report = reconfigure_library(robot, library, {'right_arm_joint2': None},
+                                     algorithm=spec.algorithm, preset=spec.preset,
+                                     deadline=None, seed=3, gestures=['bye'])
+        assert run['score_engine'] == pytest.approx(report['bye'].score_after, rel=1e-12)
+        assert run['score_before'] == pytest.approx(report['bye'].score_before, rel=1e-12)
+        assert run['score_engine'] <= run['score'] + 1e-12
+
+
+def test_dense_optimum_and_yaml_round_trip(robot, library, tmp_path):
+    entry = optimum.dense_optimum(robot, library, 'bye', 'right_arm_joint7', starts=8)
+    assert _finite(entry['score'])
+    assert entry['score'] <= entry['keyframes'][0]['reference_start_score'] + 1e-9
+    assert entry['right_deg'][6] == pytest.approx(entry['lock_deg'])
+    assert entry['starts'] == 9
+    doc = optimum.optima_document(robot, library, {('bye', 'right_arm_joint7'): entry}, 8, 0,
+                                  300)
+    path = tmp_path / 'optima.yaml'
+    optimum.write_optima(path, doc)
+    loaded = load_best_known(path)
+    assert loaded.score('bye', 'right_arm_joint7') == pytest.approx(entry['score'])
+    assert loaded.check_model(robot, library) is None
+    with pytest.raises(KeyError, match='no best-known optimum'):
+        loaded.score('wai', 'right_arm_joint1')
+
+
+def test_packaged_optima_cover_the_28_cases(robot, library):
+    best = load_best_known()
+    assert best.check_model(robot, library) is None
+    targets = {g.name: gesture_targets(g) for g in library}
+    for g, j in common.select_cases(robot, library):
+        e = best.cases[(g, j)]
+        scorer = SimilarityScore(robot, targets[g])
+        value = scorer(np.radians(e['right_deg']), np.radians(e['left_deg']))[0]
+        assert value == pytest.approx(e['score'], rel=1e-5)
+        side, k = robot.locate_joint(j)
+        assert e['right_deg'][k] == pytest.approx(np.degrees(library.lock_averages(side)[k]))
+        # Spec section 3: every best-known optimum lies at or below the paper's ABC best.
+        assert e['score'] <= TABLE6[(g, k + 1)]['abc']['min']
+
+
+def test_optimum_bench_gaps(robot, library, tmp_path):
+    out = io.StringIO()
+    cases = [('side_invite', 'right_arm_joint7')]
+    doc = optimum.run_optimum(robot, library, out, cases, starts=4, keys=('ga-paper',), seeds=1,
+                              write=tmp_path / 'o.yaml', progress=False)
+    text = out.getvalue()
+    assert 'gap to the best-known optimum' in text
+    assert len(doc['gaps']) == 1 and _finite(doc['gaps'][0]['gaps'][0])
+    assert (tmp_path / 'o.yaml').is_file()
+
+
+def test_speed_bench_structure(tmp_path):
+    out = io.StringIO()
+    s = speed.run_speed(out, tmp_path, reps=1, joints=['7'], progress=False, sequential_reps=1)
+    for k in speed.KEYS:
+        assert s['timing'][k]['n'] == 1 and _finite(s['timing'][k]['median'])
+    assert _finite(s['ratio']['median'])
+    assert s['sequential']['n'] == 1 and _finite(s['sequential']['ratio_median'])
+    q = s['quality']
+    assert q is not None and len(q['abc-default']['cases']) == 4
+    assert 0.0 <= q['abc-default']['share_within_overall'] <= 1.0
+    assert q['equal_or_better']['cases'] == 4
+    assert 'ratio paper ABC / ours' in out.getvalue()
+    assert (tmp_path / 'runs.csv').is_file() and (tmp_path / 'summary.json').is_file()
+
+
+def test_deadline_bench_structure(tmp_path):
+    out = io.StringIO()
+    s = deadline.run_deadline(out, tmp_path, deadlines=(0.05,), reps=1,
+                              keys=('abc-default', 'ga-paper'), burner=True, progress=False)
+    assert [r['condition'] for r in s['rows']] == ['idle', 'cpu burner']
+    for r in s['rows']:
+        assert r['n'] == 2 and _finite(r['worst_overrun']) and r['bound_share'] == 1.0
+    assert 'worst overrun' in out.getvalue()
+
+
+def test_quick_defaults():
+    assert paper.QUICK_REPS * len(paper.QUICK_JOINTS) * 4 <= 40   # keeps --quick short
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['bench', 'paper', '--reps', '0'], '--reps'),
+    (['bench', 'paper', '--algorithms', 'nope'], 'unknown algorithm key'),
+    (['bench', 'paper', '--joints', '9'], 'joint number 9'),
+    (['bench', 'speed', '--joints', 'left_arm_jointX'], 'unknown joint'),
+    (['bench', 'deadline', '--deadlines', '-1'], '--deadlines'),
+    (['bench', 'optimum', '--stored', '--write'], 'nothing to write'),
+    (['bench'], 'required'),
+])
+def test_bad_arguments_exit_2(capsys, argv, message):
+    code, _ = run_cli(argv)
+    assert code == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count('\n') == 1
+
+
+def test_speed_command(tmp_path):
+    code, text = run_cli(['bench', 'speed', '--reps', '1', '--joints', '3',
+                          '--sequential-reps', '0', '--out', str(tmp_path), '--quiet'])
+    assert code == 0
+    assert 'ratio paper ABC / ours' in text and 'one gesture at a time' not in text
+
+
+def test_paper_bench_in_two_processes(tmp_path):
+    code, text = run_cli(['bench', 'paper', '--reps', '1', '--jobs', '2', '--gestures', 'bye',
+                          'salute', '--joints', '7', '--algorithms', 'ga-paper', 'abc-default',
+                          '--out', str(tmp_path), '--quiet', '--no-plots'])
+    assert code == 0 and '4 new run(s)' in text
+    assert len(list((tmp_path / 'cases').glob('*.json'))) == 4

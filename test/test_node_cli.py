@@ -1,0 +1,140 @@
+"""
+The ROS subcommands of ``namo-recovery``, against a real ``recovery_node`` process.
+
+fault, clear, reconfigure, library, demo and bench latency are real rclpy clients.
+"""
+
+import argparse
+import io
+import json
+
+from namo_fault_recovery import ros_cli
+from node_harness import NodeProcess, RosClient, session_domain
+import pytest
+
+pytestmark = pytest.mark.slow
+
+DOMAIN = session_domain(3)
+DEMO_DOMAIN = session_domain(4)
+
+
+def parser():
+    p = argparse.ArgumentParser(prog='namo-recovery')
+    p.add_argument('--robot-file')
+    p.add_argument('--gesture-file')
+    sub = p.add_subparsers(dest='command', required=True)
+    ros_cli.register(sub)
+    bench = sub.add_parser('bench').add_subparsers(dest='bench', required=True)
+    ros_cli.register_bench(bench)
+    return p
+
+
+def run(*argv, domain=DOMAIN):
+    """Run one subcommand in this domain; return (exit code, stdout text)."""
+    argv = list(argv)
+    if '--domain-id' not in argv:
+        argv += ['--domain-id', str(domain)]
+    args = parser().parse_args(argv)
+    out = io.StringIO()
+    return args.func(args, out), out.getvalue()
+
+
+@pytest.fixture(scope='module')
+def node(tmp_path_factory):
+    node = NodeProcess(DOMAIN, state_dir=tmp_path_factory.mktemp('state'))
+    client = RosClient(DOMAIN)          # also sets this process' discovery environment
+    try:
+        client.wait_library(what='the reference library')
+        yield node
+    finally:
+        client.close()
+        assert node.stop() == 0, node.stderr
+
+
+def test_fault_prints_the_new_scores_and_the_lock(node):
+    assert run('clear')[0] == 0
+    code, text = run('fault', 'right_arm_joint2')
+    assert code == 0, text
+    assert 'fault reported on /actuator_fault: right_arm_joint2' in text
+    assert 'new library received' in text
+    for name in ('wai', 'bye', 'salute', 'side_invite'):
+        assert f'\n{name} ' in text
+    assert 'wai                61.96' in text
+    assert 'locked: right_arm_joint2 at -14.25 deg' in text
+
+
+def test_fault_with_angle_in_degrees(node):
+    assert run('clear')[0] == 0
+    code, text = run('fault', 'left_arm_joint4', '--angle', '17.5')
+    assert code == 0, text
+    assert 'locked: left_arm_joint4 at 17.50 deg' in text
+
+
+def test_library_marks_locked_joints(node):
+    assert run('clear')[0] == 0
+    assert run('fault', 'right_arm_joint2')[0] == 0
+    code, text = run('library')
+    assert code == 0, text
+    assert '* = locked joint: right_arm_joint2 at -14.25' in text
+    for name in ('wai', 'bye', 'salute', 'side_invite'):
+        assert f'\n{name}\n  t = 2.000 s\n' in text
+    assert text.count('  -14.25*') == 4
+    code, text = run('library', '--json')
+    doc = json.loads(text)
+    assert set(doc['gestures']) == {'wai', 'bye', 'salute', 'side_invite'}
+    assert list(doc['locked_joints']) == ['right_arm_joint2']
+    wai = doc['gestures']['wai'][0]
+    assert wai['positions_rad']['right_arm_joint2'] == doc['locked_joints']['right_arm_joint2']
+
+
+def test_reconfigure_and_clear(node):
+    code, text = run('reconfigure')
+    assert code == 0 and text.startswith('success'), text
+    code, text = run('clear')
+    assert code == 0 and 'cleared' in text
+    code, text = run('library')
+    assert 'no locked joint (reference library)' in text
+
+
+def test_rejected_fault_exits_1_with_the_reason(node, capsys):
+    code, _ = run('fault', 'right_arm_joint9')
+    assert code == 1
+    assert "the node rejected the fault report: unknown joint 'right_arm_joint9'" in \
+        capsys.readouterr().err
+
+
+def test_bad_arguments_exit_2(node, capsys):
+    code, _ = run('fault', 'right_arm_joint1', 'right_arm_joint2', '--angle', '10')
+    assert code == 2 and 'one angle (deg) per joint' in capsys.readouterr().err
+
+
+def test_no_node_exits_1(capsys):
+    code, _ = run('library', '--timeout', '1', domain=DEMO_DOMAIN)
+    assert code == 1
+    assert 'no recovery_node found' in capsys.readouterr().err
+
+
+def test_bench_latency_reports_percentiles(node):
+    code, text = run('bench', 'latency', '-n', '3', '--json')
+    assert code == 0, text
+    report = json.loads(text)
+    assert report['fault_to_library']['n'] == 3
+    assert report['reconfigure_service']['n'] == 3
+    for key in ('fault_to_library', 'reconfigure_service'):
+        stats = report[key]
+        assert 0 < stats['p50_ms'] <= stats['p95_ms'] <= stats['max_ms']
+
+
+def test_demo_runs_end_to_end(tmp_path):
+    code, text = run('demo', '--out-dir', str(tmp_path / 'figures'), domain=DEMO_DOMAIN)
+    assert code == 0, text
+    assert 'reference library received on /gesture_library' in text
+    assert 'fault reported on /actuator_fault: right_arm_joint2' in text
+    assert 'wai                61.96' in text
+    assert 'calling /reconfigure_gestures' in text and '\nsuccess (' in text
+    assert 'stick figure saved' in text or 'stick-figure PNG skipped' in text
+    if 'stick figure saved' in text:
+        for name in ('wai', 'bye', 'salute', 'side_invite'):
+            png = tmp_path / 'figures' / f'{name}.png'
+            assert png.read_bytes().startswith(b'\x89PNG'), png
+    assert text.rstrip().endswith('node stopped cleanly (exit code 0)')

@@ -1,0 +1,138 @@
+"""The state file: atomic writes, exact round trips, corrupted files set aside."""
+
+import json
+import os
+import threading
+
+from namo_fault_recovery import state_store
+from namo_fault_recovery.state_store import (decode_state, encode_state, Fault, GestureResult,
+                                             LibraryResult, StateFileError, StateStore)
+import pytest
+
+
+def library(angle=0.1):
+    gestures = (
+        GestureResult('wai', (2.0,), ((angle, -0.2487094184091919, 0.1 + 0.2) + (0.0,) * 11,),
+                      score_before=61.96, score_after=25.5, wall_time=0.2, status='converged',
+                      message='wai: reconfigured', breakdown={'elbow': 1.5}),
+        GestureResult('bye', (1.0, 2.5), ((0.0,) * 14, (1e-300,) * 14)),
+    )
+    return LibraryResult(gestures, faults={'right_arm_joint2': None},
+                         locks={'right_arm_joint2': -0.2487094184091919},
+                         frozen_arms=('left',), wall_time=0.21, deadline=1.0,
+                         settings={'lock_strategy': 'average', 'seed': 7})
+
+
+FAULTS = {'right_arm_joint2': Fault(None, 0.25), 'left_arm_joint4': Fault(0.3, None)}
+
+
+def test_round_trip_is_exact():
+    state = decode_state(encode_state(FAULTS, library(), 'abc'))
+    assert state.faults == FAULTS
+    assert list(state.faults) == list(FAULTS)            # arrival order kept
+    assert state.library == library()
+    assert state.library.gestures[0].positions[0][2] == 0.1 + 0.2   # floats bit for bit
+    assert state.fingerprint == 'abc'
+
+
+def test_save_then_load(tmp_path):
+    store = StateStore(tmp_path / 'deep' / 'dir')
+    assert store.load() == (None, None)
+    assert store.save(FAULTS, library())
+    state, problem = store.load()
+    assert problem is None and state.faults == FAULTS and state.library == library()
+    assert store.save({}, None)
+    state, _ = store.load()
+    assert state.faults == {} and state.library is None
+    assert os.listdir(store.directory) == ['state.json']    # no temporary file left
+
+
+def test_directory_expands_home_and_variables(monkeypatch, tmp_path):
+    monkeypatch.setenv('HOME', str(tmp_path))
+    monkeypatch.setenv('NAMO_SUB', 'robot1')
+    store = StateStore('~/.ros/$NAMO_SUB')
+    assert store.directory == tmp_path / '.ros' / 'robot1'
+
+
+def test_a_failed_write_leaves_the_old_state_intact(tmp_path, monkeypatch):
+    store = StateStore(tmp_path)
+    store.save(FAULTS, library())
+    before = store.path.read_text()
+
+    def broken_replace(src, dst):
+        raise OSError('disk full')
+    monkeypatch.setattr(state_store.os, 'replace', broken_replace)
+    with pytest.raises(OSError, match='disk full'):
+        store.save({}, None)
+    assert store.path.read_text() == before
+    assert os.listdir(tmp_path) == ['state.json']
+
+
+def test_older_saves_never_overwrite_newer_ones(tmp_path):
+    store = StateStore(tmp_path)
+    assert store.save({'a': Fault(0.5)}, None, seq=5)
+    assert not store.save({'b': Fault(0.1)}, None, seq=3)
+    assert list(store.load()[0].faults) == ['a']
+
+
+def test_concurrent_saves_end_on_the_newest(tmp_path):
+    store = StateStore(tmp_path)
+    threads = [threading.Thread(target=store.save, args=({f'j{i}': Fault(i * 0.01)}, None),
+                                kwargs={'seq': i}) for i in range(40)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert list(store.load()[0].faults) == ['j39']
+    assert os.listdir(tmp_path) == ['state.json']
+
+
+@pytest.mark.parametrize('content, reason', [
+    ('{"format": "namo_fault_recovery/state", ', 'not valid JSON'),
+    ('', 'not valid JSON'),
+    ('"hello"', "missing or wrong 'format' key"),
+    (json.dumps({'format': 'namo_fault_recovery/state', 'version': 99, 'faults': {}}),
+     'unsupported version 99'),
+    (json.dumps({'format': 'namo_fault_recovery/state', 'version': 1, 'faults': []}),
+     "'faults': expected a mapping"),
+    ('{"format": "namo_fault_recovery/state", "version": 1, '
+     '"faults": {"right_arm_joint1": {"angle": NaN}}}', 'expected a finite number'),
+    (json.dumps({'format': 'namo_fault_recovery/state', 'version': 1,
+                 'faults': {'right_arm_joint1': {'angle': 'x'}}}), 'expected a number'),
+    (json.dumps({'format': 'namo_fault_recovery/state', 'version': 1, 'faults': {},
+                 'library': {'gestures': [{'name': 'wai', 'times': [1.0],
+                                           'positions': []}], 'locks': {}}}),
+     '1 times for 0 keyframes'),
+])
+def test_corrupted_file_is_reported_and_set_aside(tmp_path, content, reason):
+    store = StateStore(tmp_path)
+    store.path.write_text(content)
+    state, problem = store.load()
+    assert state is None
+    assert 'corrupted' in problem and reason in problem and 'set aside as' in problem
+    aside = list(tmp_path.glob('state.json.corrupt-*'))
+    assert len(aside) == 1 and aside[0].read_text() == content
+    assert not store.path.exists()
+    assert store.load() == (None, None)       # the next start is clean
+
+
+def test_set_aside_names_never_collide(tmp_path):
+    store = StateStore(tmp_path)
+    for _ in range(3):
+        store.path.write_text('garbage')
+        assert store.load()[0] is None
+    assert len(list(tmp_path.glob('state.json.corrupt-*'))) == 3
+
+
+def test_decode_rejects_non_finite_library_angles():
+    doc = json.loads(encode_state({}, library()))
+    doc['library']['gestures'][0]['positions'][0][0] = 1e400   # parses as inf
+    with pytest.raises(StateFileError, match='finite'):
+        decode_state(json.dumps(doc))
+
+
+def test_unwritable_directory_raises_oserror(tmp_path):
+    blocker = tmp_path / 'file'
+    blocker.write_text('')
+    with pytest.raises(OSError):
+        StateStore(blocker / 'state').save({}, None)
