@@ -14,6 +14,7 @@ wall-clock budget for the whole library.  On top of the paper's method:
   a final check reported per gesture.
 """
 
+import copy
 from dataclasses import dataclass, field
 import time
 
@@ -221,7 +222,8 @@ def _solve(robot, scorer, checker, batch, algo, clock_end, cancel, rng):
         return best_r, best_l, status
     sub = _Batch(batch.right[rows], batch.left[rows], ids[rows],
                  [batch.layouts[k] for k in rows])
-    r2, l2, st2 = _solve_once(robot, scorer, checker, sub, algo, clock_end, cancel, rng)
+    r2, l2, st2 = _solve_once(robot, scorer, checker, sub, _repair_algorithm(algo), clock_end,
+                              cancel, rng)
     # Candidates per row: the plain result, the penalised one, and the starting pose
     # (collision-free unless the locks themselves force a contact).  The best score
     # among those that do not collide wins; if all collide, the least penetration.
@@ -242,6 +244,19 @@ def _solve(robot, scorer, checker, batch, algo, clock_end, cancel, rng):
         if st2[i] in ('deadline', 'cancelled'):
             status[k] = st2[i]
     return best_r, best_l, status
+
+
+def _repair_algorithm(algo):
+    """
+    Return the algorithm for the penalised repair pass: the same, with a shorter polish.
+
+    The repair only has to find a good collision-free pose near the start; half the
+    polish iterations keep the node's latency down (see README, "Self-collision").
+    """
+    if getattr(algo, 'polish', 0):
+        algo = copy.copy(algo)
+        algo.polish_maxiter = max(1, algo.polish_maxiter // 2)
+    return algo
 
 
 def _solve_once(robot, scorer, collision, batch, algo, clock_end, cancel, rng):
@@ -368,6 +383,14 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
                for t, lay in zip(targets, layouts)]
     two_stage = [k for k, t in enumerate(targets)
                  if bimanual != 'off' and t.two_handed and len(faulted) == 1]
+    w = scorer.weights
+    if bimanual == 'auto' and two_stage and w.wrist >= w.wrist_lr and w.tip >= w.tip_lr:
+        # The healthy arm starts at its reference, where its own terms are 0.  Moving its
+        # wrist (tip) by d adds d to its wrist (tip) term and can shorten the left-right
+        # gap by at most d, so with these weights stage 2 can never lower the score.
+        two_stage = []
+        notes.append('stage 2 skipped: with wrist >= wrist_lr and tip >= tip_lr weights, '
+                     'moving the healthy arm cannot lower the score')
     stage1_end = end
     if end is not None and two_stage:
         stage1_end = time.monotonic() + _STAGE1_SHARE * (end - time.monotonic())
