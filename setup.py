@@ -29,7 +29,9 @@ setup(
                  'flake8', 'flake8-builtins', 'flake8-comprehensions', 'flake8-docstrings',
                  'flake8-import-order', 'flake8-quotes', 'pydocstyle',
                  # test_colcon_build.py builds the package the way a ROS install does.
-                 'colcon-core', 'colcon-ros'],
+                 'colcon-core', 'colcon-ros',
+                 # The optional figures are tested too.
+                 'matplotlib'],
         'plot': ['matplotlib'],
     },
     zip_safe=True,

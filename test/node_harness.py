@@ -13,12 +13,12 @@ from pathlib import Path
 import shutil
 import signal
 import subprocess
-import sys
 import tempfile
 import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
+from namo_fault_recovery.ros_cli import node_command
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
 import rclpy
 from rclpy.context import Context
@@ -44,17 +44,6 @@ def session_domain(offset):
     """Return this test session's ROS domain id for a module (offset 0..4)."""
     base = int(os.environ.get('NAMO_TEST_DOMAIN_BASE', 1 + (os.getpid() % 20) * 5))
     return base + offset
-
-
-def node_command():
-    """Return the command that starts the installed ``recovery_node`` executable."""
-    beside = Path(sys.executable).parent / 'recovery_node'
-    if beside.is_file():
-        return [str(beside)]
-    found = shutil.which('recovery_node')
-    if found:
-        return [found]
-    return [sys.executable, '-m', 'namo_fault_recovery.recovery_node']
 
 
 def ros_env(domain, extra=None):

@@ -19,7 +19,6 @@ def _is_png(path):
 
 
 def test_plot_command_writes_png(tmp_path):
-    pytest.importorskip('matplotlib')
     path = tmp_path / 'wai.png'
     out = io.StringIO()
     code = main(['plot', '--gesture', 'wai', '--fault', 'right_arm_joint2', '--out', str(path)],
@@ -32,7 +31,6 @@ def test_plot_command_writes_png(tmp_path):
 
 
 def test_plot_function_one_arm_explicit_lock(robot, library, tmp_path):
-    pytest.importorskip('matplotlib')
     report = reconfigure_library(robot, library, {'right_arm_joint4': np.radians(60.0)},
                                  seed=0, gestures=['salute'])
     path = plotting.plot_reconfiguration(robot, library, report, 'salute',
@@ -50,7 +48,6 @@ def test_arm_points_start_at_the_shoulder(robot):
 
 
 def test_boxplot_paper(tmp_path):
-    pytest.importorskip('matplotlib')
     runs = {(k, 'bye', 'right_arm_joint2'): [{'score': s + i, 'time': 0.1 * (i + 1)}
                                              for i, s in enumerate((3.0, 4.0, 5.0))]
             for k in ('a', 'b')}
