@@ -11,8 +11,8 @@ PRESETS = ('default', 'paper')
 # The product default: a small colony seeded with the reference pose, run on all gestures
 # at once, then a batched quasi-Newton polish of the best two sources (one of them the
 # reference start).  Chosen with `namo-recovery bench speed`; see README "Product default".
-DEFAULT_ABC = {'n_sources': 8, 'max_cycles': 12, 'limit': 20, 'polish': 2,
-               'polish_maxiter': 60, 'polish_ftol': 1e-7, 'use_x0': True}
+DEFAULT_ABC = {'n_sources': 8, 'max_cycles': 8, 'limit': 20, 'polish': 2,
+               'polish_maxiter': 50, 'polish_ftol': 1e-7, 'use_x0': True}
 
 
 def make_algorithm(name, preset='default', **overrides):
