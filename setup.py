@@ -16,7 +16,9 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         (share, ['package.xml']),
         (os.path.join(share, 'config'), sorted(glob('config/*'))),
-        (os.path.join(share, 'msg_docs'), sorted(glob('msg_docs/*'))),
+        (os.path.join(share, 'msg_docs'), sorted(f for f in glob('msg_docs/*')
+                                                 if os.path.isfile(f))),
+        (os.path.join(share, 'msg_docs', 'figures'), sorted(glob('msg_docs/figures/*.png'))),
     ],
     python_requires='>=3.10',
     install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML'],

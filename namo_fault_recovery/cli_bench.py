@@ -3,8 +3,7 @@ The ``bench`` and ``plot`` commands of ``namo-recovery``.
 
 :func:`register` adds them to the main parser's subcommands.  The benchmarks print
 their figures on stdout (progress goes to stderr) and write their files under
-``bench_out/`` unless told otherwise.  Until the main CLI registers them they also run
-standalone: ``python -m namo_fault_recovery.cli_bench bench speed``.
+``bench_out/`` unless told otherwise.
 """
 
 import math
@@ -13,20 +12,13 @@ import sys
 
 import numpy as np
 
+from .cli_common import _Parser, UsageError
+
 EXIT_USAGE = 2
 
 
-def _cli_names():
-    """Return ``(_Parser, UsageError)`` of the main CLI (imported late: no import cycle)."""
-    try:
-        from .cli_common import _Parser, UsageError
-    except ImportError:
-        from .cli import _Parser, UsageError
-    return _Parser, UsageError
-
-
 def _usage(message):
-    return _cli_names()[1](message)
+    return UsageError(message)
 
 
 def _positive_int(option, value, minimum=1):
@@ -226,7 +218,6 @@ def register(subparsers):
     """
     from .benchmarks.common import ALGORITHM_SPECS, PAPER_LINEUP
     from .benchmarks.deadline import DEADLINES, DEFAULT_KEYS
-    _Parser = _cli_names()[0]
     keys = ', '.join(ALGORITHM_SPECS)
 
     bench = subparsers.add_parser('bench', help='benchmarks that print figures')
@@ -312,38 +303,3 @@ def register(subparsers):
     p.add_argument('--keyframe', type=int, default=0, help='keyframe index (default 0)')
     p.set_defaults(func=cmd_plot)
     return bench_sub
-
-
-def build_parser():
-    """Return a standalone parser with the main options and these commands."""
-    _Parser = _cli_names()[0]
-    parser = _Parser(prog='namo-recovery', description='Benchmarks and figures.')
-    parser.add_argument('--robot-file', default=None, help='robot model YAML')
-    parser.add_argument('--gesture-file', default=None, help='gesture library YAML')
-    sub = parser.add_subparsers(dest='command', metavar='COMMAND', parser_class=_Parser)
-    sub.required = True
-    register(sub)
-    return parser
-
-
-def main(argv=None, out=None):
-    """Run the bench/plot commands standalone; returns the exit code."""
-    UsageError = _cli_names()[1]
-    from .errors import ConfigError
-    out = out or sys.stdout
-    try:
-        args = build_parser().parse_args(argv)
-        return args.func(args, out)
-    except UsageError as exc:
-        sys.stderr.write(f'namo-recovery: error: {exc}\n')
-        return EXIT_USAGE
-    except (ConfigError, FileNotFoundError) as exc:
-        sys.stderr.write(f'namo-recovery: error: {exc}\n')
-        return EXIT_USAGE
-    except BrokenPipeError:
-        sys.stderr.close()
-        return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

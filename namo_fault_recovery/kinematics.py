@@ -99,6 +99,11 @@ def _chain(robot, q, axes=None, origins=None):
     return elbow, wrist, tip, palm
 
 
+def take_landmarks(lm, index):
+    """Return the landmarks of the configurations selected by ``index``."""
+    return ArmLandmarks(*(a[index] for a in lm))
+
+
 def mirror_landmarks(lm):
     """Mirror landmarks in the x-z plane (negate y; R -> M R M with M = diag(1, -1, 1))."""
     flip = np.array([1.0, -1.0, 1.0])

@@ -23,7 +23,7 @@ import numpy as np
 from .collision import CollisionModel
 from .faults import resolve_locks
 from .gestures import Keyframe
-from .kinematics import _forward, _forward_jacobian, ArmLandmarks
+from .kinematics import _forward, _forward_jacobian, ArmLandmarks, take_landmarks
 from .optimize import make_algorithm, minimize, Problem, STATUS_CANCELLED, STATUS_DEADLINE
 from .robot_model import ARMS, N_JOINTS
 from .score import gesture_targets, SimilarityScore
@@ -35,10 +35,6 @@ _STAGE1_SHARE = 0.6        # of the budget, when stage 2 may follow
 _OPTIMAL_SHARE = 0.6       # of the budget spent choosing optimal lock angles
 _LOCK_CANDIDATES = 12      # coarse lock angles per optimal joint (plus the average)
 _MARGIN = 0.015            # s kept back from the deadline for the work after the search
-
-
-def _take(lm, index):
-    return ArmLandmarks(*(a[index] for a in lm))
 
 
 class PoseProblem(Problem):
@@ -95,7 +91,7 @@ class PoseProblem(Problem):
         arms = {}
         for side in ARMS:
             if side in self.fixed:
-                arms[side] = _take(self.fixed[side], rows)
+                arms[side] = take_landmarks(self.fixed[side], rows)
             elif jacobian:
                 arms[side] = _forward_jacobian(self.robot, q[side].reshape(-1, N_JOINTS), side)
             else:

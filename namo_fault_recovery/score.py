@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .kinematics import (_forward, _forward_jacobian, ArmLandmarks, as_joint_array,
-                         forward_kinematics)
+                         forward_kinematics, take_landmarks)
 
 COMPONENTS = ('elbow', 'wrist', 'tip', 'palm', 'wrist_lr', 'tip_lr')
 _ARM_COMPONENTS = 4
@@ -167,11 +167,11 @@ class SimilarityScore:
         n = max(rows)
         target = np.broadcast_to(target, (n,))
         if isinstance(q_right, ArmLandmarks):
-            q_right = _take(q_right, target)
+            q_right = take_landmarks(q_right, target)
         else:
             q_right = np.broadcast_to(q_right, (n, q_right.shape[-1]))
         if isinstance(q_left, ArmLandmarks):
-            q_left = _take(q_left, target)
+            q_left = take_landmarks(q_left, target)
         elif q_left is not None:
             q_left = np.broadcast_to(q_left, (n, q_left.shape[-1]))
         return self.evaluate(q_right, q_left, target, breakdown)
@@ -193,7 +193,7 @@ class SimilarityScore:
         left = np.zeros_like(right)
         if self._uses_left:
             if q_left is None:
-                lm_l = _take(self._ref_l, target)
+                lm_l = take_landmarks(self._ref_l, target)
             elif isinstance(q_left, ArmLandmarks):
                 lm_l = q_left
             else:
@@ -232,7 +232,7 @@ class SimilarityScore:
         lms, jacs = {}, {}
         for side, q in (('right', q_right), ('left', q_left)):
             if q is None:
-                lms[side] = _take(self._ref_l if side == 'left' else self._ref_r, target)
+                lms[side] = take_landmarks(self._ref_l if side == 'left' else self._ref_r, target)
             elif isinstance(q, ArmLandmarks):
                 lms[side] = q
             elif isinstance(q, tuple):
@@ -310,7 +310,3 @@ class SimilarityScore:
         frob = np.sqrt(np.einsum('nij,nij->n', rdiff, rdiff))
         out[:, 3] = np.degrees(2.0 * np.arcsin(np.minimum(frob * _FROB_TO_ANGLE, 1.0)))
         return out
-
-
-def _take(lm, index):
-    return type(lm)(*(a[index] for a in lm))

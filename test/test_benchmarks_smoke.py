@@ -8,7 +8,7 @@ import math
 from namo_fault_recovery.benchmarks import common, deadline, load_best_known, optimum, paper
 from namo_fault_recovery.benchmarks import speed
 from namo_fault_recovery.benchmarks.paper_data import TABLE6
-from namo_fault_recovery.cli_bench import main
+from namo_fault_recovery.cli import main
 from namo_fault_recovery.reconfigure import reconfigure_library
 from namo_fault_recovery.score import gesture_targets, SimilarityScore
 import numpy as np

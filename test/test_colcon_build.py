@@ -63,8 +63,11 @@ def test_colcon_installs_the_executable_share_files_and_index_marker(workspace):
     assert (share / 'package.xml').is_file()
     for name in ('namo_robot.yaml', 'gestures.yaml', 'recovery_node.yaml'):
         assert (share / 'config' / name).is_file(), name
-    for path in sorted((ROOT / 'msg_docs').iterdir()):
-        assert (share / 'msg_docs' / path.name).read_text() == path.read_text()
+    docs = [p for p in sorted((ROOT / 'msg_docs').rglob('*')) if p.is_file()]
+    assert docs
+    for path in docs:
+        installed = share / path.relative_to(ROOT)
+        assert installed.read_bytes() == path.read_bytes(), path
     assert (prefix / 'share' / 'ament_index' / 'resource_index' / 'packages' / PACKAGE).is_file()
 
 

@@ -4,7 +4,7 @@ import io
 import sys
 
 from namo_fault_recovery import plotting
-from namo_fault_recovery.cli_bench import main
+from namo_fault_recovery.cli import main
 from namo_fault_recovery.reconfigure import reconfigure_library
 import numpy as np
 import pytest

@@ -77,8 +77,7 @@ class ABC(Algorithm):
         stall = 0
         nit = 0
         all_src = np.broadcast_to(np.arange(sn), (batch, sn))
-        polish_share = 0.0
-        while nit < self.max_cycles and not clock.expired(timer.cost + polish_share):
+        while nit < self.max_cycles and not clock.expired(timer.cost):
             nit += 1
             # Employed bees: one neighbour per source, greedy selection.
             cand = self._neighbours(problem, rng, x, all_src)
@@ -120,10 +119,13 @@ class ABC(Algorithm):
             worn = np.argmax(trials, axis=1)
             scout = trials[np.arange(batch), worn] > self.limit
             if np.any(scout):
+                # One batched call evaluates a fresh point for every sub-problem; only
+                # those with an exhausted source take theirs.
                 b = np.nonzero(scout)[0]
-                fresh = problem.random(rng, 1)[b, 0]
-                x[b, worn[b]] = fresh
-                f[b, worn[b]] = _eval_rows(problem, fresh, b)
+                fresh = problem.random(rng, 1)
+                f_fresh = problem.evaluate(fresh)
+                x[b, worn[b]] = fresh[b, 0]
+                f[b, worn[b]] = f_fresh[b, 0]
                 trials[b, worn[b]] = 0
             history.append(best_f.copy())
             timer.tick()
@@ -142,14 +144,6 @@ class ABC(Algorithm):
             best_x[gain] = px[np.arange(batch), k][gain]
             history.append(best_f.copy())
         return best_x, best_f, nit, history
-
-
-def _eval_rows(problem, points, batch_rows):
-    """Evaluate one point for each listed sub-problem; other sub-problems get a dummy."""
-    full = np.repeat(problem.clip(((problem.lower + problem.upper) / 2))[None, None, :],
-                     problem.batch, axis=0)
-    full[batch_rows, 0] = points
-    return problem.evaluate(full)[batch_rows, 0]
 
 
 def _distinct_best(x, f, best_x, k):
