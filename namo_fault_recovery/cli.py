@@ -9,7 +9,7 @@ import sys
 
 import numpy as np
 
-from .cli_common import _Parser, UsageError
+from .cli_common import _Parser, parse_faults, UsageError
 from .errors import ConfigError
 from .gestures import load_library
 from .kinematics import forward_kinematics
@@ -101,25 +101,6 @@ def cmd_score(args, out):
     return 0
 
 
-def _parse_fault(text, robot):
-    """Parse ``JOINT`` or ``JOINT=DEG`` into (joint, angle rad or None)."""
-    joint, sep, value = text.partition('=')
-    try:
-        robot.locate_joint(joint)
-    except KeyError as exc:
-        raise UsageError(f'--fault: {exc.args[0]}') from None
-    if not sep:
-        return joint, None
-    try:
-        angle = float(value)
-    except ValueError:
-        raise UsageError(f'--fault {text}: expected JOINT=DEG with DEG a number of degrees, '
-                         f'got {value!r}') from None
-    if not np.isfinite(angle):
-        raise UsageError(f'--fault {text}: the angle must be finite')
-    return joint, float(np.radians(angle))
-
-
 def solve_document(report, robot):
     """Return the stable JSON document of a reconfiguration (schema in the README)."""
     locks_deg = {j: float(np.degrees(a)) for j, a in report.locks.items()}
@@ -166,7 +147,7 @@ def cmd_solve(args, out):
     """Reconfigure gestures for a fault set and print the result."""
     from .reconfigure import reconfigure_library
     robot, library = _load_models(args)
-    faults = dict(_parse_fault(f, robot) for f in args.fault)
+    faults = parse_faults(robot, args.fault)
     for name in args.gesture or []:
         if name not in library.names:
             raise UsageError(f'--gesture: unknown gesture {name!r}; expected one of '

@@ -12,7 +12,7 @@ import sys
 
 import numpy as np
 
-from .cli_common import _Parser, UsageError
+from .cli_common import _Parser, parse_faults, UsageError
 
 EXIT_USAGE = 2
 
@@ -136,27 +136,6 @@ def cmd_bench_deadline(args, out):
     return 0
 
 
-def _parse_faults(robot, specs):
-    faults = {}
-    for spec in specs:
-        joint, sep, value = spec.partition('=')
-        try:
-            robot.locate_joint(joint)
-        except KeyError as exc:
-            raise _usage(f'--fault: {exc.args[0]}') from None
-        angle = None
-        if sep:
-            try:
-                angle = math.radians(float(value))
-            except ValueError:
-                raise _usage(f'--fault {spec}: expected JOINT=DEGREES, e.g. '
-                             f'right_arm_joint2=-14.25') from None
-            if not math.isfinite(angle):
-                raise _usage(f'--fault {spec}: the lock angle must be finite')
-        faults[joint] = angle
-    return faults
-
-
 def cmd_plot(args, out):
     """Draw the reference and reconfigured arms of one gesture (matplotlib optional)."""
     from . import plotting
@@ -166,7 +145,7 @@ def cmd_plot(args, out):
         gesture = library[args.gesture]
     except KeyError as exc:
         raise _usage(f'--gesture: {exc.args[0]}') from None
-    faults = _parse_faults(robot, args.fault)
+    faults = parse_faults(robot, args.fault)
     if not 0 <= args.keyframe < len(gesture.keyframes):
         raise _usage(f'--keyframe: gesture {gesture.name} has keyframes '
                      f'0..{len(gesture.keyframes) - 1}, got {args.keyframe}')

@@ -74,7 +74,7 @@ def test_without_matplotlib_says_how_to_install(monkeypatch, capsys, tmp_path):
 @pytest.mark.parametrize('argv, message', [
     (['plot', '--gesture', 'nope', '--fault', 'right_arm_joint2'], 'unknown gesture'),
     (['plot', '--gesture', 'wai', '--fault', 'bogus'], 'unknown joint'),
-    (['plot', '--gesture', 'wai', '--fault', 'right_arm_joint2=abc'], 'JOINT=DEGREES'),
+    (['plot', '--gesture', 'wai', '--fault', 'right_arm_joint2=abc'], 'JOINT=DEG'),
     (['plot', '--gesture', 'wai', '--fault', 'right_arm_joint2', '--keyframe', '3'],
      '--keyframe'),
 ])
