@@ -9,7 +9,7 @@ import sys
 
 import numpy as np
 
-from .cli_common import _Parser, parse_faults, UsageError
+from .cli_common import _Parser, gesture_and_keyframe, parse_faults, UsageError
 from .errors import ConfigError
 from .gestures import load_library
 from .kinematics import forward_kinematics
@@ -76,13 +76,7 @@ def _parse_angles(values, option):
 def cmd_score(args, out):
     """Score one pose against a gesture and print the breakdown."""
     robot, library = _load_models(args)
-    try:
-        gesture = library[args.gesture]
-    except KeyError as exc:
-        raise UsageError(f'--gesture: {exc.args[0]}') from None
-    if not 0 <= args.keyframe < len(gesture.keyframes):
-        raise UsageError(f'--keyframe: gesture {gesture.name} has keyframes '
-                         f'0..{len(gesture.keyframes) - 1}, got {args.keyframe}')
+    gesture = gesture_and_keyframe(library, args.gesture, args.keyframe)
     q_right = _parse_angles(args.right, '--right')
     q_left = _parse_angles(args.left, '--left')
     scorer = SimilarityScore.for_gesture(robot, gesture, args.keyframe, ScoreWeights())

@@ -12,7 +12,7 @@ import sys
 
 import numpy as np
 
-from .cli_common import _Parser, parse_faults, UsageError
+from .cli_common import _Parser, gesture_and_keyframe, parse_faults, UsageError
 
 EXIT_USAGE = 2
 
@@ -141,14 +141,8 @@ def cmd_plot(args, out):
     from . import plotting
     from .reconfigure import reconfigure_library
     robot, library = _models(args)
-    try:
-        gesture = library[args.gesture]
-    except KeyError as exc:
-        raise _usage(f'--gesture: {exc.args[0]}') from None
+    gesture = gesture_and_keyframe(library, args.gesture, args.keyframe)
     faults = parse_faults(robot, args.fault)
-    if not 0 <= args.keyframe < len(gesture.keyframes):
-        raise _usage(f'--keyframe: gesture {gesture.name} has keyframes '
-                     f'0..{len(gesture.keyframes) - 1}, got {args.keyframe}')
     try:
         plotting._figure((1, 1))
     except plotting.MatplotlibMissing as exc:

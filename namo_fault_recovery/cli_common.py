@@ -39,3 +39,15 @@ def parse_faults(robot, specs):
                 raise UsageError(f'--fault {spec}: the lock angle must be finite')
         faults[joint] = angle
     return faults
+
+
+def gesture_and_keyframe(library, name, keyframe):
+    """Return the gesture named by ``--gesture`` after checking ``--keyframe`` exists."""
+    try:
+        gesture = library[name]
+    except KeyError as exc:
+        raise UsageError(f'--gesture: {exc.args[0]}') from None
+    if not 0 <= keyframe < len(gesture.keyframes):
+        raise UsageError(f'--keyframe: gesture {gesture.name} has keyframes '
+                         f'0..{len(gesture.keyframes) - 1}, got {keyframe}')
+    return gesture

@@ -361,14 +361,7 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
                 budget_end, cancel, rng)
             notes.append(chosen_note)
 
-    def locked_sets(lk):
-        out = {side: [] for side in ARMS}
-        for joint in lk:
-            side, j = robot.locate_joint(joint)
-            out[side].append(j)
-        return out
-
-    locked = locked_sets(locks)
+    locked = _locked_sets(robot, locks)
     base_r, base_l = _apply_locks(robot, ref_r, ref_l, locks)
     start_r, start_l = base_r, base_l
     if start_poses is not None:   # the optimal sweep's solution at the chosen locks
@@ -455,6 +448,15 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
                                   preset, notes, lock_strategy)
 
 
+def _locked_sets(robot, locks):
+    """Return ``{arm: [joint indices locked]}`` for a ``{joint: angle}`` lock set."""
+    out = {side: [] for side in ARMS}
+    for joint in locks:
+        side, j = robot.locate_joint(joint)
+        out[side].append(j)
+    return out
+
+
 def _apply_locks(robot, ref_r, ref_l, locks):
     base = {'right': ref_r.copy(), 'left': ref_l.copy()}
     for joint, angle in locks.items():
@@ -503,8 +505,7 @@ def _optimise_locks(robot, scorer, checker, targets, ref_r, ref_l, locks, joints
             base_r, base_l, layouts, tid = [], [], [], []
             for a in candidates:
                 trial = dict(locks, **{joint: float(a)})
-                locked = {s: [robot.locate_joint(x)[1] for x in trial
-                              if robot.locate_joint(x)[0] == s] for s in ARMS}
+                locked = _locked_sets(robot, trial)
                 br, bl = _apply_locks(robot, ref_r, ref_l, trial)
                 base_r.append(br)
                 base_l.append(bl)

@@ -302,11 +302,4 @@ class SimilarityScore:
         return terms, d_terms
 
     def _arm_terms(self, lm, side, target):
-        ref_pos, ref_rot = self._ref_stack[side]
-        diff = np.stack((lm.elbow, lm.wrist, lm.tip), axis=1) - ref_pos[target]
-        out = np.empty((target.shape[0], _ARM_COMPONENTS))
-        out[:, :3] = np.sqrt(np.einsum('nij,nij->ni', diff, diff))
-        rdiff = lm.palm - ref_rot[target]
-        frob = np.sqrt(np.einsum('nij,nij->n', rdiff, rdiff))
-        out[:, 3] = np.degrees(2.0 * np.arcsin(np.minimum(frob * _FROB_TO_ANGLE, 1.0)))
-        return out
+        return self._arm_terms_grad(lm, side, target, None)[0]

@@ -8,7 +8,6 @@ each test starts from a known fault set.
 import math
 from pathlib import Path
 
-from namo_fault_recovery import load_library, load_robot
 from node_harness import close_to, NodeProcess, RosClient, session_domain, statuses_values
 import numpy as np
 import pytest
@@ -21,16 +20,6 @@ CONFIG = Path(__file__).resolve().parent.parent / 'config'
 GESTURES = ['wai', 'bye', 'salute', 'side_invite']
 INF = float('inf')
 NAN = float('nan')
-
-
-@pytest.fixture(scope='module')
-def robot():
-    return load_robot()
-
-
-@pytest.fixture(scope='module')
-def library(robot):
-    return load_library(robot)
 
 
 @pytest.fixture(scope='module')
