@@ -182,6 +182,26 @@ class Algorithm:
         return {k: v for k, v in vars(self).items() if not k.startswith('_')}
 
 
+def best_of(points, values):
+    """Return each sub-problem's best point (batch, D) and value (batch,) of a population."""
+    k = np.argmin(values, axis=1)
+    rows = np.arange(len(values))
+    return points[rows, k].copy(), values[rows, k].copy()
+
+
+def remember_best(points, values, best_x, best_f):
+    """
+    Keep, in place, each sub-problem's best so far against a population's best.
+
+    ``points`` (batch, N, D) and ``values`` (batch, N); returns the rows that improved.
+    """
+    x, v = best_of(points, values)
+    gain = v < best_f
+    best_f[gain] = v[gain]
+    best_x[gain] = x[gain]
+    return gain
+
+
 def check_int(name, value, minimum):
     """Return ``value`` as an int >= minimum, or raise a ValueError naming it."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:

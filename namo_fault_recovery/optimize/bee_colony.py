@@ -11,7 +11,7 @@ call.  Optionally, the best sources are polished with a batched L-BFGS-B at the 
 
 import numpy as np
 
-from .base import Algorithm, check_float, check_int, StepTimer
+from .base import Algorithm, best_of, check_float, check_int, remember_best, StepTimer
 from .polish import polish
 
 
@@ -69,9 +69,7 @@ class ABC(Algorithm):
             x[:, 0] = problem.x0
         f = problem.evaluate(x)
         trials = np.zeros((batch, sn), dtype=int)
-        bi = np.argmin(f, axis=1)
-        best_x = x[np.arange(batch), bi].copy()
-        best_f = f[np.arange(batch), bi].copy()
+        best_x, best_f = best_of(x, f)
         history = [best_f.copy()]
         timer = StepTimer()
         stall = 0
@@ -107,12 +105,7 @@ class ABC(Algorithm):
             f[improved] = fbest[improved]
             trials = np.where(improved, 0, trials + counts)
             # Memorise the best, then send a scout to the most exhausted source.
-            bi = np.argmin(f, axis=1)
-            fmin = f[np.arange(batch), bi]
-            gain = fmin < best_f
-            if np.any(gain):
-                best_f[gain] = fmin[gain]
-                best_x[gain] = x[np.arange(batch), bi][gain]
+            if np.any(remember_best(x, f, best_x, best_f)):
                 stall = 0
             else:
                 stall += 1
@@ -138,10 +131,7 @@ class ABC(Algorithm):
                 starts[:, -1] = problem.x0
             px, pf = polish(problem, starts, clock, maxiter=self.polish_maxiter,
                             ftol=self.polish_ftol)
-            k = np.argmin(pf, axis=1)
-            gain = pf[np.arange(batch), k] < best_f
-            best_f[gain] = pf[np.arange(batch), k][gain]
-            best_x[gain] = px[np.arange(batch), k][gain]
+            remember_best(px, pf, best_x, best_f)
             history.append(best_f.copy())
         return best_x, best_f, nit, history
 

@@ -16,7 +16,7 @@ computed, so other settings behave as Passino describes.
 
 import numpy as np
 
-from .base import Algorithm, check_float, check_int, StepTimer
+from .base import Algorithm, best_of, check_float, check_int, remember_best, StepTimer
 
 
 class BFOA(Algorithm):
@@ -55,19 +55,10 @@ class BFOA(Algorithm):
         rows = np.arange(batch)[:, None]
         x = problem.random(rng, s)
         j = problem.evaluate(x)
-        best_i = np.argmin(j, axis=1)
-        best_x = x[np.arange(batch), best_i].copy()
-        best_f = j[np.arange(batch), best_i].copy()
+        best_x, best_f = best_of(x, j)
         history = [best_f.copy()]
         timer = StepTimer()
         nit = 0
-
-        def remember(points, values):
-            k = np.argmin(values, axis=1)
-            v = values[np.arange(batch), k]
-            gain = v < best_f
-            best_f[gain] = v[gain]
-            best_x[gain] = points[np.arange(batch), k][gain]
 
         for _ in range(self.elimination_events):
             for _ in range(self.reproduction_steps):
@@ -81,7 +72,7 @@ class BFOA(Algorithm):
                     direction = delta / np.linalg.norm(delta, axis=-1, keepdims=True)
                     x = problem.clip(x + self.step_size * direction)
                     j = problem.evaluate(x)
-                    remember(x, j)
+                    remember_best(x, j, best_x, best_f)
                     new_cost = j + self._jcc(x, x)
                     swimming = new_cost < cost
                     cost = np.where(swimming, new_cost, cost)
@@ -96,7 +87,7 @@ class BFOA(Algorithm):
                         j = np.where(moved, jt, j)
                         cost = np.where(moved, ct, cost)
                         swimming = moved
-                        remember(trial, np.where(moved, jt, np.inf))
+                        remember_best(trial, np.where(moved, jt, np.inf), best_x, best_f)
                     health += cost
                     history.append(best_f.copy())
                     timer.tick()
@@ -109,5 +100,5 @@ class BFOA(Algorithm):
             if np.any(gone):
                 x = np.where(gone[..., None], problem.random(rng, s), x)
                 j = problem.evaluate(x)
-                remember(x, j)
+                remember_best(x, j, best_x, best_f)
         return best_x, best_f, nit, history

@@ -10,7 +10,7 @@ offspring that are better replace the worst individuals.
 
 import numpy as np
 
-from .base import Algorithm, check_float, check_int, StepTimer
+from .base import Algorithm, best_of, check_float, check_int, StepTimer
 
 
 class GA(Algorithm):
@@ -64,5 +64,5 @@ class GA(Algorithm):
             pop, fit = allx[rows, keep], allf[rows, keep]
             history.append(fit[:, 0].copy())
             timer.tick()
-        best = np.argmin(fit, axis=1)
-        return pop[np.arange(batch), best], fit[np.arange(batch), best], nit, history
+        best_x, best_f = best_of(pop, fit)
+        return best_x, best_f, nit, history
