@@ -15,7 +15,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         (share, ['package.xml']),
-        (os.path.join(share, 'config'), sorted(glob('config/*'))),
+        (os.path.join(share, 'config'), sorted(glob('config/*.yaml'))),
+        (os.path.join(share, 'config', 'trajectories'), sorted(glob('config/trajectories/*'))),
         (os.path.join(share, 'msg_docs'), sorted(f for f in glob('msg_docs/*')
                                                  if os.path.isfile(f))),
         (os.path.join(share, 'msg_docs', 'figures'), sorted(glob('msg_docs/figures/*.png'))),

@@ -2,6 +2,8 @@
 The reference gesture library: keyframes per gesture, loaded from a validated YAML file.
 
 Angles are in degrees in the file (with an explicit units key) and in radians in memory.
+A gesture is a motion: a few keyframes written in the file, or a dense recorded
+trajectory read from a CSV file (:mod:`.trajectory_csv`).
 """
 
 from dataclasses import dataclass
@@ -15,6 +17,8 @@ from . import _yaml_checks as chk
 from .errors import ConfigError
 from .resources import config_path, DEFAULT_GESTURE_FILE
 from .robot_model import ARMS, N_JOINTS
+from .score import ScoreWeights
+from .trajectory_csv import load_trajectory_csv
 
 _NAME_RE = re.compile(r'^[a-z][a-z0-9_]*$')
 
@@ -38,13 +42,40 @@ class Keyframe:
 
 @dataclass(frozen=True)
 class Gesture:
-    """One emblematic gesture: its keyframes and the arms that take part in it."""
+    """
+    One gesture: its keyframes and the arms that take part in it.
+
+    ``weights`` (ScoreWeights or None) replaces the global score weights for this
+    gesture, e.g. a drawing motion that is mostly about its fingertip path.  ``joints``
+    are the joints the motion was designed with: after a structure change only those
+    (minus locked ones) are searched first; empty means all joints of its arms.
+    ``expand`` lists further joints in priority order, one tuple per stage of the staged
+    DOF expansion (the second source paper), used when the designed joints cannot
+    reach the motion well enough.
+    """
 
     name: str
     arms: tuple
     two_handed: bool
     keyframes: tuple
     description: str = ''
+    weights: object = None
+    joints: tuple = ()
+    expand: tuple = ()
+
+    @property
+    def times(self):
+        """Return the keyframes' times from start (s) as an array."""
+        return np.array([kf.time_from_start for kf in self.keyframes])
+
+    def angles(self):
+        """Return all keyframes' 14 angles (rad) as an array (T, 14), right arm first."""
+        return np.array([kf.positions() for kf in self.keyframes])
+
+    def with_keyframes(self, keyframes):
+        """Return a copy of this gesture with other keyframes."""
+        return Gesture(self.name, self.arms, self.two_handed, tuple(keyframes),
+                       self.description, self.weights, self.joints, self.expand)
 
 
 @dataclass(frozen=True)
@@ -152,7 +183,18 @@ def load_library(robot, path=None):
         if two_handed and len(arms) != 2:
             raise ConfigError(path, f'{where}.two_handed',
                               f'a two-handed gesture must use both arms, got arms {arms!r}')
-        frames = chk.require(entry, 'keyframes', path, where)
+        if ('keyframes' in entry) == ('trajectory' in entry):
+            raise ConfigError(path, f'{where}.keyframes',
+                              "expected exactly one of 'keyframes' (a list) and "
+                              "'trajectory' (a CSV file)")
+        options = _gesture_options(entry, robot, arms, path, where)
+        if 'trajectory' in entry:
+            keyframes = _csv_keyframes(entry['trajectory'], robot, scale, path,
+                                       f'{where}.trajectory')
+            gestures.append(Gesture(name, tuple(arms), two_handed, keyframes,
+                                    str(entry.get('description', '')), *options))
+            continue
+        frames = entry['keyframes']
         if not isinstance(frames, list) or not frames:
             raise ConfigError(path, f'{where}.keyframes',
                               f'expected a non-empty list of keyframes, got {frames!r}')
@@ -173,5 +215,71 @@ def load_library(robot, path=None):
                                scale, path, f'{fwhere}.left', right)
             keyframes.append(Keyframe(t, right, left))
         gestures.append(Gesture(name, tuple(arms), two_handed, tuple(keyframes),
-                                str(entry.get('description', ''))))
+                                str(entry.get('description', '')), *options))
     return GestureLibrary(tuple(gestures), str(path))
+
+
+def _csv_keyframes(value, robot, scale, file, key):
+    """Load ``trajectory: {file: NAME.csv, units: deg}`` (relative to the YAML file)."""
+    csv_name = chk.require(value, 'file', file, key)
+    if not isinstance(csv_name, str) or not csv_name:
+        raise ConfigError(file, f'{key}.file', f'expected a CSV file name, got {csv_name!r}')
+    if 'units' in value:
+        scale = chk.as_angle_scale(value['units'], file, f'{key}.units')
+    unknown = set(value) - {'file', 'units'}
+    if unknown:
+        raise ConfigError(file, f'{key}.{sorted(unknown)[0]}',
+                          'unknown key; expected file and units')
+    csv_path = Path(file).parent / csv_name
+    times, angles = load_trajectory_csv(csv_path, robot, scale)
+    return tuple(Keyframe(float(t), q[:N_JOINTS].copy(), q[N_JOINTS:].copy())
+                 for t, q in zip(times, angles))
+
+
+def _gesture_options(entry, robot, arms, file, where):
+    """Parse a gesture's optional weights, designed joints and expansion stages."""
+    weights = None
+    if 'weights' in entry:
+        value = entry['weights']
+        if not isinstance(value, dict):
+            raise ConfigError(file, f'{where}.weights', f'expected a mapping of component '
+                              f'weights, got {value!r}')
+        try:
+            weights = ScoreWeights.from_mapping(value)
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(file, f'{where}.weights', str(exc)) from None
+    known = set(robot.joint_names)
+    used = set()
+
+    def joint_list(value, key):
+        if not isinstance(value, list) or not value:
+            raise ConfigError(file, key, f'expected a non-empty list of joint names, '
+                              f'got {value!r}')
+        for i, joint in enumerate(value):
+            if joint not in known:
+                raise ConfigError(file, f'{key}[{i}]', f'unknown joint {joint!r}; expected '
+                                  f'one of {", ".join(robot.joint_names)}')
+            if joint in used:
+                raise ConfigError(file, f'{key}[{i}]', f'joint {joint!r} is listed twice')
+            used.add(joint)
+        return tuple(value)
+
+    joints = ()
+    if 'joints' in entry:
+        joints = joint_list(entry['joints'], f'{where}.joints')
+        outside = [j for j in joints if robot.locate_joint(j)[0] not in arms]
+        if outside:
+            raise ConfigError(file, f'{where}.joints', f'joint {outside[0]!r} is not on '
+                              f'an arm of this gesture ({", ".join(arms)})')
+    expand = ()
+    if 'expand' in entry:
+        stages = entry['expand']
+        if not isinstance(stages, list) or not stages:
+            raise ConfigError(file, f'{where}.expand', f'expected a list of stages (lists '
+                              f'of joint names), got {stages!r}')
+        if not joints:
+            raise ConfigError(file, f'{where}.expand', "needs 'joints' (the designed "
+                              'joints that the stages expand)')
+        expand = tuple(joint_list(stage, f'{where}.expand[{i}]')
+                       for i, stage in enumerate(stages))
+    return weights, joints, expand

@@ -53,12 +53,13 @@ def _link_plan(robot):
     return plan
 
 
-def _chain(robot, q, axes=None, origins=None):
+def _chain(robot, q, axes=None, origins=None, tool=0.0):
     """
     Run the right-arm chain on q of shape (N, 7); return landmarks of shape (N, ...).
 
     If ``axes``/``origins`` (N, 7, 3) are given, each joint's rotation axis (the z axis
-    of its frame) and a point on it (the frame origin) are written there.
+    of its frame) and a point on it (the frame origin) are written there.  ``tool`` (mm)
+    lengthens the hand: the fingertip becomes the tip of the tool.
     """
     n = q.shape[0]
     # Columns of the accumulated rotation, each (N, 3); position (N, 3).
@@ -94,7 +95,11 @@ def _chain(robot, q, axes=None, origins=None):
     palm = np.stack((x_col, y_col, z_col), axis=-1)
     _, d_e, a_e, al_e = robot.end_effector
     # The end-effector frame only moves the origin: tip = p7 + R7 . (a, -sa d, ca d);
-    # its constant rotation about z does not move the tip.
+    # its constant rotation about z does not move the tip.  A tool lengthens that offset
+    # along its own direction.
+    if tool:
+        scale = 1.0 + tool / float(np.hypot(a_e, d_e))
+        a_e, d_e = a_e * scale, d_e * scale
     tip = pos + a_e * x_col + d_e * (np.cos(al_e) * z_col - np.sin(al_e) * y_col)
     return elbow, wrist, tip, palm
 
@@ -128,7 +133,8 @@ def forward_kinematics(robot, q, arm='right'):
 def _forward(robot, q, arm):
     """Forward kinematics without input checks, for callers that already validated q."""
     lead = q.shape[:-1]
-    elbow, wrist, tip, palm = _chain(robot, q.reshape(-1, N_JOINTS))
+    elbow, wrist, tip, palm = _chain(robot, q.reshape(-1, N_JOINTS),
+                                     tool=robot.tool_length(arm))
     lm = ArmLandmarks(elbow.reshape(lead + (3,)), wrist.reshape(lead + (3,)),
                       tip.reshape(lead + (3,)), palm.reshape(lead + (3, 3)))
     if robot.arms[arm].mirrored:
@@ -168,7 +174,7 @@ def _forward_jacobian(robot, q, arm):
     n = q.shape[0]
     axes = np.empty((n, N_JOINTS, 3))
     origins = np.empty((n, N_JOINTS, 3))
-    lm = ArmLandmarks(*_chain(robot, q, axes, origins))
+    lm = ArmLandmarks(*_chain(robot, q, axes, origins, robot.tool_length(arm)))
     pts = np.stack((lm.elbow, lm.wrist, lm.tip), axis=1)            # (N, 3, 3)
     arm_vec = pts[:, :, None, :] - origins[:, None, :, :]              # (N, 3, 7, 3)
     ax = axes[:, None]

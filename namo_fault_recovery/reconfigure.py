@@ -35,6 +35,8 @@ _STAGE1_SHARE = 0.6        # of the budget, when stage 2 may follow
 _OPTIMAL_SHARE = 0.6       # of the budget spent choosing optimal lock angles
 _LOCK_CANDIDATES = 12      # coarse lock angles per optimal joint (plus the average)
 _MARGIN = 0.015            # s kept back from the deadline for the work after the search
+_DEG2 = (180.0 / np.pi) ** 2
+DEFAULT_EXPANSION_THRESHOLD = 5.0   # mm of fingertip error
 
 
 class PoseProblem(Problem):
@@ -45,10 +47,13 @@ class PoseProblem(Problem):
     failed joints at their locks); ``free`` is a tuple of ``(arm, joint index)`` giving
     the variables.  With a ``collision`` model the capsule penalty is added to the score.
     ``smooth`` (mm or deg) rounds the kinks of the score for the gradient-based polish.
+    With ``anchor`` (B, D) the problem adds ``continuity * |x - anchor|^2`` (x in
+    degrees): a penalty on joint-space jumps away from where a motion's previous
+    point leads, so that successive keyframes stay on one branch of the redundancy.
     """
 
     def __init__(self, robot, scorer, target_ids, base_right, base_left, free,
-                 collision=None, smooth=0.01, x0=None):
+                 collision=None, smooth=0.01, x0=None, anchor=None, continuity=0.0):
         if not free:
             raise ValueError('PoseProblem: no free joint to optimise')
         self.robot = robot
@@ -68,6 +73,8 @@ class PoseProblem(Problem):
                       for side in ARMS if not self.columns[side]}
         if x0 is None:   # the starting poses' free joints: a known-good start
             x0 = [[self.base[s][b, j] for s, j in self.free] for b in range(len(target_ids))]
+        self.anchor = None if anchor is None else np.asarray(anchor, dtype=float)
+        self.continuity = float(continuity) * _DEG2 if anchor is not None else 0.0
         super().__init__(lower, upper, self._objective, n_batch=len(self.target_ids), x0=x0,
                          value_and_grad=self._value_and_grad)
 
@@ -103,7 +110,10 @@ class PoseProblem(Problem):
         f = self.scorer.evaluate(arms['right'], arms['left'], target)
         if self.collision is not None:
             f = f + self.collision.penalty(arms['right'], arms['left'], target)[0]
-        return f.reshape(x.shape[:2])
+        f = f.reshape(x.shape[:2])
+        if self.continuity:
+            f = f + self.continuity * np.sum((x - self.anchor[:, None]) ** 2, axis=-1)
+        return f
 
     def _value_and_grad(self, x):
         batch, n, dim = x.shape
@@ -124,7 +134,12 @@ class PoseProblem(Problem):
         for side in ARMS:
             for k, j in self.columns[side]:
                 grad[:, k] = grads[side][:, j]
-        return f.reshape(batch, n), grad.reshape(batch, n, dim)
+        f, grad = f.reshape(batch, n), grad.reshape(batch, n, dim)
+        if self.continuity:
+            step = x - self.anchor[:, None]
+            f = f + self.continuity * np.sum(step ** 2, axis=-1)
+            grad = grad + 2.0 * self.continuity * step
+        return f, grad
 
 
 @dataclass
@@ -144,6 +159,7 @@ class GestureReconfiguration:
     stage1_score: float = None
     collides: object = None    # None when the collision check is off
     colliding_pairs: tuple = ()
+    expansion_stage: int = 0   # expand stages used (0: the designed joints sufficed)
 
 
 @dataclass
@@ -160,6 +176,9 @@ class LibraryReconfiguration:
     preset: str = 'default'
     notes: list = field(default_factory=list)
     lock_strategy: str = 'average'
+    nfev: int = 0              # objective evaluations, summed over all keyframes
+    tool_mm: float = 0.0
+    tool_arm: str = 'right'
 
     @property
     def cancelled(self):
@@ -191,15 +210,16 @@ class LibraryReconfiguration:
 class _Batch:
     """Rows to solve: starting poses, target ids and free-variable layouts."""
 
-    def __init__(self, base_right, base_left, target_ids, layouts, x0=None):
+    def __init__(self, base_right, base_left, target_ids, layouts, x0=None, stay_close=0.0):
         self.right = np.array(base_right, dtype=float)
         self.left = np.array(base_left, dtype=float)
         self.target_ids = np.asarray(target_ids, dtype=int)
         self.layouts = list(layouts)
         self.x0 = x0   # optional {row: start vector in the row's layout}
+        self.stay_close = stay_close   # penalty per deg^2 away from the reference pose
 
 
-def _solve(robot, scorer, checker, batch, algo, clock_end, cancel, rng):
+def _solve(robot, scorer, checker, batch, algo, clock_end, cancel, rng, stats=None):
     """
     Solve every row of ``batch``; with a collision ``checker``, keep poses apart.
 
@@ -209,7 +229,7 @@ def _solve(robot, scorer, checker, batch, algo, clock_end, cancel, rng):
     starting pose.  Return (best right, best left, status names).
     """
     best_r, best_l, status = _solve_once(robot, scorer, None, batch, algo, clock_end, cancel,
-                                         rng)
+                                         rng, stats)
     if checker is None:
         return best_r, best_l, status
     ids = batch.target_ids
@@ -218,9 +238,9 @@ def _solve(robot, scorer, checker, batch, algo, clock_end, cancel, rng):
     if rows.size == 0:
         return best_r, best_l, status
     sub = _Batch(batch.right[rows], batch.left[rows], ids[rows],
-                 [batch.layouts[k] for k in rows])
+                 [batch.layouts[k] for k in rows], stay_close=batch.stay_close)
     r2, l2, st2 = _solve_once(robot, scorer, checker, sub, _repair_algorithm(algo), clock_end,
-                              cancel, rng)
+                              cancel, rng, stats)
     # Candidates per row: the plain result, the penalised one, and the starting pose
     # (collision-free unless the locks themselves force a contact).  The best score
     # among those that do not collide wins; if all collide, the least penetration.
@@ -256,12 +276,13 @@ def _repair_algorithm(algo):
     return algo
 
 
-def _solve_once(robot, scorer, collision, batch, algo, clock_end, cancel, rng):
+def _solve_once(robot, scorer, collision, batch, algo, clock_end, cancel, rng, stats=None):
     """
     Solve every row of ``batch`` (rows sharing a layout in one batched problem).
 
     Return (best right, best left, status names); a row never ends worse than its
     starting pose (by the objective, which includes the penalty when ``collision``).
+    ``stats['nfev']``, if given, counts the objective evaluations over all rows.
     """
     m = len(batch.target_ids)
     best_r, best_l = batch.right.copy(), batch.left.copy()
@@ -279,11 +300,18 @@ def _solve_once(robot, scorer, collision, batch, algo, clock_end, cancel, rng):
         x0 = None
         if batch.x0 is not None:
             x0 = np.array([batch.x0[k] for k in members])
+        anchor = None
+        if batch.stay_close:
+            refs = [scorer.reference(k) for k in batch.target_ids[members]]
+            anchor = [[ref[0 if s == 'right' else 1][j] for s, j in free] for ref in refs]
         problem = PoseProblem(robot, scorer, batch.target_ids[members], batch.right[members],
-                              batch.left[members], free, collision=collision, x0=x0)
+                              batch.left[members], free, collision=collision, x0=x0,
+                              anchor=anchor, continuity=batch.stay_close)
         start = problem.evaluate(problem.x0[:, None, :])[:, 0]
         res = minimize(problem, algo, deadline=budget, cancel=cancel,
                        seed=int(rng.integers(2 ** 63)))
+        if stats is not None:
+            stats['nfev'] = stats.get('nfev', 0) + res.nfev * len(members)
         x = np.atleast_2d(res.x)
         f = np.atleast_1d(res.fun)
         keep = f <= start
@@ -295,16 +323,23 @@ def _solve_once(robot, scorer, collision, batch, algo, clock_end, cancel, rng):
     return best_r, best_l, status
 
 
-def _layout(robot, arms_used, locked, moving):
+def _layout(robot, arms_used, locked, moving, allowed=None):
+    """Free variables: unlocked joints of moving arms used (and ``allowed``, if given)."""
     return tuple((s, j) for s in ARMS if s in moving and s in arms_used
-                 for j in range(N_JOINTS) if j not in locked[s])
+                 for j in range(N_JOINTS) if j not in locked[s]
+                 and (allowed is None or (s, j) in allowed))
+
+
+def _joint_set(robot, names):
+    return {robot.locate_joint(n) for n in names}
 
 
 def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='default',
                         deadline=1.0, seed=None, weights=None, lock_strategy='average',
                         measured=None, cancel=None, gestures=None, settings=None,
                         bimanual='off', bimanual_threshold=DEFAULT_BIMANUAL_THRESHOLD,
-                        collision=False, capsules=None):
+                        collision=False, capsules=None, tool_mm=0.0, tool_arm='right',
+                        expansion_threshold=DEFAULT_EXPANSION_THRESHOLD, stay_close=0.0):
     """
     Reconfigure every gesture (or those named in ``gestures``) for a fault set.
 
@@ -316,10 +351,20 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
     reports any pose that still collides.  Both extensions are off here by default, so
     that the library API solves exactly the paper's problem; the node and ``solve``
     turn them on (``bimanual='auto'``, ``collision=True``).
+
+    Structure changes beyond locked joints: ``tool_mm`` lengthens the hand of
+    ``tool_arm`` by a tool; the references stay those of the designed motion on the
+    original structure.  A gesture that names its designed ``joints`` searches only
+    those first, and its ``expand`` stages add further joints, in order, while the
+    fingertip of one of its keyframes stays more than ``expansion_threshold`` mm from
+    its target (staged DOF expansion).  ``stay_close`` (per deg^2) penalises moving the
+    free joints away from the reference pose: the smallest correction wins among
+    equally good ones, so that neighbouring keyframes stay on one redundant branch.
     The result is a pure function of the inputs and ``seed`` (None draws one, reported
     in the result), up to where a deadline cuts the search.
     """
     start = time.monotonic()
+    reference, robot = robot, robot.with_tool(tool_mm, tool_arm)
     if bimanual not in BIMANUAL_MODES:
         raise ValueError(f'unknown bimanual mode {bimanual!r}; expected one of '
                          f'{", ".join(BIMANUAL_MODES)}')
@@ -341,7 +386,7 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
         for t in gesture_targets(gesture):
             targets.append(t)
             owners.append(gi)
-    scorer = SimilarityScore(robot, targets, weights)
+    scorer = SimilarityScore(robot, targets, weights, reference_robot=reference)
     checker = None
     if collision:
         checker = CollisionModel(robot, targets, capsules or robot.capsules)
@@ -349,8 +394,10 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
     ref_r = np.array([t.q_right for t in targets])
     ref_l = np.array([t.q_left for t in targets])
 
+    # The arms whose structure changed: a failed joint or a tool.
     faulted = {side for side in ARMS
-               if any(robot.locate_joint(j)[0] == side for j in locks)}
+               if any(robot.locate_joint(j)[0] == side for j in locks)
+               or robot.tool_length(side) > 0}
     start_poses = None
     if lock_strategy == 'optimal':
         optimal = [j for j, a in faults.items() if a is None]
@@ -370,28 +417,42 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
     for side in frozen:
         notes.append(f'all joints of the {side} arm failed: it is frozen at its lock angles')
 
-    layouts = [_layout(robot, t.arms, locked, faulted) for t in targets]
+    designed = [_joint_set(robot, selected[g].joints) if selected[g].joints else None
+                for g in owners]
+    layouts = [_layout(robot, t.arms, locked, faulted, a) for t, a in zip(targets, designed)]
     status0 = ['frozen' if any(s in faulted for s in t.arms) and not lay else 'unchanged'
                for t, lay in zip(targets, layouts)]
     two_stage = [k for k, t in enumerate(targets)
                  if bimanual != 'off' and t.two_handed and len(faulted) == 1]
-    w = scorer.weights
-    if bimanual == 'auto' and two_stage and w.wrist >= w.wrist_lr and w.tip >= w.tip_lr:
+    if bimanual == 'auto' and two_stage and all(
+            scorer.target_weights(k).wrist >= scorer.target_weights(k).wrist_lr
+            and scorer.target_weights(k).tip >= scorer.target_weights(k).tip_lr
+            for k in two_stage):
         # The healthy arm starts at its reference, where its own terms are 0.  Moving its
         # wrist (tip) by d adds d to its wrist (tip) term and can shorten the left-right
         # gap by at most d, so with these weights stage 2 can never lower the score.
         two_stage = []
         notes.append('stage 2 skipped: with wrist >= wrist_lr and tip >= tip_lr weights, '
                      'moving the healthy arm cannot lower the score')
+    expandable = any(selected[owners[k]].expand for k in range(len(targets))
+                     if layouts[k] or status0[k] == 'frozen')
+    stats = {'nfev': 0}
     stage1_end = end
-    if end is not None and two_stage:
+    if end is not None and (two_stage or expandable):
         stage1_end = time.monotonic() + _STAGE1_SHARE * (end - time.monotonic())
     best_r, best_l, status = _solve(robot, scorer, checker,
-                                    _Batch(start_r, start_l, ids, layouts), algo,
-                                    stage1_end, cancel, rng)
+                                    _Batch(start_r, start_l, ids, layouts,
+                                           stay_close=stay_close), algo,
+                                    stage1_end, cancel, rng, stats)
     status = [s0 if s0 == 'frozen' else s for s0, s in zip(status0, status)]
     after = scorer.evaluate(best_r, best_l, ids)
     stage = np.ones(len(targets), dtype=int)
+    expansion = np.zeros(len(targets), dtype=int)
+    if expandable:
+        expansion = _expand(robot, scorer, checker, selected, owners, targets, ids, locked,
+                            faulted, designed, layouts, best_r, best_l, after, status,
+                            expansion_threshold, algo, end, two_stage, cancel, rng, stats,
+                            stay_close)
     stage1 = after.copy()
 
     # Stage 2: the healthy arm joins in for two-handed gestures that are still poor.
@@ -433,6 +494,7 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
         stage_used = int(max(stage[k] for k in ks))
         free = (layouts[ks[0]] if stage_used == 1
                 else _layout(robot, gesture.arms, locked, set(ARMS)))
+        expanded = int(max(expansion[k] for k in ks))
         hit = None if checker is None else any(collides[k] for k in ks)
         results.append(GestureReconfiguration(
             name=gesture.name, keyframes=frames,
@@ -443,9 +505,60 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
             wall_time=wall, status=st, message=_message(gesture.name, st, stage_used, hit),
             free_joints=tuple(robot.arms[s].joint_names[j] for s, j in free),
             stage=stage_used, stage1_score=float(max(stage1[k] for k in ks)),
-            collides=hit, colliding_pairs=tuple(p for k in ks for p in pairs[k])))
+            collides=hit, colliding_pairs=tuple(p for k in ks for p in pairs[k]),
+            expansion_stage=expanded))
     return LibraryReconfiguration(results, locks, frozen, wall, deadline, seed, algo.name,
-                                  preset, notes, lock_strategy)
+                                  preset, notes, lock_strategy, nfev=int(stats['nfev']),
+                                  tool_mm=float(tool_mm), tool_arm=tool_arm)
+
+
+def _expand(robot, scorer, checker, selected, owners, targets, ids, locked, faulted,
+            designed, layouts, best_r, best_l, after, status, threshold, algo, end,
+            two_stage, cancel, rng, stats, stay_close):
+    """
+    Staged DOF expansion: redo a gesture's keyframes with its next ``expand`` stage.
+
+    A gesture moves to its next stage while the fingertip of one of its keyframes is
+    more than ``threshold`` mm from its target (it cannot be reached well enough);
+    each stage starts from the previous stage's result and adds joints
+    in the configured priority order.  ``layouts``, the poses, ``after`` and ``status``
+    are updated in place; returns the stage reached per keyframe.
+    """
+    expansion = np.zeros(len(targets), dtype=int)
+    allowed = [None if a is None else set(a) for a in designed]
+    for level in range(1, 1 + max(len(selected[g].expand) for g in owners)):
+        reach = scorer.tip_error(best_r, best_l, ids)
+        rows = []
+        for gi, gesture in enumerate(selected):
+            ks = [k for k in range(len(targets)) if owners[k] == gi]
+            if (len(gesture.expand) >= level and any(layouts[k] for k in ks)
+                    and max(reach[k] for k in ks) > threshold):
+                rows += ks
+        if not rows:
+            break
+        lay = []
+        for k in rows:
+            allowed[k] |= _joint_set(robot, selected[owners[k]].expand[level - 1])
+            lay.append(_layout(robot, targets[k].arms, locked, faulted, allowed[k]))
+        x0 = {i: [(best_r if s == 'right' else best_l)[k, j] for s, j in lay[i]]
+              for i, k in enumerate(rows)}
+        stage_end = end
+        if end is not None:
+            later = sum(1 for g in owners if len(selected[g].expand) > level) or 0
+            share = _STAGE1_SHARE if (later or two_stage) else 1.0
+            stage_end = time.monotonic() + share * (end - time.monotonic())
+        batch = _Batch(best_r[rows], best_l[rows], ids[rows], lay, x0, stay_close)
+        r2, l2, st2 = _solve(robot, scorer, checker, batch, algo, stage_end, cancel, rng,
+                             stats)
+        f2 = scorer.evaluate(r2, l2, ids[rows])
+        for i, k in enumerate(rows):
+            layouts[k] = lay[i]
+            expansion[k] = level
+            if f2[i] <= after[k]:
+                best_r[k], best_l[k], after[k] = r2[i], l2[i], f2[i]
+            if st2[i] in ('deadline', 'cancelled') or status[k] == 'unchanged':
+                status[k] = st2[i]
+    return expansion
 
 
 def _locked_sets(robot, locks):

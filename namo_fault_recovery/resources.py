@@ -53,3 +53,4 @@ def config_path(name):
 
 DEFAULT_ROBOT_FILE = 'namo_robot.yaml'
 DEFAULT_GESTURE_FILE = 'gestures.yaml'
+PAPER_GESTURE_FILE = 'paper_gestures.yaml'   # the paper's Table 2 poses

@@ -1,6 +1,7 @@
 """The arm model: the DH table, joint names and limits, loaded from a validated YAML file."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+import math
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +50,33 @@ class RobotModel:
     arms: dict
     source: str = '<memory>'
     capsules: CapsuleModel = CapsuleModel()
+    tools: tuple = ()   # ((arm, length mm), ...): tools that lengthen the hands
+
+    def tool_length(self, side):
+        """Return the length (mm) of the tool held by one arm's hand; 0 without one."""
+        for arm, length in self.tools:
+            if arm == side:
+                return length
+        return 0.0
+
+    def with_tool(self, length_mm, arm='right'):
+        """
+        Return this robot with a tool of ``length_mm`` in one hand (0 removes it).
+
+        A tool is a structure change (the second source paper's pen): it lengthens the
+        hand, so the fingertip landmark becomes the tool's tip.  The arm's joints, limits
+        and every other landmark are unchanged.
+        """
+        if arm not in ARMS:
+            raise ValueError(f'tool arm: expected one of {ARMS}, got {arm!r}')
+        if (isinstance(length_mm, bool) or not isinstance(length_mm, (int, float))
+                or not math.isfinite(length_mm) or length_mm < 0):
+            raise ValueError(f'tool length: expected a finite number of mm >= 0, '
+                             f'got {length_mm!r}')
+        tools = tuple((a, n) for a, n in self.tools if a != arm)
+        if length_mm > 0:
+            tools = tuple(sorted(tools + ((arm, float(length_mm)),)))
+        return replace(self, tools=tools)
 
     @property
     def joint_names(self):

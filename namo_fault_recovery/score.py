@@ -81,12 +81,15 @@ class Target(NamedTuple):
     arms: tuple
     two_handed: bool
     label: str = ''
+    weights: object = None   # ScoreWeights of this target's gesture; None: the scorer's
 
 
-def gesture_targets(gesture):
-    """One Target per keyframe of ``gesture``."""
-    return [Target(kf.right, kf.left, gesture.arms, gesture.two_handed,
-                   f'{gesture.name}[{i}]') for i, kf in enumerate(gesture.keyframes)]
+def gesture_targets(gesture, indices=None):
+    """One Target per keyframe of ``gesture`` (or per keyframe index in ``indices``)."""
+    indices = range(len(gesture.keyframes)) if indices is None else indices
+    return [Target(gesture.keyframes[i].right, gesture.keyframes[i].left, gesture.arms,
+                   gesture.two_handed, f'{gesture.name}[{i}]', gesture.weights)
+            for i in indices]
 
 
 def rotation_angle_deg(r_a, r_b):
@@ -109,7 +112,7 @@ class SimilarityScore:
     ``target[k]``, so the poses of a whole library can be scored in one call.
     """
 
-    def __init__(self, robot, targets, weights=None):
+    def __init__(self, robot, targets, weights=None, reference_robot=None):
         targets = list(targets)
         if not targets:
             raise ValueError('SimilarityScore: expected at least one target, got none')
@@ -118,18 +121,27 @@ class SimilarityScore:
         self.weights = weights if weights is not None else ScoreWeights()
         qr = np.array([t.q_right for t in targets])
         ql = np.array([t.q_left for t in targets])
-        self._ref_r = forward_kinematics(robot, qr, 'right')
-        self._ref_l = forward_kinematics(robot, ql, 'left')
+        # After a structure change (a tool) the candidates move on the changed robot but
+        # the references stay those of the designed motion on the original one.
+        reference_robot = reference_robot if reference_robot is not None else robot
+        self._ref_r = forward_kinematics(reference_robot, qr, 'right')
+        self._ref_l = forward_kinematics(reference_robot, ql, 'left')
         self._arm_mask = np.array([[('right' in t.arms), ('left' in t.arms)] for t in targets],
                                   dtype=float)
         self._two = np.array([t.two_handed for t in targets], dtype=bool)
         self._ref_wlr = np.linalg.norm(self._ref_r.wrist - self._ref_l.wrist, axis=-1)
         self._ref_tlr = np.linalg.norm(self._ref_r.tip - self._ref_l.tip, axis=-1)
-        self._w = np.array([self.weights.vector(t.two_handed) for t in targets])
+        self._w = np.array([self.target_weights(k).vector(t.two_handed)
+                            for k, t in enumerate(targets)])
         self._ref_stack = {
             side: (np.stack((lm.elbow, lm.wrist, lm.tip), axis=1), lm.palm)
             for side, lm in (('right', self._ref_r), ('left', self._ref_l))}
         self._uses_left = bool(np.any(self._arm_mask[:, 1]) or np.any(self._two))
+
+    def target_weights(self, target):
+        """Return the ScoreWeights of one target: its gesture's own, else the scorer's."""
+        own = self.targets[target].weights
+        return own if own is not None else self.weights
 
     @classmethod
     def for_gesture(cls, robot, gesture, keyframe=0, weights=None):
@@ -140,6 +152,21 @@ class SimilarityScore:
         """Return the reference angles (right, left) of a target."""
         t = self.targets[target]
         return t.q_right, t.q_left
+
+    def tip_error(self, q_right, q_left, target):
+        """
+        Return the fingertip distance (mm) from the reference, the worst of the arms used.
+
+        This is how far a pose is from *reaching* its target (the second source paper's
+        position error), whatever the other terms of the score say.
+        """
+        target = np.asarray(target, dtype=int)
+        err = np.zeros(len(target))
+        for i, (side, ref) in enumerate((('right', self._ref_r), ('left', self._ref_l))):
+            q = q_right if side == 'right' else q_left
+            d = np.linalg.norm(_forward(self.robot, q, side).tip - ref.tip[target], axis=-1)
+            err = np.maximum(err, d * self._arm_mask[target, i])
+        return err
 
     def __call__(self, q_right, q_left=None, target=0, breakdown=False):
         """

@@ -18,6 +18,7 @@ import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
+from namo_fault_recovery import load_library, load_robot
 from namo_fault_recovery.ros_cli import node_command
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
 import rclpy
@@ -158,9 +159,11 @@ def _stamp_ns(stamp):
 class RosClient:
     """An rclpy client of the node in its own context and domain, spun in a thread."""
 
-    def __init__(self, domain, name='namo_test_client', gestures=4):
+    def __init__(self, domain, name='namo_test_client', gestures=None):
         os.environ['ROS_DOMAIN_ID'] = str(domain)
         os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        if gestures is None:   # the node's default: the packaged library
+            gestures = len(load_library(load_robot()))
         self.gestures = gestures
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain)

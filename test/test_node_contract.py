@@ -128,10 +128,10 @@ def test_markers_show_reference_and_reconfigured_skeletons(client):
         assert all(abs(p.x) < 2 and abs(p.y) < 5 and abs(p.z) < 2 for p in m.points)
 
 
-def test_fault_locks_the_joint_and_improves_every_gesture(client, robot, library):
+def test_fault_locks_the_joint_and_improves_every_gesture(client, robot, product_library):
     reset(client)
     version = inject(client, ['right_arm_joint2'])
-    lock = library.lock_averages('right')[1]
+    lock = product_library.lock_averages('right')[1]
     assert math.degrees(lock) == pytest.approx(-14.25)
     column = version.column('right_arm_joint2')
     assert len(column) == 4 and all(a == lock for a in column)
@@ -173,7 +173,7 @@ def test_reconfigure_service_answers_once_its_library_is_published(client):
                for a in version.column('right_arm_joint2'))
 
 
-def test_reconfigure_without_faults_reports_the_reference(client, library):
+def test_reconfigure_without_faults_reports_the_reference(client, product_library):
     reference = reset(client)
     response = client.trigger('/reconfigure_gestures')
     assert response.success and 'no faults' in response.message
@@ -206,10 +206,10 @@ def test_position_in_the_fault_report_is_the_lock_angle(client):
     assert values(statuses, 'joint left_arm_joint4')['lock_source'] == 'fault report'
 
 
-def test_nan_position_lets_the_lock_strategy_choose(client, library):
+def test_nan_position_lets_the_lock_strategy_choose(client, product_library):
     reset(client)
     version = inject(client, ['right_arm_joint5'], [NAN])
-    lock = library.lock_averages('right')[4]
+    lock = product_library.lock_averages('right')[4]
     assert all(a == lock for a in version.column('right_arm_joint5'))
 
 
@@ -331,14 +331,14 @@ def test_bad_parameters_are_refused_with_a_reason(client):
 # --- real faults that are not bad input -----------------------------------------------
 
 
-def test_all_joints_of_one_arm_freeze_it_and_the_other_arm_is_served(client, robot, library):
+def test_all_joints_of_one_arm_freeze_it_and_the_other_arm_is_served(client, robot, product_library):
     reset(client)
     left = list(robot.arms['left'].joint_names)
     version = inject(client, left + ['right_arm_joint2'])
-    left_locks = library.lock_averages('left')
+    left_locks = product_library.lock_averages('left')
     for k, joint in enumerate(left):
         assert all(a == left_locks[k] for a in version.column(joint)), joint
-    assert all(a == library.lock_averages('right')[1]
+    assert all(a == product_library.lock_averages('right')[1]
                for a in version.column('right_arm_joint2'))
     statuses = wait_settled(client, left + ['right_arm_joint2'])
     assert statuses['arm left'].level == statuses['arm left'].ERROR

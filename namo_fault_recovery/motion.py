@@ -1,0 +1,419 @@
+"""
+Whole-motion adaptation after a structure change (the second source paper), ROS-free.
+
+Two methods reconfigure every point of every gesture's motion:
+
+- ``kriging`` (the paper's): vector quantisation picks K typical points per motion
+  (:mod:`.vq`), only those are explored (with the batched engine of
+  :mod:`.reconfigure`, so lock strategies, staged DOF expansion, the healthy arm and
+  the collision term all apply), and the correction vectors r = theta'' - theta found
+  there are spread to every point by ordinary Kriging (:mod:`.kriging`);
+- ``per_point`` (the baseline): every point is explored in order, warm-started from
+  the previous point's solution plus the designed step, with a penalty on joint-space
+  jumps away from it, so that the motion never flips between redundant solutions.
+
+``auto`` (the node's) runs ``kriging`` first, which is fast, then refines gesture by
+gesture with ``per_point`` while the deadline allows; a gesture whose per-point pass
+cannot finish keeps its Kriging result, and the notes say so.
+"""
+
+from dataclasses import dataclass, field
+import time
+
+import numpy as np
+
+from .faults import resolve_locks
+from .gestures import GestureLibrary, Keyframe
+from .kinematics import _forward
+from .kriging import OrdinaryKriging
+from .optimize import make_algorithm, minimize
+from .optimize.base import Clock
+from .optimize.polish import polish
+from .reconfigure import (_apply_locks, _joint_set, _layout, _locked_sets,
+                          DEFAULT_EXPANSION_THRESHOLD, PoseProblem, reconfigure_library)
+from .robot_model import ARMS, N_JOINTS
+from .score import gesture_targets, SimilarityScore
+from .vq import quantise
+
+METHODS = ('auto', 'kriging', 'per_point')
+DEFAULT_DISTORTION_MM = 60.0   # the paper's quantisation distortion threshold
+DEFAULT_MIN_POINTS = 12        # shorter motions are explored at every keyframe
+DEFAULT_CONTINUITY = 0.01      # penalty per deg^2 of joint-space jump
+DEFAULT_STAY_CLOSE = 1e-3      # per deg^2 away from the design, at the typical points
+_TYPICAL_SHARE = 0.5           # of the deadline for the typical points in ``auto``
+
+
+@dataclass
+class GestureAdaptation:
+    """One adapted motion, with the figures that say how good it is."""
+
+    name: str
+    keyframes: tuple
+    method: str                  # 'kriging', 'per_point' or 'keyframes' (all explored)
+    typical: tuple               # indices of the explored typical points
+    status: str
+    nfev: int                    # objective evaluations spent on this motion
+    score_before: float          # mean score of the unadapted motion (locks applied)
+    score_mean: float
+    score_max: float
+    tip_error_before_mm: float   # mean fingertip distance to the designed path
+    tip_error_mean_mm: float
+    tip_error_max_mm: float
+    jump_designed_deg: float     # largest joint step between successive points
+    jump_before_deg: float
+    jump_after_deg: float
+    kriging_sigma_deg: tuple = ()   # Kriging standard deviation per point
+    expansion_stage: int = 0
+    free_joints: tuple = ()
+    message: str = ''
+
+    @property
+    def times(self):
+        """Return the keyframes' times (s)."""
+        return [kf.time_from_start for kf in self.keyframes]
+
+
+@dataclass
+class MotionAdaptation:
+    """The adapted library: per-gesture results and what the run cost."""
+
+    gestures: list
+    locks: dict
+    method: str
+    wall_time: float
+    nfev: int
+    seed: int
+    deadline: object
+    tool_mm: float = 0.0
+    tool_arm: str = 'right'
+    typical_result: object = None   # the engine's LibraryReconfiguration, if it ran
+    notes: list = field(default_factory=list)
+
+    def __getitem__(self, name):
+        for g in self.gestures:
+            if g.name == name:
+                return g
+        raise KeyError(f'unknown gesture {name!r}')
+
+    @property
+    def deadline_met(self):
+        """Return True if no gesture was cut short by the deadline or a cancel."""
+        return not any(g.status in ('deadline', 'cancelled') for g in self.gestures)
+
+
+def typical_points(robot, library, distortion_mm=DEFAULT_DISTORTION_MM,
+                   min_points=DEFAULT_MIN_POINTS, seed=0):
+    """
+    Return ``{gesture: Quantisation or None}``: the typical points of each motion.
+
+    Motions of fewer than ``min_points`` keyframes get None (every keyframe is explored).
+    The distortion is the fingertip distance (mm; both fingertips stacked for a
+    two-arm motion) between a point and its typical point on the original structure,
+    as in the paper.
+    It depends on the designed motions only, so a caller may compute it once per
+    library and pass it to :func:`adapt_library`.
+    """
+    out = {}
+    for gesture in library:
+        if len(gesture.keyframes) < min_points:
+            out[gesture.name] = None
+            continue
+        q = gesture.angles()
+        tips = np.concatenate([_forward(robot, q[:, _cols(side)], side).tip
+                               for side in gesture.arms], axis=1)
+        out[gesture.name] = quantise(np.degrees(q), distortion_mm, features=tips, seed=seed)
+    return out
+
+
+def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
+                  tool_arm='right', distortion_mm=DEFAULT_DISTORTION_MM,
+                  min_points=DEFAULT_MIN_POINTS, continuity=DEFAULT_CONTINUITY,
+                  deadline=1.0, seed=None, algorithm='abc', preset='default',
+                  settings=None, lock_strategy='average', measured=None, weights=None,
+                  expansion_threshold=DEFAULT_EXPANSION_THRESHOLD, cancel=None,
+                  quantisations=None, stay_close=DEFAULT_STAY_CLOSE, **engine):
+    """
+    Adapt every motion of ``library`` to a changed structure (faults and/or a tool).
+
+    ``faults`` maps joint names to lock angles (rad) or None, as for
+    :func:`.reconfigure.reconfigure_library`; extra keyword arguments (``bimanual``,
+    ``collision``...) go to that engine.  ``deadline`` (s) bounds the whole run.
+    Returns a :class:`MotionAdaptation`; a pure function of the inputs and ``seed`` up
+    to where the deadline cuts the search.
+    """
+    start = time.monotonic()
+    if method not in METHODS:
+        raise ValueError(f'unknown adaptation method {method!r}; expected one of '
+                         f'{", ".join(METHODS)}')
+    if not (np.isfinite(continuity) and continuity >= 0):
+        raise ValueError(f'continuity: expected a finite number >= 0, got {continuity!r}')
+    faults = dict(faults or {})
+    if seed is None:
+        seed = int(np.random.SeedSequence().entropy % (2 ** 63))
+    rng = np.random.default_rng(seed)
+    end = None if deadline is None else start + deadline
+    if quantisations is None:
+        quantisations = typical_points(robot, library, distortion_mm, min_points)
+    model = robot.with_tool(tool_mm, tool_arm)
+    common = dict(algorithm=algorithm, preset=preset, settings=settings,
+                  lock_strategy=lock_strategy, measured=measured, weights=weights,
+                  expansion_threshold=expansion_threshold, cancel=cancel,
+                  tool_mm=tool_mm, tool_arm=tool_arm, **engine)
+    notes = []
+    per_point_only = method == 'per_point' and lock_strategy != 'optimal'
+
+    typical_res = None
+    picks = {g.name: (tuple(range(len(g.keyframes))) if quantisations.get(g.name) is None
+                      else tuple(int(i) for i in quantisations[g.name].typical))
+             for g in library}
+    if per_point_only:
+        locks, lock_notes = resolve_locks(robot, library, faults, lock_strategy, measured)
+        notes += lock_notes
+    else:
+        sub = GestureLibrary(tuple(g.with_keyframes([g.keyframes[i] for i in picks[g.name]])
+                                   for g in library), library.source)
+        budget = None
+        if end is not None:
+            share = 1.0 if method == 'kriging' else _TYPICAL_SHARE
+            budget = max(share * (end - time.monotonic()), 1e-3)
+        # The smallest corrections keep the typical points on one redundant branch, so
+        # that Kriging interpolates between neighbours of the same kind.
+        typical_res = reconfigure_library(robot, sub, faults, deadline=budget,
+                                          seed=int(rng.integers(2 ** 63)),
+                                          stay_close=stay_close, **common)
+        locks = typical_res.locks
+        notes += typical_res.notes
+
+    locked = _locked_sets(robot, locks)
+    faulted = {s for s in ARMS if locked[s] or model.tool_length(s) > 0}
+    targets = [t for g in library for t in gesture_targets(g)]
+    scorer = SimilarityScore(model, targets, weights, reference_robot=robot)
+    algo = make_algorithm(algorithm, preset, **(settings or {}))
+    results = []
+    offset = 0
+    for gesture in library:
+        n = len(gesture.keyframes)
+        ids = np.arange(offset, offset + n)
+        offset += n
+        design = gesture.angles()
+        base_r, base_l = _apply_locks(robot, design[:, :N_JOINTS], design[:, N_JOINTS:], locks)
+        affected = any(s in faulted for s in gesture.arms)
+        status, nfev, sigma, stage, how = 'unchanged', 0, (), 0, 'keyframes'
+        free = ()
+        q_r, q_l = base_r.copy(), base_l.copy()
+        if typical_res is not None:
+            gres = typical_res[gesture.name]
+            status, stage = gres.status, gres.expansion_stage
+            free = gres.free_joints
+            how = 'keyframes' if quantisations.get(gesture.name) is None else 'kriging'
+            nfev = int(round(typical_res.nfev * len(picks[gesture.name])
+                             / max(1, sum(len(p) for p in picks.values()))))
+            solved = np.array([kf.positions() for kf in gres.keyframes])
+            if how == 'kriging' and affected and free:
+                layout = _layout(robot, gesture.arms, locked, faulted, _joint_set(robot, free))
+                solved, used = _consistent(model, scorer, ids[list(picks[gesture.name])],
+                                           design[list(picks[gesture.name])], solved, layout,
+                                           continuity, end, cancel)
+                nfev += used
+            q_r, q_l, sigma = _spread(robot, gesture, picks[gesture.name], solved, locks)
+        chain = affected and (method == 'per_point'
+                              or (method == 'auto' and how == 'kriging'))
+        if chain:
+            layouts = None
+            if typical_res is not None:
+                layouts = [_layout(robot, gesture.arms, locked, faulted,
+                                   _joint_set(robot, free))]
+            else:
+                designed = _joint_set(robot, gesture.joints) if gesture.joints else None
+                layouts = [_layout(robot, gesture.arms, locked, faulted, designed)]
+                allowed = set(designed) if designed else None
+                for extra in gesture.expand:
+                    allowed |= _joint_set(robot, extra)
+                    layouts.append(_layout(robot, gesture.arms, locked, faulted, allowed))
+            out = _chain_with_expansion(model, scorer, ids, base_r, base_l, design, layouts,
+                                        algo, continuity, expansion_threshold, end, cancel,
+                                        rng, q_r, q_l, typical_res is None)
+            if out is None:
+                notes.append(f'{gesture.name}: the per-point pass could not finish by the '
+                             f'deadline; the typical-point result with Kriging is used')
+                if method == 'per_point':
+                    status = 'deadline'
+            else:
+                q_r, q_l, extra_nfev, chain_stage, chain_free, chain_status = out
+                nfev = (nfev if method == 'auto' else 0) + extra_nfev
+                how = 'per_point'
+                if typical_res is None:
+                    stage = chain_stage
+                    free = tuple(robot.arms[s].joint_names[j] for s, j in chain_free)
+                status = chain_status if status in ('unchanged', 'converged') else status
+        results.append(_describe(robot, model, scorer, gesture, ids, design, base_r, base_l,
+                                 q_r, q_l, how, picks[gesture.name], status, nfev, sigma,
+                                 stage, free))
+    total = sum(g.nfev for g in results)
+    return MotionAdaptation(results, locks, method, time.monotonic() - start, int(total),
+                            seed, deadline, float(tool_mm), tool_arm, typical_res, notes)
+
+
+def _cols(side):
+    return slice(0, N_JOINTS) if side == 'right' else slice(N_JOINTS, 2 * N_JOINTS)
+
+
+def _consistent(model, scorer, ids, design, solved, layout, continuity, end, cancel):
+    """
+    Put the typical points on one redundant branch before Kriging interpolates them.
+
+    Independently explored typical points may land on different branches of a
+    redundant arm, and interpolating between branches leaves the path.  In motion
+    order, each typical point is polished from its own solution and from its design
+    plus the previous typical point's correction, with the continuity penalty towards
+    the latter; the lower penalised value wins.  Returns (solved, nfev).
+    """
+    solved = solved.copy()
+    col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in layout])
+    nfev = 0
+    clock = Clock(None if end is None else max(end - time.monotonic(), 0.0), cancel)
+    for k in range(1, len(ids)):
+        anchor = design[k, col] + solved[k - 1, col] - design[k - 1, col]
+        problem = PoseProblem(model, scorer, ids[k:k + 1], solved[k:k + 1, :N_JOINTS],
+                              solved[k:k + 1, N_JOINTS:], layout, x0=[solved[k, col]],
+                              anchor=[anchor], continuity=continuity)
+        starts = problem.clip(np.stack((solved[k, col], anchor))[None])
+        x, f = polish(problem, starts, clock, maxiter=50, ftol=1e-7)
+        nfev += problem.nfev
+        r, left = problem.assemble(x[:, int(np.argmin(f[0]))])
+        solved[k] = np.concatenate((r[0], left[0]))
+        if clock.expired():
+            break
+    return solved, nfev
+
+
+def _spread(robot, gesture, picks, solved, locks):
+    """Kriging of the typical points' corrections to every point of one motion."""
+    design = gesture.angles()
+    cols = np.concatenate([np.arange(2 * N_JOINTS)[_cols(s)] for s in ARMS])
+    x = np.degrees(design[:, cols])
+    r = np.degrees(solved - design[list(picks)])
+    if len(picks) == len(design):
+        out, sigma = solved, ()
+    else:
+        est = OrdinaryKriging(x[list(picks)], r).predict(x)
+        out = design + np.radians(est.values)
+        sigma = tuple(float(s) for s in np.sqrt(est.variance))
+    q_r, q_l = _apply_locks(robot, out[:, :N_JOINTS], out[:, N_JOINTS:], locks)
+    q_r = robot.arms['right'].clip(q_r)
+    q_l = robot.arms['left'].clip(q_l)
+    return _apply_locks(robot, q_r, q_l, locks) + (sigma,)
+
+
+def _chain_with_expansion(model, scorer, ids, base_r, base_l, design, layouts, algo,
+                          continuity, threshold, end, cancel, rng, start_r, start_l,
+                          expand):
+    """
+    Run the per-point chain, then its staged expansion while the worst point is poor.
+
+    Returns None if the deadline cut the first pass, else (right, left, nfev, stage,
+    layout, status).
+    """
+    nfev = 0
+    best = None
+    for stage, layout in enumerate(layouts):
+        if not layout:
+            continue
+        out = _chain(model, scorer, ids, base_r, base_l, design, layout, algo, continuity,
+                     end, cancel, rng, start_r, start_l)
+        if out is None:
+            return None if best is None else best[:2] + (nfev,) + best[3:]
+        q_r, q_l, used, f = out
+        nfev += used
+        reach = scorer.tip_error(q_r, q_l, ids).max()
+        if best is None or f.mean() < best[6]:
+            best = (q_r, q_l, nfev, stage, layout, 'converged', f.mean())
+        if not expand or reach <= threshold:
+            break
+        start_r, start_l = q_r, q_l
+    if best is None:
+        return start_r, start_l, 0, 0, (), 'frozen'
+    return best[:2] + (nfev,) + best[3:6]
+
+
+def _chain(model, scorer, ids, base_r, base_l, design, layout, algo, continuity, end,
+           cancel, rng, start_r, start_l):
+    """
+    Explore every point in order, warm-started from the previous point's solution.
+
+    Point t starts at (and is penalised for moving away from) the previous solution
+    plus the designed step theta(t) - theta(t-1).  Returns None if the deadline or a
+    cancel cut it short, else (right, left, nfev, scores).
+    """
+    q_r, q_l = base_r.copy(), base_l.copy()
+    col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in layout])
+    design_free = design[:, col]
+    full = np.concatenate((start_r, start_l), axis=1)
+    nfev = 0
+    scores = np.empty(len(ids))
+    for t in range(len(ids)):
+        if t == 0:
+            anchor = None
+            x0 = full[0, col]
+        else:
+            prev = np.concatenate((q_r[t - 1], q_l[t - 1]))[col]
+            anchor = prev + design_free[t] - design_free[t - 1]
+            x0 = anchor
+        problem = PoseProblem(model, scorer, ids[t:t + 1], base_r[t:t + 1], base_l[t:t + 1],
+                              layout, x0=[x0], anchor=None if anchor is None else [anchor],
+                              continuity=continuity)
+        budget = None if end is None else end - time.monotonic()
+        if budget is not None and budget <= 0:
+            return None
+        res = minimize(problem, algo, deadline=budget, cancel=cancel,
+                       seed=int(rng.integers(2 ** 63)))
+        if res.status != 0:
+            return None
+        nfev += res.nfev
+        x = np.atleast_2d(res.x)
+        r, left = problem.assemble(x)
+        q_r[t], q_l[t] = r[0], left[0]
+        scores[t] = scorer.evaluate(q_r[t:t + 1], q_l[t:t + 1], ids[t:t + 1])[0]
+    return q_r, q_l, nfev, scores
+
+
+def _jump(q):
+    if len(q) < 2:
+        return 0.0
+    return float(np.degrees(np.abs(np.diff(q, axis=0))).max())
+
+
+def _describe(robot, model, scorer, gesture, ids, design, base_r, base_l, q_r, q_l, how,
+              picks, status, nfev, sigma, stage, free):
+    """Compute a motion's figures: score, fingertip error and joint jumps."""
+    before = scorer.evaluate(base_r, base_l, ids)
+    after = scorer.evaluate(q_r, q_l, ids)
+    err_before = np.zeros(len(ids))
+    err_after = np.zeros(len(ids))
+    for side in gesture.arms:
+        want = _forward(robot, design[:, _cols(side)], side).tip
+        qb, qa = (base_r, q_r) if side == 'right' else (base_l, q_l)
+        err_before = np.maximum(err_before, np.linalg.norm(
+            _forward(model, qb, side).tip - want, axis=1))
+        err_after = np.maximum(err_after, np.linalg.norm(
+            _forward(model, qa, side).tip - want, axis=1))
+    adapted = np.concatenate((q_r, q_l), axis=1)
+    frames = tuple(Keyframe(kf.time_from_start, q_r[i].copy(), q_l[i].copy())
+                   for i, kf in enumerate(gesture.keyframes))
+    label = {'kriging': f'{len(picks)} typical points + Kriging',
+             'per_point': 'every point explored in order',
+             'keyframes': 'every keyframe explored'}[how]
+    message = f'{gesture.name}: {label}; mean score {after.mean():.2f}'
+    if status == 'deadline':
+        message += '; deadline reached, best result so far used'
+    return GestureAdaptation(
+        name=gesture.name, keyframes=frames, method=how, typical=tuple(picks),
+        status=status, nfev=int(nfev), score_before=float(before.mean()),
+        score_mean=float(after.mean()), score_max=float(after.max()),
+        tip_error_before_mm=float(err_before.mean()),
+        tip_error_mean_mm=float(err_after.mean()),
+        tip_error_max_mm=float(err_after.max()),
+        jump_designed_deg=_jump(design),
+        jump_before_deg=_jump(np.concatenate((base_r, base_l), axis=1)),
+        jump_after_deg=_jump(adapted), kriging_sigma_deg=tuple(sigma),
+        expansion_stage=int(stage), free_joints=tuple(free), message=message)
