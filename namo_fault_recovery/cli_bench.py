@@ -137,25 +137,58 @@ def cmd_bench_deadline(args, out):
 
 
 def cmd_plot(args, out):
-    """Draw the reference and reconfigured arms of one gesture (matplotlib optional)."""
+    """
+    Draw one gesture before and after adaptation (matplotlib optional).
+
+    A single pose is drawn as arm skeletons; a motion (several keyframes) as fingertip
+    paths: desired, unadapted and adapted, like the second source paper's Fig. 5-7.
+    """
     from . import plotting
+    from .gestures import load_library
     from .reconfigure import reconfigure_library
-    robot, library = _models(args)
+    robot = _models(args)[0]
+    library = load_library(robot, getattr(args, 'gesture_file', None))
     gesture = gesture_and_keyframe(library, args.gesture, args.keyframe)
-    faults = parse_faults(robot, args.fault)
+    faults = parse_faults(robot, args.fault or [])
+    if not faults and not args.tool:
+        raise _usage('nothing changed: give --fault JOINT[=DEG] and/or --tool MM')
     try:
         plotting._figure((1, 1))
     except plotting.MatplotlibMissing as exc:
         sys.stderr.write(f'namo-recovery: error: {exc}\n')
         return EXIT_USAGE
+    tag = '_'.join([j.replace('_arm_joint', '') for j in faults]
+                   + ([f'tool{args.tool:g}'] if args.tool else []))
+    path = Path(args.out) if args.out else Path(f'{gesture.name}_{tag}.png')
+    if len(gesture.keyframes) > 1:
+        from .gestures import GestureLibrary
+        from .motion import adapt_library
+        try:
+            res = adapt_library(robot, GestureLibrary((gesture,), library.source), faults,
+                                method=args.method, tool_mm=args.tool, seed=args.seed,
+                                deadline=args.deadline, algorithm=args.algorithm,
+                                preset=args.preset)
+        except ValueError as exc:
+            raise _usage(str(exc)) from None
+        g = res[gesture.name]
+        plotting.plot_motion(robot, gesture, res, path)
+        for joint, angle in res.locks.items():
+            out.write(f'lock {joint} = {math.degrees(angle):.2f} deg\n')
+        out.write(f'{g.message}\n  fingertip error (mm): unadapted mean '
+                  f'{g.tip_error_before_mm:.1f}; adapted mean {g.tip_error_mean_mm:.1f}, max '
+                  f'{g.tip_error_max_mm:.1f}; {g.nfev} evaluations, '
+                  f'{1000 * res.wall_time:.0f} ms\n')
+        for note in res.notes:
+            out.write(f'  note: {note}\n')
+        out.write(f'written: {path}\n')
+        return 0
     try:
         report = reconfigure_library(robot, library, faults, algorithm=args.algorithm,
                                      preset=args.preset, deadline=args.deadline,
-                                     seed=args.seed, gestures=[gesture.name])
+                                     seed=args.seed, gestures=[gesture.name],
+                                     tool_mm=args.tool)
     except ValueError as exc:
         raise _usage(str(exc)) from None
-    tag = '_'.join(j.replace('_arm_joint', '') for j in faults)
-    path = Path(args.out) if args.out else Path(f'{gesture.name}_{tag}.png')
     plotting.plot_reconfiguration(robot, library, report, gesture.name, path,
                                   keyframe=args.keyframe)
     g = report[gesture.name]
@@ -262,11 +295,15 @@ def register(subparsers):
     _add_common(p)
     p.set_defaults(func=cmd_bench_deadline)
 
-    p = subparsers.add_parser('plot', help='draw reference and reconfigured arms (PNG)')
-    p.add_argument('--gesture', required=True, help='gesture name, e.g. wai')
-    p.add_argument('--fault', action='append', required=True, metavar='JOINT[=DEG]',
+    p = subparsers.add_parser('plot', help='draw a gesture before and after adaptation (PNG)')
+    p.add_argument('--gesture', required=True, help='gesture name, e.g. wai or circle')
+    p.add_argument('--fault', action='append', metavar='JOINT[=DEG]',
                    help='failed joint, optionally with its lock angle in degrees '
                         '(default: the library average); repeatable')
+    p.add_argument('--tool', type=float, default=0.0, metavar='MM',
+                   help='a tool of this length (mm) in the right hand (default none)')
+    p.add_argument('--method', default='auto', choices=['auto', 'kriging', 'per_point'],
+                   help='motion adaptation method (default auto)')
     p.add_argument('--out', default=None, metavar='FILE',
                    help='PNG file (default: <gesture>_<faults>.png)')
     p.add_argument('--algorithm', default='abc', choices=['abc', 'ga', 'bfoa', 'gd'])

@@ -57,13 +57,23 @@ def cmd_collision(args, out):
     return 0
 
 
+def cmd_motion(args, out):
+    """Typical points + Kriging vs per-point exploration on the circle and the wave."""
+    from .benchmarks import motion
+    motion.bench_motion(out, _out(args, 'motion'), seed=args.seed,
+                        robot_file=getattr(args, 'robot_file', None),
+                        gesture_file=getattr(args, 'gesture_file', None))
+    return 0
+
+
 def register(bench_sub):
     """Add the beyond-the-paper benchmarks to the ``bench`` subcommands."""
     for name, func, text in (
             ('lock', cmd_lock, 'average vs optimal lock angle, per right-arm joint'),
             ('pairs', cmd_pairs, 'all 21 right-arm double faults'),
             ('bimanual', cmd_bimanual, 'Wai: stage 1 vs stage 2 (healthy arm joins)'),
-            ('collision', cmd_collision, 'colliding results without/with the collision term')):
+            ('collision', cmd_collision, 'colliding results without/with the collision term'),
+            ('motion', cmd_motion, 'whole motions: typical points + Kriging vs per point')):
         p = bench_sub.add_parser(name, help=text)
         if name in ('lock', 'bimanual'):
             p.add_argument('--seeds', type=int, default=3, help='seeds per case (default 3)')

@@ -132,6 +132,54 @@ def plot_reconfiguration(robot, library, report, gesture, path, keyframe=0, titl
     return path
 
 
+def plot_motion(robot, gesture, adaptation, path, dpi=110):
+    """
+    Draw a motion's fingertip paths in 3D: desired, unadapted and adapted.
+
+    The colours follow the second source paper's Fig. 5-7: the desired path in green,
+    the unadapted motion on the changed structure as red dots, the adapted motion in
+    blue with its explored typical points as circles.  ``adaptation`` is the
+    MotionAdaptation of :func:`namo_fault_recovery.motion.adapt_library`.
+    """
+    fig = _figure((7.5, 6.5))
+    ax = fig.add_subplot(projection='3d')
+    side = gesture.arms[0]
+    col = slice(0, 7) if side == 'right' else slice(7, 14)
+    model = robot.with_tool(adaptation.tool_mm, adaptation.tool_arm)
+    design = gesture.angles()[:, col]
+    g = adaptation[gesture.name]
+    adapted = np.array([kf.arm(side) for kf in g.keyframes])
+    unadapted = design.copy()
+    for joint, angle in adaptation.locks.items():
+        arm, j = robot.locate_joint(joint)
+        if arm == side:
+            unadapted[:, j] = angle
+    want = forward_kinematics(robot, design, side).tip
+    before = forward_kinematics(model, unadapted, side).tip
+    after = forward_kinematics(model, adapted, side).tip
+    ax.plot(*want.T, color='tab:green', lw=2.5, label='desired (designed motion)')
+    ax.plot(*before.T, 'o', color='tab:red', ms=2.5,
+            label=f'unadapted (mean error {g.tip_error_before_mm:.0f} mm)')
+    ax.plot(*after.T, color='tab:blue', lw=1.5,
+            label=f'adapted, {g.method} (mean error {g.tip_error_mean_mm:.1f} mm)')
+    if g.method == 'kriging':
+        typ = after[list(g.typical)]
+        ax.plot(*typ.T, 'o', mfc='none', color='tab:blue', ms=8,
+                label=f'{len(g.typical)} explored typical points')
+    ax.set_xlabel('x (mm)')
+    ax.set_ylabel('y (mm)')
+    ax.set_zlabel('z (mm)')
+    change = [f'{j} locked at {math.degrees(a):.0f} deg' for j, a in adaptation.locks.items()]
+    if adaptation.tool_mm:
+        change.append(f'{adaptation.tool_mm:g} mm tool')
+    ax.set_title(f'{gesture.name}: {", ".join(change)}', fontsize=10)
+    _equal_3d(ax, np.concatenate((want, before, after)))
+    ax.legend(loc='upper left', fontsize=8)
+    path = Path(path)
+    fig.savefig(path, dpi=dpi, bbox_inches='tight')
+    return path
+
+
 def _equal_3d(ax, pts):
     """Give a 3D axes equal scales around the points."""
     lo, hi = pts.min(axis=0), pts.max(axis=0)
