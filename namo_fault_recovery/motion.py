@@ -351,7 +351,13 @@ def _chain(model, scorer, ids, base_r, base_l, design, layout, algo, continuity,
     full = np.concatenate((start_r, start_l), axis=1)
     nfev = 0
     scores = np.empty(len(ids))
+    began = time.monotonic()
     for t in range(len(ids)):
+        if end is not None and t >= 3:
+            # Give up early when the pace so far says the chain cannot finish in time.
+            pace = (time.monotonic() - began) / t
+            if time.monotonic() + pace * (len(ids) - t) > end:
+                return None
         if t == 0:
             anchor = None
             x0 = full[0, col]

@@ -40,7 +40,9 @@ from .faults import LOCK_STRATEGIES
 from .gestures import load_library
 from .inputs import BadInput, frozen_arms, parse_fault, parse_joint_state
 from .optimize import ALGORITHMS, PRESETS
-from .reconfigure import BIMANUAL_MODES, reconfigure_library
+from .motion import (adapt_library, DEFAULT_CONTINUITY, DEFAULT_DISTORTION_MM, METHODS,
+                     typical_points)
+from .reconfigure import BIMANUAL_MODES
 from .robot_model import ARMS, load_robot
 from .score import COMPONENTS, ScoreWeights
 from .state_store import Fault, fingerprint, GestureResult, LibraryResult, StateStore
@@ -55,10 +57,14 @@ _CHOICES = {
     'optimizer': tuple(ALGORITHMS),
     'optimizer_preset': tuple(PRESETS),
     'bimanual': tuple(BIMANUAL_MODES),
+    'trajectory_method': METHODS,
+    'tool_arm': ARMS,
 }
 # Changing one of these changes what the library should be: the node reconfigures again.
 _RERUN_PARAMS = frozenset(('deadline_sec', 'lock_strategy', 'optimizer', 'optimizer_preset',
-                           'seed', 'bimanual', 'collision_check') + _WEIGHT_PARAMS
+                           'seed', 'bimanual', 'collision_check', 'tool_length_mm',
+                           'tool_arm', 'trajectory_method', 'vq_distortion_mm',
+                           'continuity_weight') + _WEIGHT_PARAMS
                           + ('weights.normalise',))
 _MARKER_PARAMS = frozenset(('marker_frame_id', 'marker_spacing'))
 _TYPE_NAMES = {str: 'a string', float: 'a floating-point number', int: 'an integer',
@@ -80,8 +86,8 @@ def _parameter_specs():
             description='arm model YAML (DH, joint names, limits); empty = the packaged '
                         'Namo model', read_only=True)),
         ('gesture_file', '', ParameterDescriptor(
-            description='reference gesture library YAML; empty = the packaged 4-gesture '
-                        'library', read_only=True)),
+            description='reference gesture library YAML; empty = the packaged library',
+            read_only=True)),
         ('deadline_sec', 1.0, ParameterDescriptor(
             description='hard budget (s) for one reconfiguration of the whole library',
             floating_point_range=_fp_range(0.01, 60.0))),
@@ -101,6 +107,26 @@ def _parameter_specs():
             additional_constraints='one of: ' + ', '.join(BIMANUAL_MODES))),
         ('collision_check', True, ParameterDescriptor(
             description='keep the arms and the torso apart, and report poses that collide')),
+        ('tool_length_mm', 0.0, ParameterDescriptor(
+            description='a tool in the hand of tool_arm lengthens it by this much (mm): a '
+                        'structure change; 0 = none.  Changing it re-adapts the library',
+            floating_point_range=_fp_range(0.0, 300.0))),
+        ('tool_arm', 'right', ParameterDescriptor(
+            description='the arm whose hand holds the tool',
+            additional_constraints='one of: ' + ', '.join(ARMS))),
+        ('trajectory_method', 'auto', ParameterDescriptor(
+            description='motions: kriging = typical points + Kriging (the second paper); '
+                        'per_point = every point in order; auto = kriging, then per point '
+                        'where the deadline allows',
+            additional_constraints='one of: ' + ', '.join(METHODS))),
+        ('vq_distortion_mm', DEFAULT_DISTORTION_MM, ParameterDescriptor(
+            description='quantisation distortion threshold (mm of fingertip) that sets '
+                        'the number of typical points of a dense motion',
+            floating_point_range=_fp_range(1.0, 1000.0))),
+        ('continuity_weight', DEFAULT_CONTINUITY, ParameterDescriptor(
+            description='per-point adaptation: penalty per deg^2 of joint jump away from '
+                        'the previous point plus the designed step',
+            floating_point_range=_fp_range(0.0, 100.0))),
         ('seed', -1, ParameterDescriptor(
             description='random seed for reproducible runs; -1 draws one per run',
             integer_range=[IntegerRange(from_value=-1, to_value=2 ** 31 - 1, step=1)])),
@@ -178,6 +204,7 @@ class RecoveryNode(Node):
         self._joint_names = tuple(self._robot.joint_names)
         self._fingerprint = fingerprint(self._robot.source, self._library.source)
         self._reference = conv.reference_result(self._library)
+        self._typical_cache = None
 
         # State, guarded by self._cond.
         self._faults = {}                 # joint -> Fault, in arrival order
@@ -217,6 +244,9 @@ class RecoveryNode(Node):
         with self._cond:
             self._publish_locked(self._reference)
         self._restore()
+        if self._settings['tool_mm'] > 0 and not self._faults:
+            with self._cond:   # a tool from the start is a structure change to adapt to
+                self._requested_gen += 1
         self._worker = threading.Thread(target=self._work, name='reconfigure', daemon=True)
         self._worker.start()
         self._ready = True
@@ -267,6 +297,11 @@ class RecoveryNode(Node):
             'seed': None if seed < 0 else seed,
             'bimanual': values['bimanual'],
             'collision': bool(values['collision_check']),
+            'tool_mm': float(values['tool_length_mm']),
+            'tool_arm': values['tool_arm'],
+            'method': values['trajectory_method'],
+            'distortion_mm': float(values['vq_distortion_mm']),
+            'continuity': float(values['continuity_weight']),
             'weights': ScoreWeights.from_mapping(weights),
             'marker_frame_id': values['marker_frame_id'],
             'marker_spacing': float(values['marker_spacing']),
@@ -296,7 +331,8 @@ class RecoveryNode(Node):
         settings = self._settings_from(self._current_values())
         with self._cond:
             self._settings = settings
-            rerun = bool(names & _RERUN_PARAMS) and bool(self._faults)
+            rerun = bool(names & _RERUN_PARAMS) and (bool(self._faults) or 'tool_length_mm'
+                                                     in names or settings['tool_mm'] > 0)
             if rerun:
                 self._requested_gen += 1
                 self._cond.notify_all()
@@ -445,8 +481,11 @@ class RecoveryNode(Node):
             self._published_gen = self._requested_gen
             self._last_accepted = time.time()
             result = conv.reference_result(self._library, self._settings['deadline'])
-            self._persist_locked(result)
-            self._publish_locked(result)
+            if self._settings['tool_mm'] > 0:
+                self._handled_gen -= 1     # the tool is still there: adapt to it alone
+            else:
+                self._persist_locked(result)
+                self._publish_locked(result)
             self._cond.notify_all()
         self.get_logger().info(f'cleared {count} fault(s); reference library published')
         self._publish_diagnostics()
@@ -466,8 +505,9 @@ class RecoveryNode(Node):
         """
         try:
             joint = self._robot.arms['right'].joint_names[0]
-            reconfigure_library(self._robot, self._library, {joint: None}, deadline=0.2,
-                                seed=0, collision=True, cancel=lambda: self._stopping)
+            adapt_library(self._robot, self._library, {joint: None}, deadline=0.2, seed=0,
+                          method='kriging', collision=True, cancel=lambda: self._stopping,
+                          quantisations=self._typical_points(self._settings['distortion_mm']))
         except Exception as exc:  # noqa: B902 - a warm-up problem must not stop the node
             self.get_logger().warning(f'warm-up run failed: {type(exc).__name__}: {exc}')
 
@@ -547,41 +587,66 @@ class RecoveryNode(Node):
                 self.get_logger().warning(conv.summary(result))
             self._background(self._publish_diagnostics)
 
+    def _typical_points(self, distortion_mm):
+        """Return the library's typical points (they depend on the designed motions only)."""
+        cached = self._typical_cache
+        if cached is None or cached[0] != distortion_mm:
+            cached = (distortion_mm, typical_points(self._robot, self._library, distortion_mm))
+            self._typical_cache = cached
+        return cached[1]
+
     def _compute(self, faults, measured, settings, cancel):
-        if not faults:
+        if not faults and settings['tool_mm'] <= 0:
             return conv.reference_result(self._library, settings['deadline'],
                                          _public_settings(settings))
         requested = {j: f.angle for j, f in faults.items()}
         for joint, fault in faults.items():
             if fault.measured is not None:
                 measured[joint] = fault.measured   # where it stopped when it failed
-        report = reconfigure_library(
-            self._robot, self._library, requested, algorithm=settings['algorithm'],
-            preset=settings['preset'], deadline=settings['deadline'], seed=settings['seed'],
+        report = adapt_library(
+            self._robot, self._library, requested, method=settings['method'],
+            tool_mm=settings['tool_mm'], tool_arm=settings['tool_arm'],
+            distortion_mm=settings['distortion_mm'], continuity=settings['continuity'],
+            quantisations=self._typical_points(settings['distortion_mm']),
+            algorithm=settings['algorithm'], preset=settings['preset'],
+            deadline=settings['deadline'], seed=settings['seed'],
             weights=settings['weights'], lock_strategy=settings['lock_strategy'],
             measured=measured, cancel=cancel, bimanual=settings['bimanual'],
             collision=settings['collision'])
         public = _public_settings(settings)
-        public['seed'] = getattr(report, 'seed', settings['seed'])
-        public['notes'] = list(getattr(report, 'notes', ()))
-        gestures = tuple(
-            GestureResult(
+        public['seed'] = report.seed
+        public['notes'] = list(report.notes)
+        engine = report.typical_result
+        by_name = {} if engine is None else {g.name: g for g in engine.gestures}
+        gestures = []
+        for g in report.gestures:
+            e = by_name.get(g.name)
+            gestures.append(GestureResult(
                 name=g.name,
                 times=tuple(float(kf.time_from_start) for kf in g.keyframes),
                 positions=tuple(tuple(float(a) for a in kf.positions()) for kf in g.keyframes),
-                score_before=float(g.score_before), score_after=float(g.score_after),
-                wall_time=float(g.wall_time), status=str(g.status), message=str(g.message),
-                collides=bool(g.collides), breakdown={k: float(v) for k, v in
-                                                      dict(g.breakdown).items()},
-                stage=int(getattr(g, 'stage', 1) or 1),
-                colliding_pairs=tuple(str(p) for p in getattr(g, 'colliding_pairs', ())))
-            for g in report.gestures)
+                score_before=float(e.score_before if e else g.score_before),
+                score_after=float(e.score_after if e and g.method != 'kriging'
+                                  else g.score_max),
+                wall_time=float(report.wall_time), status=str(g.status),
+                message=str(e.message if e and g.method == 'keyframes' else g.message),
+                collides=bool(e.collides) if e else False,
+                breakdown={k: float(v) for k, v in dict(e.breakdown if e else {}).items()},
+                stage=int(e.stage if e else 1),
+                colliding_pairs=tuple(str(p) for p in (e.colliding_pairs if e else ())),
+                method=g.method, typical_points=len(g.typical),
+                tip_error_mm=float(g.tip_error_mean_mm),
+                max_jump_deg=float(g.jump_after_deg)))
+        success = (report.deadline_met and engine is not None and engine.success
+                   and all(math.isfinite(g.score_after) for g in gestures))
         return LibraryResult(
-            gestures=gestures, faults=requested,
+            gestures=tuple(gestures), faults=requested,
             locks={j: float(a) for j, a in report.locks.items()},
-            frozen_arms=tuple(report.frozen_arms), wall_time=float(report.wall_time),
-            deadline=settings['deadline'], deadline_met=bool(report.deadline_met),
-            success=bool(report.success), cancelled=bool(report.cancelled), settings=public)
+            frozen_arms=tuple(engine.frozen_arms if engine else ()),
+            wall_time=float(report.wall_time), deadline=settings['deadline'],
+            deadline_met=bool(report.deadline_met), success=bool(success),
+            cancelled=bool(engine.cancelled if engine else False), settings=public,
+            tool_mm=settings['tool_mm'], tool_arm=settings['tool_arm'])
 
     def _check_result(self, result, faults=None):
         """Return None if ``result`` is safe to publish, else the reason it is not."""

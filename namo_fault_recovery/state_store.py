@@ -62,6 +62,10 @@ class GestureResult:
     breakdown: dict = field(default_factory=dict)
     stage: int = 1
     colliding_pairs: tuple = ()
+    method: str = 'keyframes'    # kriging, per_point or keyframes (every one explored)
+    typical_points: int = 0
+    tip_error_mm: float = 0.0    # mean fingertip distance to the designed path
+    max_jump_deg: float = 0.0    # largest joint step between successive keyframes
 
     def to_dict(self):
         """Return a JSON-ready dict."""
@@ -72,6 +76,8 @@ class GestureResult:
             'wall_time': self.wall_time, 'status': self.status, 'message': self.message,
             'collides': self.collides, 'breakdown': dict(self.breakdown),
             'stage': self.stage, 'colliding_pairs': list(self.colliding_pairs),
+            'method': self.method, 'typical_points': self.typical_points,
+            'tip_error_mm': self.tip_error_mm, 'max_jump_deg': self.max_jump_deg,
         }
 
     @classmethod
@@ -93,6 +99,10 @@ class GestureResult:
                 breakdown={str(k): _number(v) for k, v in dict(doc.get('breakdown', {})).items()},
                 stage=int(doc.get('stage', 1)),
                 colliding_pairs=tuple(str(p) for p in doc.get('colliding_pairs', ())),
+                method=str(doc.get('method', 'keyframes')),
+                typical_points=int(doc.get('typical_points', 0)),
+                tip_error_mm=_number(doc.get('tip_error_mm', 0.0)),
+                max_jump_deg=_number(doc.get('max_jump_deg', 0.0)),
             )
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             if isinstance(exc, StateFileError):
@@ -119,6 +129,8 @@ class LibraryResult:
     success: bool = True
     cancelled: bool = False
     settings: dict = field(default_factory=dict)
+    tool_mm: float = 0.0
+    tool_arm: str = 'right'
 
     @property
     def names(self):
@@ -134,6 +146,7 @@ class LibraryResult:
             'deadline': self.deadline, 'deadline_met': self.deadline_met,
             'success': self.success, 'cancelled': self.cancelled,
             'settings': dict(self.settings),
+            'tool_mm': self.tool_mm, 'tool_arm': self.tool_arm,
         }
 
     @classmethod
@@ -155,6 +168,8 @@ class LibraryResult:
                 success=bool(doc.get('success', True)),
                 cancelled=bool(doc.get('cancelled', False)),
                 settings=dict(doc.get('settings', {})),
+                tool_mm=_number(doc.get('tool_mm', 0.0)),
+                tool_arm=str(doc.get('tool_arm', 'right')),
             )
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             if isinstance(exc, StateFileError):

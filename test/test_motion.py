@@ -1,0 +1,289 @@
+"""Whole-motion adaptation: CSV trajectories, tools, VQ, Kriging, continuity, expansion."""
+
+from pathlib import Path
+
+import numpy as np
+from namo_fault_recovery import ConfigError, load_library
+from namo_fault_recovery.circle_design import circle_path, RADIUS_MM
+from namo_fault_recovery.gestures import GestureLibrary
+from namo_fault_recovery.kinematics import forward_kinematics
+from namo_fault_recovery.kriging import (fit_spherical, OrdinaryKriging, SphericalVariogram,
+                                        variogram_cloud)
+from namo_fault_recovery.motion import adapt_library, typical_points
+from namo_fault_recovery.trajectory_csv import load_trajectory_csv
+from namo_fault_recovery.vq import quantise
+import pytest
+
+ELBOW = 'right_arm_joint4'
+
+
+@pytest.fixture(scope='module')
+def circle(product_library):
+    return GestureLibrary((product_library['circle'],), '<test>')
+
+
+# --- the library --------------------------------------------------------------------
+
+def test_circle_is_a_150_mm_circle_in_front_of_the_robot(robot, product_library):
+    g = product_library['circle']
+    assert len(g.keyframes) == 100
+    tips = forward_kinematics(robot, g.angles()[:, :7], 'right').tip
+    np.testing.assert_allclose(tips, circle_path(), atol=1e-3)   # CSV keeps 6 decimals
+    centre = tips.mean(axis=0)
+    np.testing.assert_allclose(np.linalg.norm(tips - centre, axis=1), RADIUS_MM, atol=1e-2)
+    assert np.ptp(tips[:, 0]) < 1e-2 and centre[0] > 200     # a plane x = const, in front
+    assert np.all(np.diff(g.times) > 0)
+
+
+def test_bye_is_a_wave_around_the_paper_pose(product_library, library):
+    bye = product_library['bye']
+    assert len(bye.keyframes) >= 5
+    paper = library['bye'].keyframes[0].right
+    np.testing.assert_allclose(bye.keyframes[0].right, paper)
+    swing = np.ptp(bye.angles()[:, :7], axis=0)
+    assert swing[2] > np.radians(20) and swing[6] > np.radians(20)   # forearm and hand
+    np.testing.assert_allclose(bye.angles()[:, :7].mean(axis=0), paper, atol=1e-12)
+
+
+# --- CSV loading --------------------------------------------------------------------
+
+def _csv(tmp_path, text):
+    path = tmp_path / 'motion.csv'
+    path.write_text(text)
+    return path
+
+
+HEADER = 'time,' + ','.join([f'right_arm_joint{i}' for i in range(1, 8)]
+                            + [f'left_arm_joint{i}' for i in range(1, 8)]) + '\n'
+ROW = ',' + ','.join(['0'] * 14) + '\n'
+
+
+@pytest.mark.parametrize('text, where, problem', [
+    ('', None, 'no samples'),
+    (HEADER, None, 'a header but no samples'),
+    (HEADER + '0.1,1,2\n', 'line 2', 'expected 15 values'),
+    (HEADER + '0.1' + ROW.replace('0', 'x', 1), 'line 2, column right_arm_joint1',
+     "got 'x'"),
+    (HEADER + '0.2' + ROW + '0.1' + ROW, 'line 3, column time', 'strictly increasing'),
+    (HEADER + '0.1' + ROW.replace('0', '200', 1), 'line 2, column right_arm_joint1',
+     'outside the joint limits'),
+    (HEADER.replace('left_arm_joint7', 'elbow'), 'line 1', "unknown column 'elbow'"),
+    ('0.1' + ROW + '0.2,nan' + ROW[2:], 'line 2, column right_arm_joint1', 'finite'),
+])
+def test_csv_errors_name_file_line_and_column(tmp_path, robot, text, where, problem):
+    path = _csv(tmp_path, text)
+    with pytest.raises(ConfigError) as info:
+        load_trajectory_csv(path, robot, np.pi / 180)
+    assert str(path) in str(info.value) and problem in str(info.value)
+    if where:
+        assert info.value.key == where
+
+
+def test_csv_header_maps_columns_in_any_order(tmp_path, robot):
+    names = HEADER.strip().split(',')
+    order = [names[0]] + names[1:][::-1]
+    values = ['0.5'] + [str(i) for i in range(14)][::-1]
+    path = _csv(tmp_path, '# comment\n' + ','.join(order) + '\n' + ','.join(values) + '\n')
+    times, angles = load_trajectory_csv(path, robot, np.pi / 180)
+    assert times.tolist() == [0.5]
+    np.testing.assert_allclose(np.degrees(angles[0]), np.arange(14))
+
+
+def test_gesture_file_trajectory_errors_name_the_key(tmp_path, robot):
+    (tmp_path / 'g.yaml').write_text(
+        'units: deg\ngestures:\n  - name: m\n    arms: [right]\n    two_handed: false\n'
+        '    trajectory: {file: missing.csv}\n')
+    with pytest.raises(ConfigError, match='missing.csv.*cannot read'):
+        load_library(robot, tmp_path / 'g.yaml')
+    (tmp_path / 'h.yaml').write_text(
+        'units: deg\ngestures:\n  - name: m\n    arms: [right]\n    two_handed: false\n'
+        '    expand: [[right_arm_joint3]]\n    keyframes:\n      - time_from_start: 1.0\n'
+        '        right: [0, 0, 0, 0, 0, 0, 0]\n        left: [0, 0, 0, 0, 0, 0, 0]\n')
+    with pytest.raises(ConfigError, match=r"gestures\[0\]\.expand.*needs 'joints'"):
+        load_library(robot, tmp_path / 'h.yaml')
+
+
+# --- structure change: a tool -------------------------------------------------------
+
+def test_tool_lengthens_the_hand_only(robot, library):
+    q = library['bye'].keyframes[0].right
+    plain = forward_kinematics(robot, q)
+    tooled = forward_kinematics(robot.with_tool(50.0), q)
+    np.testing.assert_allclose(tooled.wrist, plain.wrist)
+    np.testing.assert_allclose(tooled.palm, plain.palm)
+    assert np.linalg.norm(tooled.tip - plain.tip) == pytest.approx(50.0)
+    hand = plain.tip - plain.wrist
+    np.testing.assert_allclose(np.cross(tooled.tip - plain.tip, hand), 0, atol=1e-9)
+    left = forward_kinematics(robot.with_tool(50.0), q, 'left')
+    np.testing.assert_allclose(left.tip, forward_kinematics(robot, q, 'left').tip)
+    with pytest.raises(ValueError, match='tool length.*-5'):
+        robot.with_tool(-5)
+
+
+# --- VQ -----------------------------------------------------------------------------
+
+@pytest.mark.parametrize('threshold', [20.0, 60.0, 150.0])
+def test_vq_respects_the_distortion_threshold(robot, product_library, threshold):
+    g = product_library['circle']
+    tips = forward_kinematics(robot, g.angles()[:, :7]).tip
+    q = quantise(np.degrees(g.angles()), threshold, features=tips, seed=1)
+    assert q.distortion <= threshold
+    assert 1 <= q.k < len(tips)
+    dist = np.linalg.norm(tips - tips[q.typical][q.labels], axis=1)
+    assert dist.max() == pytest.approx(q.distortion)
+    assert np.all(np.diff(q.typical) > 0)
+
+
+def test_vq_needs_more_points_for_a_tighter_threshold(robot, product_library):
+    g = product_library['circle']
+    tips = forward_kinematics(robot, g.angles()[:, :7]).tip
+    ks = [quantise(np.degrees(g.angles()), t, tips, seed=0).k for t in (120, 60, 20)]
+    assert ks[0] < ks[1] < ks[2]
+
+
+def test_vq_rejects_bad_input():
+    with pytest.raises(ValueError, match='threshold'):
+        quantise(np.zeros((3, 2)), -1.0)
+    with pytest.raises(ValueError, match='shape'):
+        quantise(np.zeros(3), 1.0)
+
+
+# --- Kriging ------------------------------------------------------------------------
+
+def _samples(seed=0, k=9, d=3, m=4):
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-50, 50, (k, d))
+    return x, np.sin(x @ rng.normal(size=(d, m)) / 30)
+
+
+def test_kriging_reproduces_the_samples_and_weights_sum_to_one():
+    x, r = _samples()
+    krig = OrdinaryKriging(x, r)
+    est = krig.predict(x)
+    np.testing.assert_allclose(est.values, r, atol=1e-9)
+    np.testing.assert_allclose(est.variance, 0.0, atol=1e-9)
+    query = np.random.default_rng(1).uniform(-60, 60, (50, 3))
+    est = krig.predict(query)
+    np.testing.assert_allclose(est.weights.sum(axis=1), 1.0, atol=1e-12)
+    assert np.all(est.variance >= 0) and est.variance.max() > 0
+
+
+def test_kriging_variance_grows_away_from_the_samples():
+    x, r = _samples(k=5, d=1, m=1)
+    krig = OrdinaryKriging(x, r, SphericalVariogram(0.0, 1.0, 40.0))
+    near = krig.predict(x[:1] + 0.5).variance[0]
+    far = krig.predict(x[:1] + 500).variance[0]
+    assert 0 < near < far
+
+
+def test_kriging_of_equal_samples_is_that_value_everywhere():
+    x, _ = _samples()
+    r = np.tile([1.0, -2.0], (len(x), 1))
+    est = OrdinaryKriging(x, r).predict(np.zeros((4, 3)))
+    np.testing.assert_allclose(est.values, np.tile([1.0, -2.0], (4, 1)))
+
+
+def test_spherical_fit_recovers_known_parameters():
+    truth = SphericalVariogram(nugget=0.5, sill=2.0, range=30.0)
+    rng = np.random.default_rng(0)
+    h = rng.uniform(0.1, 80.0, 600)
+    gamma = truth(h) + rng.normal(0.0, 0.02, h.size)
+    fit = fit_spherical(h, gamma)
+    assert fit.nugget == pytest.approx(0.5, abs=0.05)
+    assert fit.sill == pytest.approx(2.0, rel=0.05)
+    assert fit.range == pytest.approx(30.0, rel=0.05)
+
+
+def test_variogram_cloud_is_half_the_mean_squared_difference():
+    x = np.array([[0.0], [3.0]])
+    r = np.array([[1.0, 1.0], [3.0, 5.0]])
+    h, gamma = variogram_cloud(x, r)
+    assert h.tolist() == [3.0] and gamma.tolist() == [0.5 * (4 + 16) / 2]
+
+
+# --- adaptation ---------------------------------------------------------------------
+
+@pytest.fixture(scope='module')
+def elbow_locked(robot, circle):
+    return {m: adapt_library(robot, circle, {ELBOW: 0.0}, method=m, deadline=None, seed=2)
+            for m in ('kriging', 'per_point')}
+
+
+@pytest.mark.parametrize('method', ['kriging', 'per_point'])
+def test_adapted_motions_keep_locked_joints_exact(elbow_locked, method):
+    g = elbow_locked[method]['circle']
+    assert all(kf.right[3] == 0.0 for kf in g.keyframes)
+
+
+@pytest.mark.parametrize('method', ['kriging', 'per_point'])
+def test_expansion_recovers_the_circle_with_the_elbow_locked(elbow_locked, method):
+    g = elbow_locked[method]['circle']
+    assert g.tip_error_before_mm > 300
+    assert g.expansion_stage >= 1 and 'right_arm_joint6' in g.free_joints
+    assert g.tip_error_mean_mm < 0.05 * g.tip_error_before_mm
+
+
+def test_continuity_is_bounded(elbow_locked):
+    for res in elbow_locked.values():
+        g = res['circle']
+        assert g.jump_after_deg <= 3 * g.jump_designed_deg
+
+
+def test_continuity_penalty_smooths_the_motion(robot, circle, elbow_locked):
+    free = adapt_library(robot, circle, {ELBOW: 0.0}, method='per_point', deadline=None,
+                         seed=2, continuity=0.0)['circle']
+    penalised = elbow_locked['per_point']['circle']
+    assert penalised.jump_after_deg < free.jump_after_deg
+
+
+def test_kriging_costs_a_fraction_of_per_point_exploration(elbow_locked):
+    kriging, per_point = (elbow_locked[m]['circle'] for m in ('kriging', 'per_point'))
+    assert len(kriging.typical) < 20
+    assert kriging.nfev < 0.4 * per_point.nfev
+    assert len(kriging.kriging_sigma_deg) == 100
+
+
+def test_without_expansion_the_designed_joints_fall_short(robot, circle):
+    g = adapt_library(robot, circle, {ELBOW: 0.0}, method='kriging', deadline=None, seed=2,
+                      expansion_threshold=1e9)['circle']
+    assert g.expansion_stage == 0
+    assert set(g.free_joints) == {'right_arm_joint1', 'right_arm_joint2'}
+    assert g.tip_error_mean_mm > 100
+
+
+def test_tool_and_lock_combine(robot, circle):
+    res = adapt_library(robot, circle, {'right_arm_joint7': 0.0}, tool_mm=50.0,
+                        method='kriging', deadline=None, seed=0)
+    g = res['circle']
+    assert res.tool_mm == 50.0 and res.locks == {'right_arm_joint7': 0.0}
+    assert g.tip_error_before_mm == pytest.approx(50.0, abs=1.0)
+    assert g.tip_error_mean_mm < 10.0
+
+
+def test_auto_falls_back_to_kriging_when_the_deadline_is_short(robot, product_library):
+    res = adapt_library(robot, product_library, {ELBOW: None}, method='auto', deadline=0.4,
+                        seed=0)
+    g = res['circle']
+    assert g.method == 'kriging'
+    assert any('circle' in n and 'Kriging' in n for n in res.notes)
+    assert res.deadline_met
+    assert res['bye'].method == 'keyframes'
+
+
+def test_typical_points_are_computed_once_per_library(robot, product_library):
+    typ = typical_points(robot, product_library)
+    assert typ['wai'] is None and typ['bye'] is None
+    assert typ['circle'].distortion <= 60.0
+    res = adapt_library(robot, product_library, {ELBOW: 0.0}, method='kriging', seed=0,
+                        deadline=None, quantisations=typ)
+    assert res['circle'].typical == tuple(int(i) for i in typ['circle'].typical)
+
+
+def test_bad_method_is_rejected(robot, circle):
+    with pytest.raises(ValueError, match="method 'fast'"):
+        adapt_library(robot, circle, {}, method='fast')
+
+
+def test_packaged_trajectory_file_is_installed_beside_the_library():
+    setup = (Path(__file__).resolve().parent.parent / 'setup.py').read_text()
+    assert "config/trajectories/*" in setup
