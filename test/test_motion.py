@@ -261,7 +261,7 @@ def test_tool_and_lock_combine(robot, circle):
 
 
 def test_auto_falls_back_to_kriging_when_the_deadline_is_short(robot, product_library):
-    res = adapt_library(robot, product_library, {ELBOW: None}, method='auto', deadline=0.4,
+    res = adapt_library(robot, product_library, {ELBOW: None}, method='auto', deadline=1.0,
                         seed=0)
     g = res['circle']
     assert g.method == 'kriging'
