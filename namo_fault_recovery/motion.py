@@ -40,7 +40,7 @@ DEFAULT_DISTORTION_MM = 60.0   # the paper's quantisation distortion threshold
 DEFAULT_MIN_POINTS = 12        # shorter motions are explored at every keyframe
 DEFAULT_CONTINUITY = 0.01      # penalty per deg^2 of joint-space jump
 DEFAULT_STAY_CLOSE = 1e-3      # per deg^2 away from the design, at the typical points
-_TYPICAL_SHARE = 0.5           # of the deadline for the typical points in ``auto``
+_TYPICAL_SHARE = 0.75          # of the deadline for the typical points in ``auto``
 
 
 @dataclass
@@ -278,7 +278,7 @@ def _consistent(model, scorer, ids, design, solved, layout, continuity, end, can
                               solved[k:k + 1, N_JOINTS:], layout, x0=[solved[k, col]],
                               anchor=[anchor], continuity=continuity)
         starts = problem.clip(np.stack((solved[k, col], anchor))[None])
-        x, f = polish(problem, starts, clock, maxiter=50, ftol=1e-7)
+        x, f = polish(problem, starts, clock, maxiter=20, ftol=1e-6)
         nfev += problem.nfev
         r, left = problem.assemble(x[:, int(np.argmin(f[0]))])
         solved[k] = np.concatenate((r[0], left[0]))

@@ -2,6 +2,7 @@
 
 import io
 import json
+from pathlib import Path
 import subprocess
 import sys
 
@@ -14,11 +15,19 @@ def run(argv):
     return main(argv, out), out.getvalue()
 
 
+PAPER = str(Path(__file__).resolve().parent.parent / 'config' / 'paper_gestures.yaml')
+
+
 def test_show_prints_library_and_landmarks():
     code, text = run(['show'])
     assert code == 0
-    for name in ('wai', 'bye', 'salute', 'side_invite'):
+    for name in ('wai', 'bye', 'salute', 'side_invite', 'circle'):
         assert f'\n{name}:' in text
+
+
+def test_show_paper_library_lock_averages():
+    code, text = run(['--gesture-file', PAPER, 'show'])
+    assert code == 0
     assert '(  222.66,   -18.89,   -94.33)' in text   # Wai right wrist
     assert '(  222.66,    18.89,   -94.33)' in text   # its mirror, the left wrist
     assert '52.50,  -14.25' in text                    # Table 2 lock averages

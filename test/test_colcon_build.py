@@ -61,7 +61,8 @@ def test_colcon_installs_the_executable_share_files_and_index_marker(workspace):
     assert executable.is_file() and os.access(executable, os.X_OK)
     share = prefix / 'share' / PACKAGE
     assert (share / 'package.xml').is_file()
-    for name in ('namo_robot.yaml', 'gestures.yaml', 'recovery_node.yaml'):
+    for name in ('namo_robot.yaml', 'gestures.yaml', 'paper_gestures.yaml',
+                 'recovery_node.yaml', 'trajectories/circle.csv'):
         assert (share / 'config' / name).is_file(), name
     docs = [p for p in sorted((ROOT / 'msg_docs').rglob('*')) if p.is_file()]
     assert docs
@@ -82,7 +83,7 @@ def test_installed_node_serves_the_contract(workspace, tmp_path):
     client = RosClient(DOMAIN)
     try:
         reference = client.wait_library(what='the library from the colcon-installed node')
-        assert sorted(reference.names) == ['bye', 'salute', 'side_invite', 'wai']
+        assert sorted(reference.names) == ['bye', 'circle', 'salute', 'side_invite', 'wai']
         client.publish_fault(['right_arm_joint2'])
         client.wait_library(after=reference.stamp, what='a reconfigured library')
         response = client.trigger('/reconfigure_gestures')

@@ -17,7 +17,7 @@ pytestmark = pytest.mark.slow
 
 DOMAIN = session_domain(0)
 CONFIG = Path(__file__).resolve().parent.parent / 'config'
-GESTURES = ['wai', 'bye', 'salute', 'side_invite']
+GESTURES = ['wai', 'bye', 'salute', 'side_invite', 'circle']
 INF = float('inf')
 NAN = float('nan')
 

@@ -2,12 +2,15 @@
 
 import io
 import json
+from pathlib import Path
 
 from namo_fault_recovery.cli import main
 from namo_fault_recovery.reconfigure import reconfigure_library
 from namo_fault_recovery.score import gesture_targets, SimilarityScore
 import numpy as np
 import pytest
+
+CONFIG_DIR = Path(__file__).resolve().parent.parent / 'config'
 
 
 def _check_locks(robot, report):
@@ -134,7 +137,8 @@ def test_gradient_matches_finite_differences(robot, library):
 
 def test_cli_solve_json_schema(robot):
     out = io.StringIO()
-    code = main(['solve', '--fault', 'right_arm_joint2', '--fault', 'left_arm_joint1=20',
+    code = main(['--gesture-file', str(CONFIG_DIR / 'paper_gestures.yaml'), 'solve',
+                 '--fault', 'right_arm_joint2', '--fault', 'left_arm_joint1=20',
                  '--seed', '3', '--json'], out)
     doc = json.loads(out.getvalue())
     assert code == 0 and doc['schema'] == 'namo_fault_recovery.solve/1'
