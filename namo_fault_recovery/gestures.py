@@ -68,8 +68,8 @@ class Gesture:
         """Return the keyframes' times from start (s) as an array."""
         return np.array([kf.time_from_start for kf in self.keyframes])
 
-    def angles(self):
-        """Return all keyframes' 14 angles (rad) as an array (T, 14), right arm first."""
+    def joint_matrix(self):
+        """Return every keyframe's 14 joint angles (rad) stacked, right arm first: (T, 14)."""
         return np.array([kf.positions() for kf in self.keyframes])
 
     def with_keyframes(self, keyframes):

@@ -26,7 +26,7 @@ class SphericalVariogram:
 
     nugget: float
     sill: float
-    range: float
+    range: float  # noqa: A003 - the geostatistics name (the paper's a2)
 
     def __post_init__(self):
         if not (self.nugget >= 0 and self.sill >= 0 and self.range > 0

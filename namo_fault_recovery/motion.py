@@ -69,7 +69,7 @@ class GestureAdaptation:
 
     @property
     def times(self):
-        """Return the keyframes' times (s)."""
+        """Keyframe times from start (s)."""
         return [kf.time_from_start for kf in self.keyframes]
 
 
@@ -118,7 +118,7 @@ def typical_points(robot, library, distortion_mm=DEFAULT_DISTORTION_MM,
         if len(gesture.keyframes) < min_points:
             out[gesture.name] = None
             continue
-        q = gesture.angles()
+        q = gesture.joint_matrix()
         tips = np.concatenate([_forward(robot, q[:, _cols(side)], side).tip
                                for side in gesture.arms], axis=1)
         out[gesture.name] = quantise(np.degrees(q), distortion_mm, features=tips, seed=seed)
@@ -195,7 +195,7 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
         n = len(gesture.keyframes)
         ids = np.arange(offset, offset + n)
         offset += n
-        design = gesture.angles()
+        design = gesture.joint_matrix()
         base_r, base_l = _apply_locks(robot, design[:, :N_JOINTS], design[:, N_JOINTS:], locks)
         affected = any(s in faulted for s in gesture.arms)
         status, nfev, sigma, stage, how = 'unchanged', 0, (), 0, 'keyframes'
@@ -289,7 +289,7 @@ def _consistent(model, scorer, ids, design, solved, layout, continuity, end, can
 
 def _spread(robot, gesture, picks, solved, locks):
     """Kriging of the typical points' corrections to every point of one motion."""
-    design = gesture.angles()
+    design = gesture.joint_matrix()
     cols = np.concatenate([np.arange(2 * N_JOINTS)[_cols(s)] for s in ARMS])
     x = np.degrees(design[:, cols])
     r = np.degrees(solved - design[list(picks)])

@@ -146,7 +146,7 @@ def plot_motion(robot, gesture, adaptation, path, dpi=110):
     side = gesture.arms[0]
     col = slice(0, 7) if side == 'right' else slice(7, 14)
     model = robot.with_tool(adaptation.tool_mm, adaptation.tool_arm)
-    design = gesture.angles()[:, col]
+    design = gesture.joint_matrix()[:, col]
     g = adaptation[gesture.name]
     adapted = np.array([kf.arm(side) for kf in g.keyframes])
     unadapted = design.copy()

@@ -39,9 +39,9 @@ from .errors import ConfigError
 from .faults import LOCK_STRATEGIES
 from .gestures import load_library
 from .inputs import BadInput, frozen_arms, parse_fault, parse_joint_state
-from .optimize import ALGORITHMS, PRESETS
 from .motion import (adapt_library, DEFAULT_CONTINUITY, DEFAULT_DISTORTION_MM, METHODS,
                      typical_points)
+from .optimize import ALGORITHMS, PRESETS
 from .reconfigure import BIMANUAL_MODES
 from .robot_model import ARMS, load_robot
 from .score import COMPONENTS, ScoreWeights

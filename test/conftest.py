@@ -15,11 +15,11 @@ def robot():
 
 @pytest.fixture(scope='session')
 def library(robot):
-    """The paper's Table 2 poses (one keyframe per gesture)."""
+    """Load the paper's Table 2 poses (one keyframe per gesture)."""
     return load_library(robot, CONFIG_DIR / 'paper_gestures.yaml')
 
 
 @pytest.fixture(scope='session')
 def product_library(robot):
-    """The packaged product library: Table 2 gestures as motions, plus the circle."""
+    """Load the packaged product library: Table 2 gestures as motions, plus the circle."""
     return load_library(robot)

@@ -2,16 +2,16 @@
 
 from pathlib import Path
 
-import numpy as np
 from namo_fault_recovery import ConfigError, load_library
 from namo_fault_recovery.circle_design import circle_path, RADIUS_MM
 from namo_fault_recovery.gestures import GestureLibrary
 from namo_fault_recovery.kinematics import forward_kinematics
-from namo_fault_recovery.kriging import (fit_spherical, OrdinaryKriging, SphericalVariogram,
-                                        variogram_cloud)
+from namo_fault_recovery.kriging import fit_spherical, OrdinaryKriging
+from namo_fault_recovery.kriging import SphericalVariogram, variogram_cloud
 from namo_fault_recovery.motion import adapt_library, typical_points
 from namo_fault_recovery.trajectory_csv import load_trajectory_csv
 from namo_fault_recovery.vq import quantise
+import numpy as np
 import pytest
 
 ELBOW = 'right_arm_joint4'
@@ -27,7 +27,7 @@ def circle(product_library):
 def test_circle_is_a_150_mm_circle_in_front_of_the_robot(robot, product_library):
     g = product_library['circle']
     assert len(g.keyframes) == 100
-    tips = forward_kinematics(robot, g.angles()[:, :7], 'right').tip
+    tips = forward_kinematics(robot, g.joint_matrix()[:, :7], 'right').tip
     np.testing.assert_allclose(tips, circle_path(), atol=1e-3)   # CSV keeps 6 decimals
     centre = tips.mean(axis=0)
     np.testing.assert_allclose(np.linalg.norm(tips - centre, axis=1), RADIUS_MM, atol=1e-2)
@@ -40,9 +40,9 @@ def test_bye_is_a_wave_around_the_paper_pose(product_library, library):
     assert len(bye.keyframes) >= 5
     paper = library['bye'].keyframes[0].right
     np.testing.assert_allclose(bye.keyframes[0].right, paper)
-    swing = np.ptp(bye.angles()[:, :7], axis=0)
+    swing = np.ptp(bye.joint_matrix()[:, :7], axis=0)
     assert swing[2] > np.radians(20) and swing[6] > np.radians(20)   # forearm and hand
-    np.testing.assert_allclose(bye.angles()[:, :7].mean(axis=0), paper, atol=1e-12)
+    np.testing.assert_allclose(bye.joint_matrix()[:, :7].mean(axis=0), paper, atol=1e-12)
 
 
 # --- CSV loading --------------------------------------------------------------------
@@ -125,8 +125,8 @@ def test_tool_lengthens_the_hand_only(robot, library):
 @pytest.mark.parametrize('threshold', [20.0, 60.0, 150.0])
 def test_vq_respects_the_distortion_threshold(robot, product_library, threshold):
     g = product_library['circle']
-    tips = forward_kinematics(robot, g.angles()[:, :7]).tip
-    q = quantise(np.degrees(g.angles()), threshold, features=tips, seed=1)
+    tips = forward_kinematics(robot, g.joint_matrix()[:, :7]).tip
+    q = quantise(np.degrees(g.joint_matrix()), threshold, features=tips, seed=1)
     assert q.distortion <= threshold
     assert 1 <= q.k < len(tips)
     dist = np.linalg.norm(tips - tips[q.typical][q.labels], axis=1)
@@ -136,8 +136,8 @@ def test_vq_respects_the_distortion_threshold(robot, product_library, threshold)
 
 def test_vq_needs_more_points_for_a_tighter_threshold(robot, product_library):
     g = product_library['circle']
-    tips = forward_kinematics(robot, g.angles()[:, :7]).tip
-    ks = [quantise(np.degrees(g.angles()), t, tips, seed=0).k for t in (120, 60, 20)]
+    tips = forward_kinematics(robot, g.joint_matrix()[:, :7]).tip
+    ks = [quantise(np.degrees(g.joint_matrix()), t, tips, seed=0).k for t in (120, 60, 20)]
     assert ks[0] < ks[1] < ks[2]
 
 
@@ -286,4 +286,4 @@ def test_bad_method_is_rejected(robot, circle):
 
 def test_packaged_trajectory_file_is_installed_beside_the_library():
     setup = (Path(__file__).resolve().parent.parent / 'setup.py').read_text()
-    assert "config/trajectories/*" in setup
+    assert 'config/trajectories/*' in setup

@@ -331,7 +331,8 @@ def test_bad_parameters_are_refused_with_a_reason(client):
 # --- real faults that are not bad input -----------------------------------------------
 
 
-def test_all_joints_of_one_arm_freeze_it_and_the_other_arm_is_served(client, robot, product_library):
+def test_all_joints_of_one_arm_freeze_it_and_the_other_arm_is_served(client, robot,
+                                                                     product_library):
     reset(client)
     left = list(robot.arms['left'].joint_names)
     version = inject(client, left + ['right_arm_joint2'])

@@ -19,8 +19,8 @@ import numpy as np
 
 from ..faults import resolve_locks
 from ..gestures import load_library
-from ..resources import config_path, PAPER_GESTURE_FILE
 from ..reconfigure import PoseProblem
+from ..resources import config_path, PAPER_GESTURE_FILE
 from ..robot_model import ARMS, load_robot, N_JOINTS
 from ..score import gesture_targets, SimilarityScore
 

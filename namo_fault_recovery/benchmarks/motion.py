@@ -72,8 +72,6 @@ def bench_motion(out, out_dir, seed=0, motions=MOTIONS, robot_file=None, gesture
                 g, wall = run_case(robot, gesture, method, seed, min_points,
                                    distortion_mm=threshold, **kwargs)
                 pair[method] = g
-                cost = (100.0 * g.nfev / pair['per_point'].nfev
-                        if method == 'per_point' or 'per_point' in pair else math.nan)
                 row = {'motion': name, 'scenario': label, 'method': method,
                        'points': len(gesture.keyframes),
                        'typical': (len(g.typical) if method == 'kriging'
@@ -100,8 +98,9 @@ def bench_motion(out, out_dir, seed=0, motions=MOTIONS, robot_file=None, gesture
                           f'{row["tip_error_max_mm"]:7.1f} {row["recovery_pct"]:5.1f}% '
                           f'{row["score_mean"]:7.2f} {row["jump_after_deg"]:6.1f} '
                           f'{row["expansion_stage"]:5d}\n')
-    out.write('\nK: points explored; cost: evaluations of the method / those of per-point exploration in the same '
-              'run; err0: mean fingertip error of the unadapted motion; recov: 1 - mean error '
+    out.write('\nK: points explored; cost: evaluations of the method / those of per-point '
+              'exploration in the same run; err0: mean fingertip error of the unadapted '
+              'motion; recov: 1 - mean error '
               '/ err0 (the paper\'s "97% similar"); score: mean similarity score (lower is '
               'better); jump: largest joint step (deg) between successive points, designed '
               f'{rows[0]["jump_designed_deg"]:.1f} deg for the circle; stage: DOF expansion '
