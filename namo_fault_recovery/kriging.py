@@ -13,7 +13,11 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import minimize_scalar, nnls
+
+# Range search, in units of the largest lag of the cloud.
+_MIN_RANGE = 1e-3
+_MAX_RANGE = 1e3
 
 
 @dataclass(frozen=True)
@@ -59,11 +63,15 @@ def variogram_cloud(points, values):
 
 def fit_spherical(h, gamma):
     """
-    Fit a spherical variogram to a variogram cloud by bounded least squares (scipy).
+    Fit a spherical variogram to a variogram cloud by least squares (scipy).
 
-    The spherical model has a kink at its range, so the fit starts from several ranges
-    and keeps the best.  A flat cloud (all zero: every sample equal) gives a zero sill,
-    for which Kriging returns that common value everywhere.
+    For a fixed range the model is linear in the nugget and the sill, so they come from
+    a non-negative linear least-squares solve (``scipy.optimize.nnls``); the range,
+    where the model has a kink, is found by a grid over the cloud's extent refined with
+    ``scipy.optimize.minimize_scalar``.  (A general bounded ``least_squares`` from
+    several starts found the same fits about 30 times slower, which mattered inside
+    the node's deadline.)  A flat cloud (all zero: every sample equal) gives a zero
+    sill, for which Kriging returns that common value everywhere.
     """
     h = np.asarray(h, dtype=float).ravel()
     gamma = np.asarray(gamma, dtype=float).ravel()
@@ -79,18 +87,27 @@ def fit_spherical(h, gamma):
     # Work in units of the cloud's extent so that the tolerances mean the same thing
     # whatever the units of the joint space and of the values.
     hs, gs = h / h_max, gamma / g_max
+    positive = hs > 0
 
-    def residual(p):
-        return SphericalVariogram(p[0], p[1], p[2])(hs) - gs
+    def linear_part(range_):
+        s = np.minimum(hs / range_, 1.0)
+        design = np.stack((positive.astype(float),
+                           np.where(positive, 1.5 * s - 0.5 * s ** 3, 0.0)), axis=1)
+        return nnls(design, gs)
 
-    best = None
-    for range0 in (0.25, 0.5, 1.0, 2.0):
-        sol = least_squares(residual, [0.0, 1.0, range0], bounds=([0, 0, 1e-6],
-                                                                  [np.inf, np.inf, 1e3]))
-        if best is None or sol.cost < best.cost:
-            best = sol
-    a0, a1, a2 = best.x
-    return SphericalVariogram(float(a0 * g_max), float(a1 * g_max), float(a2 * h_max))
+    def cost(log_range):
+        return linear_part(np.exp(log_range))[1]
+
+    grid = np.log(np.geomspace(_MIN_RANGE, _MAX_RANGE, 41))
+    costs = [cost(r) for r in grid]
+    k = int(np.argmin(costs))
+    lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+    best = minimize_scalar(cost, bounds=(lo, hi), method='bounded',
+                           options={'xatol': 1e-6})
+    log_range = best.x if best.fun <= costs[k] else grid[k]
+    (a0, a1), _ = linear_part(np.exp(log_range))
+    return SphericalVariogram(float(a0 * g_max), float(a1 * g_max),
+                              float(np.exp(log_range) * h_max))
 
 
 class KrigingEstimate(NamedTuple):

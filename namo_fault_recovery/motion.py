@@ -40,7 +40,9 @@ DEFAULT_DISTORTION_MM = 60.0   # the paper's quantisation distortion threshold
 DEFAULT_MIN_POINTS = 12        # shorter motions are explored at every keyframe
 DEFAULT_CONTINUITY = 0.01      # penalty per deg^2 of joint-space jump
 DEFAULT_STAY_CLOSE = 1e-3      # per deg^2 away from the design, at the typical points
-_TYPICAL_SHARE = 0.75          # of the deadline for the typical points in ``auto``
+_TYPICAL_SHARE = 0.9           # of the deadline for the typical points in ``auto``
+_SETTLED_DEG = 0.5             # a consistency sweep that moves no point more has settled
+_MAX_SWEEPS = 6                # consistency sweeps at most (5 fixed the elbow-lock circle)
 
 
 @dataclass
@@ -170,6 +172,10 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
         locks, lock_notes = resolve_locks(robot, library, faults, lock_strategy, measured)
         notes += lock_notes
     else:
+        if lock_strategy != 'optimal':
+            # Lock angles come from the whole motions, not from their typical points.
+            faults, lock_notes = resolve_locks(robot, library, faults, lock_strategy, measured)
+            notes += lock_notes
         sub = GestureLibrary(tuple(g.with_keyframes([g.keyframes[i] for i in picks[g.name]])
                                    for g in library), library.source)
         budget = None
@@ -263,26 +269,36 @@ def _consistent(model, scorer, ids, design, solved, layout, continuity, end, can
     Put the typical points on one redundant branch before Kriging interpolates them.
 
     Independently explored typical points may land on different branches of a
-    redundant arm, and interpolating between branches leaves the path.  In motion
-    order, each typical point is polished from its own solution and from its design
-    plus the previous typical point's correction, with the continuity penalty towards
-    the latter; the lower penalised value wins.  Returns (solved, nfev).
+    redundant arm, and interpolating between branches leaves the path.  Each typical
+    point is polished from its own solution and from its design plus the previous
+    typical point's correction, with the continuity penalty towards the latter; the
+    lower penalised value wins.  All points are polished in one batch per sweep (a
+    sequential pass cost the node ~0.2 s); a branch choice moves one point along the
+    motion per sweep, so sweeps repeat until no point moves
+    (or ``_MAX_SWEEPS``).  Returns (solved, nfev).
     """
     solved = solved.copy()
+    if len(ids) < 2:
+        return solved, 0
     col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in layout])
     nfev = 0
     clock = Clock(None if end is None else max(end - time.monotonic(), 0.0), cancel)
-    for k in range(1, len(ids)):
-        anchor = design[k, col] + solved[k - 1, col] - design[k - 1, col]
-        problem = PoseProblem(model, scorer, ids[k:k + 1], solved[k:k + 1, :N_JOINTS],
-                              solved[k:k + 1, N_JOINTS:], layout, x0=[solved[k, col]],
-                              anchor=[anchor], continuity=continuity)
-        starts = problem.clip(np.stack((solved[k, col], anchor))[None])
+    rest = slice(1, None)
+    for _ in range(min(len(ids) - 1, _MAX_SWEEPS)):
+        if clock.expired():
+            break
+        before = solved[rest].copy()
+        anchor = design[rest, col] + solved[:-1, col] - design[:-1, col]
+        problem = PoseProblem(model, scorer, ids[rest], solved[rest, :N_JOINTS],
+                              solved[rest, N_JOINTS:], layout, x0=solved[rest][:, col],
+                              anchor=anchor, continuity=continuity)
+        starts = problem.clip(np.stack((solved[rest][:, col], anchor), axis=1))
         x, f = polish(problem, starts, clock, maxiter=20, ftol=1e-6)
         nfev += problem.nfev
-        r, left = problem.assemble(x[:, int(np.argmin(f[0]))])
-        solved[k] = np.concatenate((r[0], left[0]))
-        if clock.expired():
+        pick = np.argmin(f, axis=1)
+        r, left = problem.assemble(x[np.arange(len(x)), pick][:, None])
+        solved[rest] = np.concatenate((r[:, 0], left[:, 0]), axis=1)
+        if np.degrees(np.abs(solved[rest] - before).max()) < _SETTLED_DEG:
             break
     return solved, nfev
 
@@ -353,7 +369,7 @@ def _chain(model, scorer, ids, base_r, base_l, design, layout, algo, continuity,
     scores = np.empty(len(ids))
     began = time.monotonic()
     for t in range(len(ids)):
-        if end is not None and t >= 3:
+        if end is not None and t >= 1:
             # Give up early when the pace so far says the chain cannot finish in time.
             pace = (time.monotonic() - began) / t
             if time.monotonic() + pace * (len(ids) - t) > end:

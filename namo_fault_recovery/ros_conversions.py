@@ -130,11 +130,26 @@ def _point(p_mm, offset):
                  z=float(p_mm[2] * _MM + offset[2]))
 
 
-def _arm_markers(robot, q14, side, offset, base, ident, color, width, label):
-    """Return the skeleton line strip and palm-axes line list of one arm."""
+_MAX_FIGURES = 6      # stick figures per gesture; a dense motion shows its path instead
+_AXIS_LENGTH = 60.0   # mm
+
+
+def _figure_frames(n):
+    """Return the keyframes drawn as stick figures: all of a short motion, else spread."""
+    if n <= _MAX_FIGURES:
+        return list(range(n))
+    return sorted({int(round(k)) for k in np.linspace(0, n - 1, _MAX_FIGURES)})
+
+
+def _landmarks(robot, positions, side):
+    """Batched forward kinematics of one arm over every keyframe of a gesture."""
     index = ARMS.index(side)
-    q = np.asarray(q14[index * N_JOINTS:(index + 1) * N_JOINTS], dtype=float)
-    lm = forward_kinematics(robot, q, side)
+    q = np.asarray(positions, dtype=float)[:, index * N_JOINTS:(index + 1) * N_JOINTS]
+    return forward_kinematics(robot, q, side)
+
+
+def _arm_markers(robot, lm, k, side, offset, base, ident, color, width, label):
+    """Return the skeleton line strip and palm-axes line list of one arm at keyframe k."""
     skeleton = Marker(header=base.header, ns=base.ns, id=ident, type=Marker.LINE_STRIP,
                       action=Marker.ADD)
     skeleton.pose.orientation.w = 1.0
@@ -142,18 +157,29 @@ def _arm_markers(robot, q14, side, offset, base, ident, color, width, label):
     skeleton.color = color
     skeleton.text = label
     skeleton.points = [_point(p, offset) for p in
-                       (shoulder_position(robot, side), lm.elbow, lm.wrist, lm.tip)]
+                       (shoulder_position(robot, side), lm.elbow[k], lm.wrist[k], lm.tip[k])]
     axes = Marker(header=base.header, ns=base.ns, id=ident + 1, type=Marker.LINE_LIST,
                   action=Marker.ADD)
     axes.pose.orientation.w = 1.0
     axes.scale.x = width * 0.6
     axes.color = color
-    axis_length = 60.0  # mm
-    for k in range(3):
-        axes.points.append(_point(lm.tip, offset))
-        axes.points.append(_point(lm.tip + axis_length * lm.palm[:, k], offset))
-        axes.colors.extend([_AXIS_COLORS[k], _AXIS_COLORS[k]])
+    for a in range(3):
+        axes.points.append(_point(lm.tip[k], offset))
+        axes.points.append(_point(lm.tip[k] + _AXIS_LENGTH * lm.palm[k][:, a], offset))
+        axes.colors.extend([_AXIS_COLORS[a], _AXIS_COLORS[a]])
     return [skeleton, axes]
+
+
+def _path_marker(lm, offset, base, ident, color, width, label):
+    """Return the fingertip path of one arm over a motion's keyframes, as a line strip."""
+    path = Marker(header=base.header, ns=base.ns, id=ident, type=Marker.LINE_STRIP,
+                  action=Marker.ADD)
+    path.pose.orientation.w = 1.0
+    path.scale.x = width
+    path.color = color
+    path.text = label
+    path.points = [_point(p, offset) for p in lm.tip]
+    return path
 
 
 def library_markers(robot, reference, current, stamp, frame_id='base_link', spacing=0.8):
@@ -161,9 +187,11 @@ def library_markers(robot, reference, current, stamp, frame_id='base_link', spac
     Return the RViz markers comparing the reference and the current library.
 
     The first marker deletes everything previously shown.  Each gesture has its own
-    namespace and sits ``spacing`` metres further along -y than the previous one; per
-    keyframe and arm there is a grey reference skeleton and a coloured reconfigured one
-    (shoulder-elbow-wrist-fingertip, with palm axes at the fingertip), and a text label.
+    namespace and sits ``spacing`` metres further along -y than the previous one.  At up
+    to six keyframes spread over the motion, each arm gets a grey reference skeleton
+    and a coloured reconfigured one (shoulder-elbow-wrist-fingertip, with palm axes at
+    the fingertip); a motion of several keyframes also gets the fingertip paths (the
+    second paper's Fig. 5-7 view), and each gesture a text label.
     """
     clear = Marker(action=Marker.DELETEALL)
     clear.header.stamp = stamp
@@ -172,19 +200,31 @@ def library_markers(robot, reference, current, stamp, frame_id='base_link', spac
     ref_by_name = {g.name: g for g in reference.gestures}
     for gi, gesture in enumerate(current.gestures):
         ref = ref_by_name.get(gesture.name)
+        if ref is not None and len(ref.positions) != len(gesture.positions):
+            ref = None
         offset = (0.0, -gi * spacing, 0.0)
         base = Marker()
         base.header.stamp = stamp
         base.header.frame_id = frame_id
         base.ns = gesture.name
-        for k, q in enumerate(gesture.positions):
-            for ai, side in enumerate(ARMS):
+        n = len(gesture.positions)
+        for ai, side in enumerate(ARMS):
+            new = _landmarks(robot, gesture.positions, side)
+            old = None if ref is None else _landmarks(robot, ref.positions, side)
+            for k in _figure_frames(n):
                 ident = k * 100 + ai * 10
-                if ref is not None and k < len(ref.positions):
-                    markers += _arm_markers(robot, ref.positions[k], side, offset, base,
-                                            ident, _REF_COLOR, 0.008, 'reference')
-                markers += _arm_markers(robot, q, side, offset, base, ident + 2,
+                if old is not None:
+                    markers += _arm_markers(robot, old, k, side, offset, base, ident,
+                                            _REF_COLOR, 0.008, 'reference')
+                markers += _arm_markers(robot, new, k, side, offset, base, ident + 2,
                                         _NEW_COLOR[side], 0.015, 'reconfigured')
+            if n > 1:
+                ident = 1_000_000 + ai * 10
+                if old is not None:
+                    markers.append(_path_marker(old, offset, base, ident, _REF_COLOR, 0.004,
+                                                'reference path'))
+                markers.append(_path_marker(new, offset, base, ident + 1, _NEW_COLOR[side],
+                                            0.008, 'reconfigured path'))
         text = Marker(header=base.header, ns=base.ns, id=99999, type=Marker.TEXT_VIEW_FACING,
                       action=Marker.ADD)
         text.pose.position.y = offset[1]

@@ -270,6 +270,16 @@ def test_auto_falls_back_to_kriging_when_the_deadline_is_short(robot, product_li
     assert res['bye'].method == 'keyframes'
 
 
+@pytest.mark.parametrize('method', ['kriging', 'per_point'])
+def test_average_lock_is_over_whole_motions_not_typical_points(robot, product_library,
+                                                               method):
+    # The paper's average: each gesture's keyframes averaged, then over the gestures.
+    expected = product_library.lock_averages('right')[1]
+    res = adapt_library(robot, product_library, {'right_arm_joint2': None}, method=method,
+                        deadline=0.05, seed=0)
+    assert res.locks['right_arm_joint2'] == pytest.approx(expected, abs=1e-12)
+
+
 def test_typical_points_are_computed_once_per_library(robot, product_library):
     typ = typical_points(robot, product_library)
     assert typ['wai'] is None and typ['bye'] is None
