@@ -2,6 +2,7 @@
 
 import copy
 import re
+import shutil
 
 from conftest import CONFIG_DIR
 from namo_fault_recovery import ConfigError, load_library, load_robot
@@ -88,6 +89,9 @@ def test_radians_and_metres_are_accepted(tmp_path):
 def _gestures_with(tmp_path, edit):
     data = copy.deepcopy(GESTURES)
     edit(data)
+    # The packaged library's dense motions are CSV files beside it.
+    shutil.copytree(CONFIG_DIR / 'trajectories', tmp_path / 'trajectories',
+                    dirs_exist_ok=True)
     return _write(tmp_path, 'gestures.yaml', data)
 
 

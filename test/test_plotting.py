@@ -6,6 +6,7 @@ import sys
 from namo_fault_recovery import plotting
 from namo_fault_recovery.cli import main
 from namo_fault_recovery.reconfigure import reconfigure_library
+from namo_fault_recovery.resources import config_path, PAPER_GESTURE_FILE
 import numpy as np
 import pytest
 
@@ -21,12 +22,12 @@ def _is_png(path):
 def test_plot_command_writes_png(tmp_path):
     path = tmp_path / 'wai.png'
     out = io.StringIO()
-    code = main(['plot', '--gesture', 'wai', '--fault', 'right_arm_joint2', '--out', str(path)],
-                out)
+    code = main(['--gesture-file', str(config_path(PAPER_GESTURE_FILE)), 'plot', '--gesture',
+                 'wai', '--fault', 'right_arm_joint2', '--out', str(path)], out)
     assert code == 0
     assert _is_png(path)
     text = out.getvalue()
-    assert 'lock right_arm_joint2 = -14.25 deg' in text
+    assert 'lock right_arm_joint2 = -14.25 deg' in text   # Table 2's average
     assert 'left  reconfigured' in text   # both arms for Wai
 
 
