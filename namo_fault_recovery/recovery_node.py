@@ -902,13 +902,18 @@ class RecoveryNode(Node):
                   ('deadline_met', str(current.deadline_met).lower()),
                   ('success', str(current.success).lower()),
                   ('frozen_arms', ' '.join(current.frozen_arms)),
-                  ('seed', current.settings.get('seed', ''))]
+                  ('seed', current.settings.get('seed', '')),
+                  ('tool_length_mm', f'{current.tool_mm:g}'), ('tool_arm', current.tool_arm)]
         for g in current.gestures:
             pairs += [(f'{g.name}.score_before', f'{g.score_before:.6g}'),
                       (f'{g.name}.score_after', f'{g.score_after:.6g}'),
                       (f'{g.name}.time_sec', f'{g.wall_time:.4f}'),
                       (f'{g.name}.status', g.status),
-                      (f'{g.name}.stage', g.stage)]
+                      (f'{g.name}.stage', g.stage),
+                      (f'{g.name}.method', g.method),
+                      (f'{g.name}.typical_points', g.typical_points),
+                      (f'{g.name}.tip_error_mm', f'{g.tip_error_mm:.3f}'),
+                      (f'{g.name}.max_jump_deg', f'{g.max_jump_deg:.3f}')]
             if current.settings.get('collision'):
                 pairs.append((f'{g.name}.collides', str(g.collides).lower()))
                 if g.colliding_pairs:

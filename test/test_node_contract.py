@@ -262,6 +262,40 @@ def test_measured_lock_strategy_uses_joint_states(client):
         assert client.set_parameters(lock_strategy='average')[0].successful
 
 
+def test_tool_length_set_at_run_time_re_adapts_the_motions(client, robot):
+    """A structure change without any failed joint: a 50 mm tool in the right hand."""
+    reference = reset(client)
+    results = client.set_parameters(tool_length_mm=50.0)
+    assert results[0].successful, results[0].reason
+    try:
+        adapted = client.wait_library(after=reference.stamp, what='the library for the tool')
+        statuses = client.wait_diag(
+            lambda s: ('reconfiguration' in s
+                       and values(s, 'reconfiguration').get('tool_length_mm') == '50'
+                       and values(s, 'reconfiguration')['up_to_date'] == 'true'),
+            what='diagnostics of the tool run')
+        recon = values(statuses, 'reconfiguration')
+        assert recon['tool_arm'] == 'right'
+        # The dense circle goes through its typical points and Kriging, and its
+        # fingertip comes back towards the designed path (unadapted: 50 mm off).
+        assert recon['circle.method'] in ('kriging', 'per_point')
+        assert 0 < int(recon['circle.typical_points']) < 100
+        assert float(recon['circle.tip_error_mm']) < 25.0
+        assert len(adapted.positions('circle')) == 100
+        assert adapted.positions('circle') != reference.positions('circle')
+        # The left arm holds no tool: Wai's left arm is untouched.
+        left = [robot.joint_names.index(j) for j in robot.arms['left'].joint_names]
+        assert recon['wai.status'] in ('converged', 'unchanged')
+        for q_new, q_ref in zip(adapted.positions('bye'), reference.positions('bye')):
+            assert [q_new[i] for i in left] == [q_ref[i] for i in left]
+    finally:
+        assert client.set_parameters(tool_length_mm=0.0)[0].successful
+    back = client.wait_library(lambda v: v.positions('circle') == reference.positions('circle'),
+                               what='the reference library once the tool is removed')
+    for name in GESTURES:
+        assert back.positions(name) == reference.positions(name)
+
+
 # --- bad input -------------------------------------------------------------------------
 
 
