@@ -6,7 +6,7 @@ import json
 import math
 
 from namo_fault_recovery.benchmarks import common, deadline, load_best_known, optimum, paper
-from namo_fault_recovery.benchmarks import speed
+from namo_fault_recovery.benchmarks import motion, speed
 from namo_fault_recovery.benchmarks.paper_data import TABLE6
 from namo_fault_recovery.cli import main
 from namo_fault_recovery.reconfigure import reconfigure_library
@@ -174,3 +174,20 @@ def test_paper_bench_in_two_processes(tmp_path):
                           '--out', str(tmp_path), '--quiet', '--no-plots'])
     assert code == 0 and '4 new run(s)' in text
     assert len(list((tmp_path / 'cases').glob('*.json'))) == 4
+
+
+def test_motion_bench_compares_both_methods_on_the_wave(tmp_path):
+    out = io.StringIO()
+    rows = motion.bench_motion(out, str(tmp_path), seed=0, motions=('bye',))
+    text = out.getvalue()
+    assert '## bye: 6 points' in text and 'The paper (its own 3-DOF arm' in text
+    assert len(rows) == 2 * len(motion.SCENARIOS)
+    doc = json.loads((tmp_path / 'motion.json').read_text())
+    assert len(doc['rows']) == len(rows)
+    for kriging, per_point in zip(rows[::2], rows[1::2]):
+        assert (kriging['method'], per_point['method']) == ('kriging', 'per_point')
+        assert per_point['cost_pct'] == 100.0 and per_point['typical'] == 6
+        assert 0 < kriging['typical'] < 6 and kriging['nfev'] > 0
+        for row in (kriging, per_point):
+            assert _finite(row['tip_error_mean_mm']) and _finite(row['jump_before_deg'])
+            assert row['tip_error_mean_mm'] <= row['tip_error_max_mm'] + 1e-9

@@ -65,7 +65,7 @@ def bench_motion(out, out_dir, seed=0, motions=MOTIONS, robot_file=None, gesture
                   f'{threshold:g} mm\n')
         out.write(f'{"scenario":36s} {"method":10s} {"K":>3s} {"evals":>7s} {"cost":>6s} '
                   f'{"time ms":>8s} {"err0 mm":>8s} {"mean mm":>8s} {"max mm":>7s} '
-                  f'{"recov":>6s} {"score":>7s} {"jump":>6s} {"stage":>5s}\n')
+                  f'{"recov":>6s} {"score":>7s} {"jump0":>6s} {"jump":>6s} {"stage":>5s}\n')
         for label, kwargs in SCENARIOS:
             pair = {}
             for method in METHODS:
@@ -96,13 +96,15 @@ def bench_motion(out, out_dir, seed=0, motions=MOTIONS, robot_file=None, gesture
                           f'{row["nfev"]:7d} {row["cost_pct"]:5.1f}% {row["wall_ms"]:8.0f} '
                           f'{row["tip_error_before_mm"]:8.1f} {row["tip_error_mean_mm"]:8.1f} '
                           f'{row["tip_error_max_mm"]:7.1f} {row["recovery_pct"]:5.1f}% '
-                          f'{row["score_mean"]:7.2f} {row["jump_after_deg"]:6.1f} '
+                          f'{row["score_mean"]:7.2f} {row["jump_before_deg"]:6.1f} '
+                          f'{row["jump_after_deg"]:6.1f} '
                           f'{row["expansion_stage"]:5d}\n')
     out.write('\nK: points explored; cost: evaluations of the method / those of per-point '
               'exploration in the same run; err0: mean fingertip error of the unadapted '
               'motion; recov: 1 - mean error '
               '/ err0 (the paper\'s "97% similar"); score: mean similarity score (lower is '
-              'better); jump: largest joint step (deg) between successive points, designed '
+              'better); jump0 / jump: largest joint step (deg) between successive points, '
+              'unadapted (locks applied) / adapted; designed '
               f'{rows[0]["jump_designed_deg"]:.1f} deg for the circle; stage: DOF expansion '
               'stages used.\n\nThe paper (its own 3-DOF arm; compare shapes, not values):\n')
     for label, text in PAPER.items():
