@@ -148,16 +148,23 @@ def _landmarks(robot, positions, side):
     return forward_kinematics(robot, q, side)
 
 
+def _line_strip(base, ident, color, width, label, points_mm, offset):
+    """Return one labelled LINE_STRIP marker through ``points_mm`` (mm, robot frame)."""
+    strip = Marker(header=base.header, ns=base.ns, id=ident, type=Marker.LINE_STRIP,
+                   action=Marker.ADD)
+    strip.pose.orientation.w = 1.0
+    strip.scale.x = width
+    strip.color = color
+    strip.text = label
+    strip.points = [_point(p, offset) for p in points_mm]
+    return strip
+
+
 def _arm_markers(robot, lm, k, side, offset, base, ident, color, width, label):
     """Return the skeleton line strip and palm-axes line list of one arm at keyframe k."""
-    skeleton = Marker(header=base.header, ns=base.ns, id=ident, type=Marker.LINE_STRIP,
-                      action=Marker.ADD)
-    skeleton.pose.orientation.w = 1.0
-    skeleton.scale.x = width
-    skeleton.color = color
-    skeleton.text = label
-    skeleton.points = [_point(p, offset) for p in
-                       (shoulder_position(robot, side), lm.elbow[k], lm.wrist[k], lm.tip[k])]
+    skeleton = _line_strip(base, ident, color, width, label,
+                           (shoulder_position(robot, side), lm.elbow[k], lm.wrist[k],
+                            lm.tip[k]), offset)
     axes = Marker(header=base.header, ns=base.ns, id=ident + 1, type=Marker.LINE_LIST,
                   action=Marker.ADD)
     axes.pose.orientation.w = 1.0
@@ -168,18 +175,6 @@ def _arm_markers(robot, lm, k, side, offset, base, ident, color, width, label):
         axes.points.append(_point(lm.tip[k] + _AXIS_LENGTH * lm.palm[k][:, a], offset))
         axes.colors.extend([_AXIS_COLORS[a], _AXIS_COLORS[a]])
     return [skeleton, axes]
-
-
-def _path_marker(lm, offset, base, ident, color, width, label):
-    """Return the fingertip path of one arm over a motion's keyframes, as a line strip."""
-    path = Marker(header=base.header, ns=base.ns, id=ident, type=Marker.LINE_STRIP,
-                  action=Marker.ADD)
-    path.pose.orientation.w = 1.0
-    path.scale.x = width
-    path.color = color
-    path.text = label
-    path.points = [_point(p, offset) for p in lm.tip]
-    return path
 
 
 def library_markers(robot, reference, current, stamp, frame_id='base_link', spacing=0.8):
@@ -221,10 +216,10 @@ def library_markers(robot, reference, current, stamp, frame_id='base_link', spac
             if n > 1:
                 ident = 1_000_000 + ai * 10
                 if old is not None:
-                    markers.append(_path_marker(old, offset, base, ident, _REF_COLOR, 0.004,
-                                                'reference path'))
-                markers.append(_path_marker(new, offset, base, ident + 1, _NEW_COLOR[side],
-                                            0.008, 'reconfigured path'))
+                    markers.append(_line_strip(base, ident, _REF_COLOR, 0.004,
+                                               'reference path', old.tip, offset))
+                markers.append(_line_strip(base, ident + 1, _NEW_COLOR[side], 0.008,
+                                           'reconfigured path', new.tip, offset))
         text = Marker(header=base.header, ns=base.ns, id=99999, type=Marker.TEXT_VIEW_FACING,
                       action=Marker.ADD)
         text.pose.position.y = offset[1]
