@@ -65,6 +65,7 @@ class GestureAdaptation:
     jump_before_deg: float
     jump_after_deg: float
     kriging_sigma_deg: tuple = ()   # Kriging standard deviation per point
+    score_before_max: float = 0.0   # worst point of the unadapted motion
     expansion_stage: int = 0
     free_joints: tuple = ()
     message: str = ''
@@ -438,4 +439,5 @@ def _describe(robot, model, scorer, gesture, ids, design, base_r, base_l, q_r, q
         jump_designed_deg=_jump(design),
         jump_before_deg=_jump(np.concatenate((base_r, base_l), axis=1)),
         jump_after_deg=_jump(adapted), kriging_sigma_deg=tuple(sigma),
-        expansion_stage=int(stage), free_joints=tuple(free), message=message)
+        score_before_max=float(before.max()), expansion_stage=int(stage),
+        free_joints=tuple(free), message=message)

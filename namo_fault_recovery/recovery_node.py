@@ -625,9 +625,9 @@ class RecoveryNode(Node):
                 name=g.name,
                 times=tuple(float(kf.time_from_start) for kf in g.keyframes),
                 positions=tuple(tuple(float(a) for a in kf.positions()) for kf in g.keyframes),
-                score_before=float(e.score_before if e else g.score_before),
-                score_after=float(e.score_after if e and g.method != 'kriging'
-                                  else g.score_max),
+                # Both the worst point of the whole motion, however it was adapted.
+                score_before=float(g.score_before_max),
+                score_after=float(g.score_max),
                 wall_time=float(report.wall_time), status=str(g.status),
                 message=str(e.message if e and g.method == 'keyframes' else g.message),
                 collides=bool(e.collides) if e else False,
