@@ -41,6 +41,7 @@ DEFAULT_MIN_POINTS = 12        # shorter motions are explored at every keyframe
 DEFAULT_CONTINUITY = 0.01      # penalty per deg^2 of joint-space jump
 DEFAULT_STAY_CLOSE = 1e-3      # per deg^2 away from the design, at the typical points
 _TYPICAL_SHARE = 0.9           # of the deadline for the typical points in ``auto``
+_FINISH_MARGIN = 0.03          # s of the deadline kept for Kriging and the figures
 _SETTLED_DEG = 0.5             # a consistency sweep that moves no point more has settled
 _MAX_SWEEPS = 6                # consistency sweeps at most (5 fixed the elbow-lock circle)
 
@@ -154,7 +155,8 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
     if seed is None:
         seed = int(np.random.SeedSequence().entropy % (2 ** 63))
     rng = np.random.default_rng(seed)
-    end = None if deadline is None else start + deadline
+    # Kriging and the figures run after the search: keep a little time for them.
+    end = None if deadline is None else start + max(deadline - _FINISH_MARGIN, 0.5 * deadline)
     if quantisations is None:
         quantisations = typical_points(robot, library, distortion_mm, min_points)
     model = robot.with_tool(tool_mm, tool_arm)
@@ -241,8 +243,10 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
                                         algo, continuity, expansion_threshold, end, cancel,
                                         rng, q_r, q_l, typical_res is None)
             if out is None:
+                kept = ('the typical-point result with Kriging is used' if typical_res
+                        is not None else 'the motion is published unadapted (locks applied)')
                 notes.append(f'{gesture.name}: the per-point pass could not finish by the '
-                             f'deadline; the typical-point result with Kriging is used')
+                             f'deadline; {kept}')
                 if method == 'per_point':
                     status = 'deadline'
             else:
@@ -329,7 +333,7 @@ def _chain_with_expansion(model, scorer, ids, base_r, base_l, design, layouts, a
     Run the per-point chain, then its staged expansion while the worst point is poor.
 
     Returns None if the deadline cut the first pass, else (right, left, nfev, stage,
-    layout, status).
+    layout, status); status is 'deadline' when a later expansion stage was cut short.
     """
     nfev = 0
     best = None
@@ -339,7 +343,8 @@ def _chain_with_expansion(model, scorer, ids, base_r, base_l, design, layouts, a
         out = _chain(model, scorer, ids, base_r, base_l, design, layout, algo, continuity,
                      end, cancel, rng, start_r, start_l)
         if out is None:
-            return None if best is None else best[:2] + (nfev,) + best[3:]
+            # A later stage was cut short: keep the best completed stage, say so.
+            return None if best is None else best[:2] + (nfev,) + best[3:5] + ('deadline',)
         q_r, q_l, used, f = out
         nfev += used
         reach = scorer.tip_error(q_r, q_l, ids).max()

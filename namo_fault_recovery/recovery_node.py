@@ -477,21 +477,25 @@ class RecoveryNode(Node):
             self._faults = {}
             self._fault_version += 1
             self._requested_gen += 1
-            self._handled_gen = self._requested_gen
-            self._published_gen = self._requested_gen
             self._last_accepted = time.time()
-            result = conv.reference_result(self._library, self._settings['deadline'])
-            if self._settings['tool_mm'] > 0:
-                self._handled_gen -= 1     # the tool is still there: adapt to it alone
-            else:
+            tool_mm = self._settings['tool_mm']
+            if tool_mm <= 0:
+                self._handled_gen = self._requested_gen
+                self._published_gen = self._requested_gen
+                result = conv.reference_result(self._library, self._settings['deadline'])
                 self._persist_locked(result)
                 self._publish_locked(result)
+            # else the tool is still there: the worker adapts the library to it alone.
             self._cond.notify_all()
-        self.get_logger().info(f'cleared {count} fault(s); reference library published')
+        if tool_mm <= 0:
+            done = f'the reference library is published ({len(self._library)} gestures)'
+        else:
+            done = (f'the library is being adapted to the {tool_mm:g} mm tool alone '
+                    f'(tool_length_mm)')
+        self.get_logger().info(f'cleared {count} fault(s); {done}')
         self._publish_diagnostics()
         response.success = True
-        response.message = (f'cleared {count} fault(s); the reference library is published '
-                            f'({len(self._library)} gestures)')
+        response.message = f'cleared {count} fault(s); {done}'
         return response
 
     # --- the worker -----------------------------------------------------------------
@@ -603,13 +607,19 @@ class RecoveryNode(Node):
         for joint, fault in faults.items():
             if fault.measured is not None:
                 measured[joint] = fault.measured   # where it stopped when it failed
+        # Typical points are cached per threshold; computing new ones counts against
+        # the deadline like the rest of the run.
+        began = time.monotonic()
+        quantisations = self._typical_points(settings['distortion_mm'])
+        spent = time.monotonic() - began
         report = adapt_library(
             self._robot, self._library, requested, method=settings['method'],
             tool_mm=settings['tool_mm'], tool_arm=settings['tool_arm'],
             distortion_mm=settings['distortion_mm'], continuity=settings['continuity'],
-            quantisations=self._typical_points(settings['distortion_mm']),
+            quantisations=quantisations,
             algorithm=settings['algorithm'], preset=settings['preset'],
-            deadline=settings['deadline'], seed=settings['seed'],
+            deadline=max(settings['deadline'] - spent, 0.5 * settings['deadline']),
+            seed=settings['seed'],
             weights=settings['weights'], lock_strategy=settings['lock_strategy'],
             measured=measured, cancel=cancel, bimanual=settings['bimanual'],
             collision=settings['collision'])
@@ -628,7 +638,7 @@ class RecoveryNode(Node):
                 # Both the worst point of the whole motion, however it was adapted.
                 score_before=float(g.score_before_max),
                 score_after=float(g.score_max),
-                wall_time=float(report.wall_time), status=str(g.status),
+                wall_time=float(report.wall_time + spent), status=str(g.status),
                 message=str(e.message if e and g.method == 'keyframes' else g.message),
                 collides=bool(e.collides) if e else False,
                 breakdown={k: float(v) for k, v in dict(e.breakdown if e else {}).items()},
@@ -637,13 +647,15 @@ class RecoveryNode(Node):
                 method=g.method, typical_points=len(g.typical),
                 tip_error_mm=float(g.tip_error_mean_mm),
                 max_jump_deg=float(g.jump_after_deg)))
-        success = (report.deadline_met and engine is not None and engine.success
+        # ``per_point`` runs no typical-point engine: its statuses say it all.
+        success = (report.deadline_met and (engine is None or engine.success)
                    and all(math.isfinite(g.score_after) for g in gestures))
         return LibraryResult(
             gestures=tuple(gestures), faults=requested,
             locks={j: float(a) for j, a in report.locks.items()},
-            frozen_arms=tuple(engine.frozen_arms if engine else ()),
-            wall_time=float(report.wall_time), deadline=settings['deadline'],
+            frozen_arms=tuple(engine.frozen_arms if engine
+                              else frozen_arms(self._robot, report.locks)),
+            wall_time=float(report.wall_time + spent), deadline=settings['deadline'],
             deadline_met=bool(report.deadline_met), success=bool(success),
             cancelled=bool(engine.cancelled if engine else False), settings=public,
             tool_mm=settings['tool_mm'], tool_arm=settings['tool_arm'])
@@ -771,6 +783,9 @@ class RecoveryNode(Node):
             reason = 'the saved library was computed for another fault set'
         elif library.settings.get('lock_strategy') != self._settings['lock_strategy']:
             reason = 'the lock strategy changed since it was saved'
+        elif _tool(library.tool_mm, library.tool_arm) != _tool(self._settings['tool_mm'],
+                                                               self._settings['tool_arm']):
+            reason = 'the tool (tool_length_mm, tool_arm) changed since it was saved'
         else:
             reason = self._check_result(library, state.faults)
         with self._cond:
@@ -943,6 +958,11 @@ class RecoveryNode(Node):
         housekeeping = getattr(self, '_housekeeping', None)
         if housekeeping is not None:
             housekeeping.shutdown(wait=True)
+
+
+def _tool(length_mm, arm):
+    """Return a comparable structure change: no tool is the same on either arm."""
+    return (float(length_mm), arm) if length_mm > 0 else (0.0, None)
 
 
 def _public_settings(settings):

@@ -94,11 +94,14 @@ def fmt_angle(rad):
 
 def summary(result):
     """Return the one-line summary of a library version that a person reads."""
-    if not result.faults and not result.locks:
+    tool = result.tool_mm > 0
+    if not result.faults and not result.locks and not tool:
         return (f'no faults: the reference library is published '
                 f'({len(result.gestures)} gestures, unchanged)')
-    locks = ', '.join(f'{j} at {math.degrees(a):.2f} deg'
-                      for j, a in result.locks.items())
+    changes = [f'{j} at {math.degrees(a):.2f} deg' for j, a in result.locks.items()]
+    if tool:
+        changes.append(f'a {result.tool_mm:g} mm tool in the {result.tool_arm} hand')
+    locks = ', '.join(changes)
     finite = sum(1 for g in result.gestures if math.isfinite(g.score_after))
     timing = (f'deadline {result.deadline:.3f} s '
               f"{'met' if result.deadline_met else 'MISSED, best found so far used'}")
@@ -193,6 +196,8 @@ def library_markers(robot, reference, current, stamp, frame_id='base_link', spac
     clear.header.frame_id = frame_id
     markers = [clear]
     ref_by_name = {g.name: g for g in reference.gestures}
+    # The reconfigured arms are drawn as they are: with the tool, if one is held.
+    model = robot.with_tool(current.tool_mm, current.tool_arm)
     for gi, gesture in enumerate(current.gestures):
         ref = ref_by_name.get(gesture.name)
         if ref is not None and len(ref.positions) != len(gesture.positions):
@@ -204,14 +209,14 @@ def library_markers(robot, reference, current, stamp, frame_id='base_link', spac
         base.ns = gesture.name
         n = len(gesture.positions)
         for ai, side in enumerate(ARMS):
-            new = _landmarks(robot, gesture.positions, side)
+            new = _landmarks(model, gesture.positions, side)
             old = None if ref is None else _landmarks(robot, ref.positions, side)
             for k in _figure_frames(n):
                 ident = k * 100 + ai * 10
                 if old is not None:
                     markers += _arm_markers(robot, old, k, side, offset, base, ident,
                                             _REF_COLOR, 0.008, 'reference')
-                markers += _arm_markers(robot, new, k, side, offset, base, ident + 2,
+                markers += _arm_markers(model, new, k, side, offset, base, ident + 2,
                                         _NEW_COLOR[side], 0.015, 'reconfigured')
             if n > 1:
                 ident = 1_000_000 + ai * 10

@@ -34,6 +34,9 @@ def load_trajectory_csv(path, robot, scale):
         raise ConfigError(path, None, f'cannot read file ({exc.strerror or exc})') from exc
     except csv.Error as exc:
         raise ConfigError(path, None, f'not a valid CSV file ({exc})') from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(path, None, f'not a UTF-8 text file (byte {exc.start}: '
+                          f'{exc.reason})') from exc
     if not rows:
         raise ConfigError(path, None, f'no samples; expected rows of time and '
                           f'{len(names)} joint angles')

@@ -3,6 +3,7 @@
 from pathlib import Path
 
 from namo_fault_recovery import ConfigError, load_library
+from namo_fault_recovery import motion as motion_module
 from namo_fault_recovery.circle_design import circle_path, RADIUS_MM
 from namo_fault_recovery.gestures import GestureLibrary
 from namo_fault_recovery.kinematics import forward_kinematics
@@ -77,6 +78,14 @@ def test_csv_errors_name_file_line_and_column(tmp_path, robot, text, where, prob
     assert str(path) in str(info.value) and problem in str(info.value)
     if where:
         assert info.value.key == where
+
+
+def test_csv_that_is_not_text_is_a_config_error(tmp_path, robot):
+    path = tmp_path / 'motion.csv'
+    path.write_bytes(HEADER.encode() + b'0.1,\xff\xfe' + ROW[1:].encode())
+    with pytest.raises(ConfigError, match='not a UTF-8 text file') as info:
+        load_trajectory_csv(path, robot, np.pi / 180)
+    assert str(path) in str(info.value)
 
 
 def test_csv_header_maps_columns_in_any_order(tmp_path, robot):
@@ -221,6 +230,26 @@ def test_expansion_recovers_the_circle_with_the_elbow_locked(elbow_locked, metho
     assert g.tip_error_before_mm > 300
     assert g.expansion_stage >= 1 and 'right_arm_joint6' in g.free_joints
     assert g.tip_error_mean_mm < 0.05 * g.tip_error_before_mm
+
+
+def test_expansion_cut_by_the_deadline_keeps_the_completed_stage(robot, circle, monkeypatch):
+    # The deadline cuts the per-point pass of the second stage (simulated: the chain
+    # reports that it could not finish): the first stage's motion is kept, and says so.
+    real = motion_module._chain
+    calls = []
+
+    def chain(*args, **kwargs):
+        calls.append(1)
+        return None if len(calls) > 1 else real(*args, **kwargs)
+
+    monkeypatch.setattr(motion_module, '_chain', chain)
+    res = adapt_library(robot, circle, {ELBOW: 0.0}, method='per_point', deadline=None,
+                        seed=2)
+    g = res['circle']
+    assert len(calls) == 2
+    assert g.status == 'deadline' and not res.deadline_met
+    assert g.method == 'per_point' and g.expansion_stage == 0
+    assert all(kf.right[3] == 0.0 for kf in g.keyframes)
 
 
 def test_continuity_is_bounded(elbow_locked):

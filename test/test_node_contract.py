@@ -276,6 +276,10 @@ def test_tool_length_set_at_run_time_re_adapts_the_motions(client, robot):
             what='diagnostics of the tool run')
         recon = values(statuses, 'reconfiguration')
         assert recon['tool_arm'] == 'right'
+        response = client.trigger('/reconfigure_gestures')
+        assert response.success, response.message
+        assert 'for a 50 mm tool in the right hand:' in response.message
+        assert 'no faults' not in response.message
         # The dense circle goes through its typical points and Kriging, and its
         # fingertip comes back towards the designed path (unadapted: 50 mm off).
         assert recon['circle.method'] in ('kriging', 'per_point')
@@ -283,17 +287,36 @@ def test_tool_length_set_at_run_time_re_adapts_the_motions(client, robot):
         assert float(recon['circle.tip_error_mm']) < 25.0
         assert len(adapted.positions('circle')) == 100
         assert adapted.positions('circle') != reference.positions('circle')
-        # The left arm holds no tool: Wai's left arm is untouched.
+        # One-arm gestures of the right hand leave the left arm where it was designed.
         left = [robot.joint_names.index(j) for j in robot.arms['left'].joint_names]
         assert recon['wai.status'] in ('converged', 'unchanged')
-        for q_new, q_ref in zip(adapted.positions('bye'), reference.positions('bye')):
-            assert [q_new[i] for i in left] == [q_ref[i] for i in left]
+        for name in ('bye', 'circle'):
+            for q_new, q_ref in zip(adapted.positions(name), reference.positions(name)):
+                assert [q_new[i] for i in left] == [q_ref[i] for i in left]
+        # Clearing faults keeps the tool: the library stays adapted to it.
+        response = client.trigger('/clear_faults')
+        assert response.success and 'adapted to the 50 mm tool' in response.message
     finally:
         assert client.set_parameters(tool_length_mm=0.0)[0].successful
     back = client.wait_library(lambda v: v.positions('circle') == reference.positions('circle'),
                                what='the reference library once the tool is removed')
     for name in GESTURES:
         assert back.positions(name) == reference.positions(name)
+
+
+def test_per_point_method_reports_success_and_the_per_point_pass(client):
+    reset(client)
+    assert client.set_parameters(trajectory_method='per_point')[0].successful
+    try:
+        inject(client, ['left_arm_joint4'])      # only Wai uses the left arm
+        response = client.trigger('/reconfigure_gestures')
+        assert response.success, response.message
+        statuses = wait_settled(client, ['left_arm_joint4'])
+        recon = values(statuses, 'reconfiguration')
+        assert recon['wai.method'] == 'per_point' and recon['success'] == 'true'
+        assert recon['frozen_arms'] == ''
+    finally:
+        assert client.set_parameters(trajectory_method='auto')[0].successful
 
 
 # --- bad input -------------------------------------------------------------------------

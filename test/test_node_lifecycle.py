@@ -81,6 +81,36 @@ def test_sigkill_then_restart_restores_and_republishes(tmp_path, client):
     no_traceback(node)
 
 
+def test_restart_with_another_tool_recomputes_instead_of_restoring(tmp_path, client):
+    state = tmp_path / 'state'
+    node = NodeProcess(DOMAIN, state_dir=state)
+    try:
+        reference = client.wait_library(what='the reference library')
+        client.publish_fault(['right_arm_joint4'], [0.0])
+        faulted = client.wait_library(after=reference.stamp, what='the library for the fault')
+    finally:
+        assert node.stop() == 0
+    saved = decode_state((state / 'state.json').read_text()).library
+    assert saved.tool_mm == 0.0
+
+    node = NodeProcess(DOMAIN, state_dir=state, args=['-p', 'tool_length_mm:=50.0'])
+    try:
+        statuses = client.wait_diag(
+            lambda s: ('reconfiguration' in s
+                       and statuses_values(s['reconfiguration']).get('tool_length_mm') == '50'
+                       and statuses_values(s['reconfiguration'])['up_to_date'] == 'true'),
+            what='diagnostics of the library recomputed for the tool')
+        assert 'joint right_arm_joint4' in statuses
+        latest = client.wait_library(
+            lambda v: v.positions('circle') != faulted.positions('circle'),
+            after=faulted.stamp, what='a library for the tool, not the restored one')
+        assert all(a == 0.0 for a in latest.column('right_arm_joint4'))
+    finally:
+        assert node.stop() == 0
+    assert 'the tool (tool_length_mm, tool_arm) changed since it was saved' in node.stderr
+    no_traceback(node)
+
+
 @pytest.mark.parametrize('content, reason', [
     ('{"format": "namo_fault_recovery/state", "version": 1, "faults": {', 'not valid JSON'),
     ('[1, 2, 3]', 'not a namo_fault_recovery/state document'),
