@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 
+from .collision import CollisionModel
 from .faults import resolve_locks
 from .gestures import GestureLibrary, Keyframe
 from .kinematics import _forward
@@ -67,6 +68,8 @@ class GestureAdaptation:
     jump_after_deg: float
     kriging_sigma_deg: tuple = ()   # Kriging standard deviation per point
     score_before_max: float = 0.0   # worst point of the unadapted motion
+    collides: object = None         # with ``collision``: does any point of the motion?
+    colliding_pairs: tuple = ()     # the capsule pairs that touch, over the motion
     expansion_stage: int = 0
     free_joints: tuple = ()
     message: str = ''
@@ -197,6 +200,10 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
     faulted = {s for s in ARMS if locked[s] or model.tool_length(s) > 0}
     targets = [t for g in library for t in gesture_targets(g)]
     scorer = SimilarityScore(model, targets, weights, reference_robot=robot)
+    # Every point of the final motions is checked, Kriging-interpolated ones included.
+    checker = None
+    if engine.get('collision'):
+        checker = CollisionModel(model, targets, engine.get('capsules') or robot.capsules)
     algo = make_algorithm(algorithm, preset, **(settings or {}))
     results = []
     offset = 0
@@ -259,7 +266,7 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
                 status = chain_status if status in ('unchanged', 'converged') else status
         results.append(_describe(robot, model, scorer, gesture, ids, design, base_r, base_l,
                                  q_r, q_l, how, picks[gesture.name], status, nfev, sigma,
-                                 stage, free))
+                                 stage, free, checker))
     total = sum(g.nfev for g in results)
     return MotionAdaptation(results, locks, method, time.monotonic() - start, int(total),
                             seed, deadline, float(tool_mm), tool_arm, typical_res, notes)
@@ -412,10 +419,16 @@ def _jump(q):
 
 
 def _describe(robot, model, scorer, gesture, ids, design, base_r, base_l, q_r, q_l, how,
-              picks, status, nfev, sigma, stage, free):
-    """Compute a motion's figures: score, fingertip error and joint jumps."""
+              picks, status, nfev, sigma, stage, free, checker=None):
+    """Compute a motion's figures: score, fingertip error, joint jumps and collisions."""
     before = scorer.evaluate(base_r, base_l, ids)
     after = scorer.evaluate(q_r, q_l, ids)
+    collides, pairs = None, ()
+    if checker is not None:
+        lm_r, lm_l = _forward(model, q_r, 'right'), _forward(model, q_l, 'left')
+        collides = bool(checker.collides(lm_r, lm_l, ids).any())
+        pairs = tuple(dict.fromkeys(p for row in checker.colliding_pairs(lm_r, lm_l, ids)
+                                    for p in row))
     err_before = np.zeros(len(ids))
     err_after = np.zeros(len(ids))
     for side in gesture.arms:
@@ -444,5 +457,5 @@ def _describe(robot, model, scorer, gesture, ids, design, base_r, base_l, q_r, q
         jump_designed_deg=_jump(design),
         jump_before_deg=_jump(np.concatenate((base_r, base_l), axis=1)),
         jump_after_deg=_jump(adapted), kriging_sigma_deg=tuple(sigma),
-        score_before_max=float(before.max()), expansion_stage=int(stage),
-        free_joints=tuple(free), message=message)
+        score_before_max=float(before.max()), collides=collides, colliding_pairs=pairs,
+        expansion_stage=int(stage), free_joints=tuple(free), message=message)

@@ -640,10 +640,10 @@ class RecoveryNode(Node):
                 score_after=float(g.score_max),
                 wall_time=float(report.wall_time + spent), status=str(g.status),
                 message=str(e.message if e and g.method == 'keyframes' else g.message),
-                collides=bool(e.collides) if e else False,
+                collides=bool(g.collides),
                 breakdown={k: float(v) for k, v in dict(e.breakdown if e else {}).items()},
                 stage=int(e.stage if e else 1),
-                colliding_pairs=tuple(str(p) for p in (e.colliding_pairs if e else ())),
+                colliding_pairs=tuple(str(p) for p in g.colliding_pairs),
                 method=g.method, typical_points=len(g.typical),
                 tip_error_mm=float(g.tip_error_mean_mm),
                 max_jump_deg=float(g.jump_after_deg)))

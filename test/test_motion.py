@@ -5,11 +5,13 @@ from pathlib import Path
 from namo_fault_recovery import ConfigError, load_library
 from namo_fault_recovery import motion as motion_module
 from namo_fault_recovery.circle_design import circle_path, RADIUS_MM
+from namo_fault_recovery.collision import CollisionModel
 from namo_fault_recovery.gestures import GestureLibrary
 from namo_fault_recovery.kinematics import forward_kinematics
 from namo_fault_recovery.kriging import fit_spherical, OrdinaryKriging
 from namo_fault_recovery.kriging import SphericalVariogram, variogram_cloud
 from namo_fault_recovery.motion import adapt_library, typical_points
+from namo_fault_recovery.score import gesture_targets
 from namo_fault_recovery.trajectory_csv import load_trajectory_csv
 from namo_fault_recovery.vq import quantise
 import numpy as np
@@ -250,6 +252,24 @@ def test_expansion_cut_by_the_deadline_keeps_the_completed_stage(robot, circle, 
     assert g.status == 'deadline' and not res.deadline_met
     assert g.method == 'per_point' and g.expansion_stage == 0
     assert all(kf.right[3] == 0.0 for kf in g.keyframes)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_collisions_are_checked_at_every_point_of_the_motion(robot, circle, seed):
+    res = adapt_library(robot, circle, {'right_arm_joint1': 1.2}, method='kriging',
+                        deadline=None, seed=seed, collision=True)
+    g = res['circle']
+    # An independent check of the published keyframes, all 100 of them.
+    checker = CollisionModel(robot, gesture_targets(circle['circle']))
+    q_r = np.array([kf.right for kf in g.keyframes])
+    q_l = np.array([kf.left for kf in g.keyframes])
+    hits = checker.collides(forward_kinematics(robot, q_r, 'right'),
+                            forward_kinematics(robot, q_l, 'left'), np.arange(100))
+    assert g.collides == bool(hits.any())
+    if seed == 0:
+        # Known case: the typical points are clear, Kriging between them is not.
+        assert g.collides and not res.typical_result['circle'].collides
+        assert 'right_forearm-torso' in g.colliding_pairs
 
 
 def test_continuity_is_bounded(elbow_locked):
