@@ -263,7 +263,7 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
                 if typical_res is None:
                     stage = chain_stage
                     free = tuple(robot.arms[s].joint_names[j] for s, j in chain_free)
-                status = chain_status if status in ('unchanged', 'converged') else status
+                status = chain_status     # the published motion is the chain's
         results.append(_describe(robot, model, scorer, gesture, ids, design, base_r, base_l,
                                  q_r, q_l, how, picks[gesture.name], status, nfev, sigma,
                                  stage, free, checker))
