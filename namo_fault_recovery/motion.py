@@ -107,6 +107,11 @@ class MotionAdaptation:
         """Return True if no gesture was cut short by the deadline or a cancel."""
         return not any(g.status in ('deadline', 'cancelled') for g in self.gestures)
 
+    @property
+    def cancelled(self):
+        """Return True if any gesture was cut short by a cancel request."""
+        return any(g.status == 'cancelled' for g in self.gestures)
+
 
 def typical_points(robot, library, distortion_mm=DEFAULT_DISTORTION_MM,
                    min_points=DEFAULT_MIN_POINTS, seed=0):
@@ -168,20 +173,18 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
                   expansion_threshold=expansion_threshold, cancel=cancel,
                   tool_mm=tool_mm, tool_arm=tool_arm, **engine)
     notes = []
+    if lock_strategy != 'optimal':
+        # Lock angles come from the whole motions, not from their typical points.
+        faults, notes = resolve_locks(robot, library, faults, lock_strategy, measured)
+    # ``optimal`` lock angles are chosen at the typical points, even for ``per_point``.
     per_point_only = method == 'per_point' and lock_strategy != 'optimal'
 
     typical_res = None
+    locks = faults
     picks = {g.name: (tuple(range(len(g.keyframes))) if quantisations.get(g.name) is None
                       else tuple(int(i) for i in quantisations[g.name].typical))
              for g in library}
-    if per_point_only:
-        locks, lock_notes = resolve_locks(robot, library, faults, lock_strategy, measured)
-        notes += lock_notes
-    else:
-        if lock_strategy != 'optimal':
-            # Lock angles come from the whole motions, not from their typical points.
-            faults, lock_notes = resolve_locks(robot, library, faults, lock_strategy, measured)
-            notes += lock_notes
+    if not per_point_only:
         sub = GestureLibrary(tuple(g.with_keyframes([g.keyframes[i] for i in picks[g.name]])
                                    for g in library), library.source)
         budget = None
@@ -221,12 +224,12 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
             gres = typical_res[gesture.name]
             status, stage = gres.status, gres.expansion_stage
             free = gres.free_joints
+            layout = _layout(robot, gesture.arms, locked, faulted, _joint_set(robot, free))
             how = 'keyframes' if quantisations.get(gesture.name) is None else 'kriging'
             nfev = int(round(typical_res.nfev * len(picks[gesture.name])
                              / max(1, sum(len(p) for p in picks.values()))))
             solved = np.array([kf.positions() for kf in gres.keyframes])
             if how == 'kriging' and affected and free:
-                layout = _layout(robot, gesture.arms, locked, faulted, _joint_set(robot, free))
                 solved, used = _consistent(model, scorer, ids[list(picks[gesture.name])],
                                            design[list(picks[gesture.name])], solved, layout,
                                            continuity, end, cancel)
@@ -235,10 +238,8 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
         chain = affected and (method == 'per_point'
                               or (method == 'auto' and how == 'kriging'))
         if chain:
-            layouts = None
             if typical_res is not None:
-                layouts = [_layout(robot, gesture.arms, locked, faulted,
-                                   _joint_set(robot, free))]
+                layouts = [layout]      # the joints the typical points ended with
             else:
                 designed = _joint_set(robot, gesture.joints) if gesture.joints else None
                 layouts = [_layout(robot, gesture.arms, locked, faulted, designed)]

@@ -627,10 +627,9 @@ class RecoveryNode(Node):
         public['seed'] = report.seed
         public['notes'] = list(report.notes)
         engine = report.typical_result
-        by_name = {} if engine is None else {g.name: g for g in engine.gestures}
         gestures = []
         for g in report.gestures:
-            e = by_name.get(g.name)
+            e = engine[g.name] if engine is not None else None
             gestures.append(GestureResult(
                 name=g.name,
                 times=tuple(float(kf.time_from_start) for kf in g.keyframes),
@@ -653,11 +652,10 @@ class RecoveryNode(Node):
         return LibraryResult(
             gestures=tuple(gestures), faults=requested,
             locks={j: float(a) for j, a in report.locks.items()},
-            frozen_arms=tuple(engine.frozen_arms if engine
-                              else frozen_arms(self._robot, report.locks)),
+            frozen_arms=frozen_arms(self._robot, report.locks),
             wall_time=float(report.wall_time + spent), deadline=settings['deadline'],
             deadline_met=bool(report.deadline_met), success=bool(success),
-            cancelled=bool(engine.cancelled if engine else False), settings=public,
+            cancelled=report.cancelled, settings=public,
             tool_mm=settings['tool_mm'], tool_arm=settings['tool_arm'])
 
     def _check_result(self, result, faults=None):
