@@ -45,8 +45,8 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'recovery_node = namo_fault_recovery.recovery_node:main',
-            'namo-recovery = namo_fault_recovery.cli:main',
+            'recovery_node = namo_fault_recovery.ros.recovery_node:main',
+            'namo-recovery = namo_fault_recovery.cli.main:main',
         ],
     },
 )

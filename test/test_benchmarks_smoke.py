@@ -8,9 +8,9 @@ import math
 from namo_fault_recovery.benchmarks import common, deadline, load_best_known, optimum, paper
 from namo_fault_recovery.benchmarks import motion, speed
 from namo_fault_recovery.benchmarks.paper_data import TABLE6
-from namo_fault_recovery.cli import main
-from namo_fault_recovery.reconfigure import reconfigure_library
-from namo_fault_recovery.score import gesture_targets, SimilarityScore
+from namo_fault_recovery.cli.main import main
+from namo_fault_recovery.objective.score import gesture_targets, SimilarityScore
+from namo_fault_recovery.recovery.keyframes import reconfigure_library
 import numpy as np
 import pytest
 

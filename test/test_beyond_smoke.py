@@ -4,7 +4,7 @@ import io
 import json
 
 from namo_fault_recovery.benchmarks import beyond
-from namo_fault_recovery.cli import main
+from namo_fault_recovery.cli.main import main
 import numpy as np
 
 

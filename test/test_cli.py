@@ -6,7 +6,7 @@ from pathlib import Path
 import subprocess
 import sys
 
-from namo_fault_recovery.cli import main
+from namo_fault_recovery.cli.main import main
 import pytest
 
 
@@ -66,7 +66,7 @@ def test_bad_arguments_one_line_exit_2(capsys, argv, message):
 
 
 def test_console_entry_point_runs_as_a_process():
-    proc = subprocess.run([sys.executable, '-m', 'namo_fault_recovery.cli', 'score',
+    proc = subprocess.run([sys.executable, '-m', 'namo_fault_recovery.cli.main', 'score',
                            '--gesture', 'nope', '--right'] + ['0'] * 7,
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2

@@ -1,11 +1,11 @@
 """The capsule collision model: distances, hand-made poses, and no colliding output."""
 
 from hypothesis import given, HealthCheck, settings, strategies as st
-from namo_fault_recovery.capsules import CapsuleModel
-from namo_fault_recovery.collision import CollisionModel, segment_distance
-from namo_fault_recovery.kinematics import _forward_jacobian, forward_kinematics
-from namo_fault_recovery.reconfigure import reconfigure_library
-from namo_fault_recovery.score import gesture_targets
+from namo_fault_recovery.model.capsules import CapsuleModel
+from namo_fault_recovery.model.kinematics import batch_forward_jacobian, forward_kinematics
+from namo_fault_recovery.objective.collision import CollisionModel, segment_distance
+from namo_fault_recovery.objective.score import gesture_targets
+from namo_fault_recovery.recovery.keyframes import reconfigure_library
 import numpy as np
 import pytest
 
@@ -72,7 +72,7 @@ def test_penalty_gradient_matches_finite_differences(robot, model):
     rng = np.random.default_rng(3)
     q = np.radians([30, 5, -70, 90, -10, -45, 45]) + rng.normal(0, 0.05, (6, 7))
     lm_l = forward_kinematics(robot, np.radians([[30, 5, -45, 90, -10, -45, 45]] * 6), 'left')
-    lm_r, jac_r = _forward_jacobian(robot, q, 'right')
+    lm_r, jac_r = batch_forward_jacobian(robot, q, 'right')
     target = np.zeros(6, dtype=int)
     value, grads = model.penalty(lm_r, lm_l, target, jac_r, None)
     assert np.all(value > 0)

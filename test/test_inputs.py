@@ -2,7 +2,8 @@
 
 import math
 
-from namo_fault_recovery.inputs import BadInput, frozen_arms, parse_fault, parse_joint_state
+from namo_fault_recovery.recovery.locks import frozen_arms
+from namo_fault_recovery.ros.inputs import BadInput, parse_fault, parse_joint_state
 import pytest
 
 NAN = float('nan')

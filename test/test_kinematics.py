@@ -1,7 +1,7 @@
 """Forward kinematics against the spec's golden values, mirror symmetry and batching."""
 
 from namo_fault_recovery import forward_kinematics
-from namo_fault_recovery.kinematics import shoulder_position
+from namo_fault_recovery.model.kinematics import shoulder_position
 import numpy as np
 import pytest
 

@@ -1,7 +1,7 @@
 """Lock strategies, left/right symmetry and staged bimanual expansion."""
 
-from namo_fault_recovery.faults import resolve_locks
-from namo_fault_recovery.reconfigure import reconfigure_library
+from namo_fault_recovery.recovery.keyframes import reconfigure_library
+from namo_fault_recovery.recovery.locks import resolve_locks
 import numpy as np
 import pytest
 

@@ -1,17 +1,17 @@
 """Whole-motion adaptation: CSV trajectories, tools, VQ, Kriging, continuity, expansion."""
 
 from namo_fault_recovery import ConfigError, load_library
-from namo_fault_recovery import motion as motion_module
-from namo_fault_recovery.circle_design import circle_path, RADIUS_MM
-from namo_fault_recovery.collision import CollisionModel
-from namo_fault_recovery.gestures import GestureLibrary
-from namo_fault_recovery.kinematics import forward_kinematics
-from namo_fault_recovery.kriging import fit_spherical, OrdinaryKriging
-from namo_fault_recovery.kriging import SphericalVariogram, variogram_cloud
-from namo_fault_recovery.motion import adapt_library, typical_points
-from namo_fault_recovery.score import gesture_targets
-from namo_fault_recovery.trajectory_csv import load_trajectory_csv
-from namo_fault_recovery.vq import quantise
+from namo_fault_recovery.model.circle_design import circle_path, RADIUS_MM
+from namo_fault_recovery.model.gestures import GestureLibrary
+from namo_fault_recovery.model.kinematics import forward_kinematics
+from namo_fault_recovery.model.trajectory_csv import load_trajectory_csv
+from namo_fault_recovery.objective.collision import CollisionModel
+from namo_fault_recovery.objective.score import gesture_targets
+from namo_fault_recovery.recovery import motion as motion_module
+from namo_fault_recovery.recovery.kriging import fit_spherical, OrdinaryKriging
+from namo_fault_recovery.recovery.kriging import SphericalVariogram, variogram_cloud
+from namo_fault_recovery.recovery.motion import adapt_library, typical_points
+from namo_fault_recovery.recovery.vq import quantise
 import numpy as np
 import pytest
 

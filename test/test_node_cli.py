@@ -9,8 +9,8 @@ import io
 import json
 import math
 
-from namo_fault_recovery import ros_cli
-from namo_fault_recovery.motion import adapt_library
+from namo_fault_recovery.cli import ros_commands as ros_cli
+from namo_fault_recovery.recovery.motion import adapt_library
 from node_harness import NodeProcess, RosClient, session_domain
 import pytest
 

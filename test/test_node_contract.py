@@ -9,7 +9,7 @@ import csv
 import math
 from pathlib import Path
 
-from namo_fault_recovery.motion import adapt_library
+from namo_fault_recovery.recovery.motion import adapt_library
 from node_harness import close_to, NodeProcess, RosClient, session_domain, statuses_values
 import numpy as np
 import pytest

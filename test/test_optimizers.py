@@ -1,10 +1,10 @@
 """The optimisers: improvement, reproducibility, deadlines and clear errors."""
 
-from namo_fault_recovery.optimize import (ABC, BFOA, GA, GradientDescent, make_algorithm,
-                                          minimize, polish, Problem, STATUS_CANCELLED,
-                                          STATUS_DEADLINE, STATUS_DONE)
+from namo_fault_recovery.optimize import (ABC, BFOA, GA, GradientDescent, make_algorithm, minimize,
+                                          polish, Problem, STATUS_CANCELLED, STATUS_DEADLINE,
+                                          STATUS_DONE)
 from namo_fault_recovery.optimize.base import Clock
-from namo_fault_recovery.reconfigure import reconfigure_library
+from namo_fault_recovery.recovery.keyframes import reconfigure_library
 import numpy as np
 import pytest
 

@@ -3,9 +3,9 @@
 import io
 import sys
 
-from namo_fault_recovery import plotting
-from namo_fault_recovery.cli import main
-from namo_fault_recovery.reconfigure import reconfigure_library
+from namo_fault_recovery.benchmarks import plotting
+from namo_fault_recovery.cli.main import main
+from namo_fault_recovery.recovery.keyframes import reconfigure_library
 from namo_fault_recovery.resources import config_path, PAPER_GESTURE_FILE
 import numpy as np
 import pytest

@@ -4,10 +4,10 @@ import io
 import json
 from pathlib import Path
 
-from namo_fault_recovery.cli import main
-from namo_fault_recovery.reconfigure import reconfigure_library
+from namo_fault_recovery.cli.main import main
+from namo_fault_recovery.objective.score import gesture_targets, SimilarityScore
+from namo_fault_recovery.recovery.keyframes import reconfigure_library
 from namo_fault_recovery.resources import config_path, PAPER_GESTURE_FILE
-from namo_fault_recovery.score import gesture_targets, SimilarityScore
 import numpy as np
 import pytest
 

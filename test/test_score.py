@@ -1,7 +1,7 @@
 """The similarity score: zero at the references, the spec's check value, batching."""
 
 from namo_fault_recovery import gesture_targets, ScoreWeights, SimilarityScore
-from namo_fault_recovery.score import rotation_angle_deg
+from namo_fault_recovery.objective.score import rotation_angle_deg
 import numpy as np
 import pytest
 

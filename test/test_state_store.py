@@ -4,9 +4,10 @@ import json
 import os
 import threading
 
-from namo_fault_recovery import state_store
-from namo_fault_recovery.state_store import (decode_state, encode_state, Fault, GestureResult,
-                                             LibraryResult, StateFileError, StateStore)
+from namo_fault_recovery.recovery.result import GestureResult, LibraryResult
+from namo_fault_recovery.ros import state_store
+from namo_fault_recovery.ros.state_store import (decode_state, encode_state, Fault, StateFileError,
+                                                 StateStore)
 import pytest
 
 

@@ -13,7 +13,7 @@ import time
 import numpy as np
 
 from . import common
-from ..reconfigure import reconfigure_library
+from ..recovery.keyframes import reconfigure_library
 
 GESTURES = ('wai', 'bye', 'salute', 'side_invite')
 
@@ -157,7 +157,7 @@ def bench_collision(out, out_dir, seed=0, robot=None, library=None, png=True):
     common.write_json(out_dir / 'collision.json', {'counts': counts, 'results': doc})
     if png:
         try:
-            from ..plotting import plot_reconfiguration
+            from .plotting import plot_reconfiguration
             path = plot_reconfiguration(robot, library, fig7g, 'wai',
                                         out_dir / 'fig7g_wai_joint6.png',
                                         title='Wai, right joint 6 locked: collision-aware')
@@ -168,9 +168,9 @@ def bench_collision(out, out_dir, seed=0, robot=None, library=None, png=True):
 
 
 def _check(robot, library, report):
-    from ..collision import CollisionModel
-    from ..kinematics import forward_kinematics
-    from ..score import gesture_targets
+    from ..objective.collision import CollisionModel
+    from ..model.kinematics import forward_kinematics
+    from ..objective.score import gesture_targets
     model = CollisionModel(robot, [t for g in library for t in gesture_targets(g)
                                    if g.name in [x.name for x in report.gestures]],
                            robot.capsules)
@@ -184,15 +184,15 @@ def _check(robot, library, report):
 
 
 def _hand_gap(robot, keyframe):
-    from ..collision import segment_distance
-    from ..kinematics import forward_kinematics
+    from ..objective.collision import segment_distance
+    from ..model.kinematics import forward_kinematics
     r = forward_kinematics(robot, keyframe.right[None], 'right')
     left = forward_kinematics(robot, keyframe.left[None], 'left')
     return float(segment_distance(r.wrist, r.tip, left.wrist, left.tip)[0][0])
 
 
 def _not_crossed(robot, keyframe):
-    from ..kinematics import forward_kinematics
+    from ..model.kinematics import forward_kinematics
     r = forward_kinematics(robot, keyframe.right[None], 'right')
     left = forward_kinematics(robot, keyframe.left[None], 'left')
     return bool(r.tip[0, 1] <= left.tip[0, 1] + 1e-6 and r.wrist[0, 1] <= left.wrist[0, 1])

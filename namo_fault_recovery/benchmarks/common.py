@@ -17,12 +17,12 @@ import time
 
 import numpy as np
 
-from ..faults import resolve_locks
-from ..gestures import load_library
-from ..reconfigure import PoseProblem
+from ..model.gestures import load_library
+from ..model.robot import ARMS, load_robot, N_JOINTS
+from ..objective.score import gesture_targets, SimilarityScore
+from ..recovery.keyframes import PoseProblem
+from ..recovery.locks import resolve_locks
 from ..resources import config_path, PAPER_GESTURE_FILE
-from ..robot_model import ARMS, load_robot, N_JOINTS
-from ..score import gesture_targets, SimilarityScore
 
 DEFAULT_OUT_ROOT = 'bench_out'
 WITHIN = 0.005   # "within 0.5% of the best-known optimum"
@@ -347,7 +347,7 @@ def model_fingerprint(robot, library, weights=None):
     weights; stored optima are only valid for the model they were computed on.
     """
     import hashlib
-    from ..score import ScoreWeights
+    from ..objective.score import ScoreWeights
     weights = weights if weights is not None else ScoreWeights()
     h = hashlib.sha256()
     for arr in (robot.theta_offset, robot.d, robot.a_prev, robot.alpha_prev,

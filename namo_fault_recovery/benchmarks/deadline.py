@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 from . import common
-from ..reconfigure import reconfigure_library
+from ..recovery.keyframes import reconfigure_library
 
 DEADLINES = (0.05, 0.1, 0.25, 1.0)
 TARGET_OVERRUN_S = 0.020

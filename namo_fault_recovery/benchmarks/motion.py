@@ -15,9 +15,9 @@ import os
 import time
 
 from . import common
-from ..gestures import GestureLibrary, load_library
-from ..motion import adapt_library, DEFAULT_DISTORTION_MM
-from ..robot_model import load_robot
+from ..model.gestures import GestureLibrary, load_library
+from ..model.robot import load_robot
+from ..recovery.motion import adapt_library, DEFAULT_DISTORTION_MM
 
 ELBOW = 'right_arm_joint4'
 SCENARIOS = (

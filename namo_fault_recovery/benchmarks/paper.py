@@ -303,7 +303,7 @@ def _write_outputs(robot, out_dir, runs, summary, keys, cases, plots, out):
     common.write_text(out_dir / 'tables.md', markdown(robot, summary, keys, cases))
     if not plots:
         return
-    from .. import plotting
+    from . import plotting
     try:
         optima = {(s['gesture'], s['joint']): s['best_known'] for s in summary['stats']
                   if s['best_known'] is not None}

@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 from . import common
-from ..reconfigure import reconfigure_library
+from ..recovery.keyframes import reconfigure_library
 
 TARGET_MEDIAN_S = 0.100
 TARGET_P95_S = 0.200

@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 
+from ..model.robot import ARMS
+
 LOCK_STRATEGIES = ('average', 'measured', 'optimal')
 
 
@@ -68,3 +70,9 @@ def resolve_locks(robot, library, faults, strategy='average', measured=None):
             angle = float(library.lock_averages(side)[index])
         locks[joint] = float(angle)
     return locks, notes
+
+
+def frozen_arms(robot, joints):
+    """Return the arms (in robot order) whose joints are all in ``joints``."""
+    joints = set(joints)
+    return tuple(side for side in ARMS if set(robot.arms[side].joint_names) <= joints)

@@ -6,10 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import _yaml_checks as chk
+from . import yaml_checks as chk
 from .capsules import CapsuleModel
-from .errors import ConfigError
-from .resources import config_path, DEFAULT_ROBOT_FILE
+from ..errors import ConfigError
+from ..resources import config_path, DEFAULT_ROBOT_FILE
 
 ARMS = ('right', 'left')
 N_JOINTS = 7

@@ -4,26 +4,26 @@ from pathlib import Path
 
 
 def _out(args, name):
-    from .benchmarks.common import DEFAULT_OUT_ROOT
+    from ..benchmarks.common import DEFAULT_OUT_ROOT
     path = Path(args.out) if args.out else Path(DEFAULT_OUT_ROOT) / name
     path.mkdir(parents=True, exist_ok=True)
     return path
 
 
 def _models(args):
-    from .benchmarks import common
+    from ..benchmarks import common
     return common.models(getattr(args, 'robot_file', None), getattr(args, 'gesture_file', None))
 
 
 def _check_positive(option, value):
     if value < 1:
-        from .cli_common import UsageError
+        from .common import UsageError
         raise UsageError(f'{option}: expected an integer >= 1, got {value}')
 
 
 def cmd_lock(args, out):
     """Average vs optimal lock for every right-arm joint."""
-    from .benchmarks import beyond
+    from ..benchmarks import beyond
     _check_positive('--seeds', args.seeds)
     robot, library = _models(args)
     beyond.bench_lock(out, _out(args, 'lock'), seeds=args.seeds, robot=robot, library=library)
@@ -32,7 +32,7 @@ def cmd_lock(args, out):
 
 def cmd_pairs(args, out):
     """Every pair of right-arm joints failing at once."""
-    from .benchmarks import beyond
+    from ..benchmarks import beyond
     robot, library = _models(args)
     beyond.bench_pairs(out, _out(args, 'pairs'), seed=args.seed, robot=robot, library=library)
     return 0
@@ -40,7 +40,7 @@ def cmd_pairs(args, out):
 
 def cmd_bimanual(args, out):
     """Wai: stage 1 vs stage 2 under each single failure."""
-    from .benchmarks import beyond
+    from ..benchmarks import beyond
     _check_positive('--seeds', args.seeds)
     robot, library = _models(args)
     beyond.bench_bimanual(out, _out(args, 'bimanual'), seeds=args.seeds, robot=robot,
@@ -50,7 +50,7 @@ def cmd_bimanual(args, out):
 
 def cmd_collision(args, out):
     """Colliding results without and with the collision term; the Fig. 7g case."""
-    from .benchmarks import beyond
+    from ..benchmarks import beyond
     robot, library = _models(args)
     beyond.bench_collision(out, _out(args, 'collision'), seed=args.seed, robot=robot,
                            library=library, png=not args.no_plots)
@@ -59,7 +59,7 @@ def cmd_collision(args, out):
 
 def cmd_motion(args, out):
     """Typical points + Kriging vs per-point exploration on the circle and the wave."""
-    from .benchmarks import motion
+    from ..benchmarks import motion
     motion.bench_motion(out, _out(args, 'motion'), seed=args.seed,
                         robot_file=getattr(args, 'robot_file', None),
                         gesture_file=getattr(args, 'gesture_file', None))

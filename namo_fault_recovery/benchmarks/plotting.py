@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .kinematics import forward_kinematics, shoulder_position
+from ..model.kinematics import forward_kinematics, shoulder_position
 
 REFERENCE_COLOR = 'tab:blue'
 RECONFIGURED_COLOR = 'tab:orange'

@@ -34,18 +34,20 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 import yaml
 
-from . import ros_conversions as conv
-from .errors import ConfigError
-from .faults import LOCK_STRATEGIES
-from .gestures import load_library
-from .inputs import BadInput, frozen_arms, parse_fault, parse_joint_state
-from .motion import (adapt_library, DEFAULT_CONTINUITY, DEFAULT_DISTORTION_MM, METHODS,
-                     typical_points)
-from .optimize import ALGORITHMS, PRESETS
-from .reconfigure import BIMANUAL_MODES
-from .robot_model import ARMS, load_robot
-from .score import COMPONENTS, ScoreWeights
-from .state_store import Fault, fingerprint, GestureResult, LibraryResult, StateStore
+from . import messages as conv
+from .inputs import BadInput, parse_fault, parse_joint_state
+from .state_store import Fault, fingerprint, StateStore
+from ..errors import ConfigError
+from ..model.gestures import load_library
+from ..model.robot import ARMS, load_robot
+from ..objective.score import COMPONENTS, ScoreWeights
+from ..optimize import ALGORITHMS, PRESETS
+from ..optimize.base import Clock
+from ..recovery.engine import recover, RecoverySettings
+from ..recovery.keyframes import BIMANUAL_MODES
+from ..recovery.locks import frozen_arms
+from ..recovery.locks import LOCK_STRATEGIES
+from ..recovery.motion import DEFAULT_CONTINUITY, DEFAULT_DISTORTION_MM, METHODS, typical_points
 
 NODE_NAME = 'recovery_node'
 DEFAULT_STATE_DIR = '~/.ros/namo_fault_recovery'
@@ -482,7 +484,8 @@ class RecoveryNode(Node):
             if tool_mm <= 0:
                 self._handled_gen = self._requested_gen
                 self._published_gen = self._requested_gen
-                result = conv.reference_result(self._library, self._settings['deadline'])
+                result = conv.reference_result(self._library, self._settings['deadline'],
+                                               engine_settings(self._settings).public())
                 self._persist_locked(result)
                 self._publish_locked(result)
             # else the tool is still there: the worker adapts the library to it alone.
@@ -509,9 +512,10 @@ class RecoveryNode(Node):
         """
         try:
             joint = self._robot.arms['right'].joint_names[0]
-            adapt_library(self._robot, self._library, {joint: None}, deadline=0.2, seed=0,
-                          method='kriging', collision=True, cancel=lambda: self._stopping,
-                          quantisations=self._typical_points(self._settings['distortion_mm']))
+            recover(self._robot, self._library, {joint: None},
+                    RecoverySettings(trajectory_method='kriging'), seed=0,
+                    clock=Clock(0.2, lambda: self._stopping),
+                    quantisations=self._typical_points(self._settings['distortion_mm']))
         except Exception as exc:  # noqa: B902 - a warm-up problem must not stop the node
             self.get_logger().warning(f'warm-up run failed: {type(exc).__name__}: {exc}')
 
@@ -600,63 +604,13 @@ class RecoveryNode(Node):
         return cached[1]
 
     def _compute(self, faults, measured, settings, cancel):
-        if not faults and settings['tool_mm'] <= 0:
-            return conv.reference_result(self._library, settings['deadline'],
-                                         _public_settings(settings))
-        requested = {j: f.angle for j, f in faults.items()}
         for joint, fault in faults.items():
             if fault.measured is not None:
                 measured[joint] = fault.measured   # where it stopped when it failed
-        # Typical points are cached per threshold; computing new ones counts against
-        # the deadline like the rest of the run.
-        began = time.monotonic()
-        quantisations = self._typical_points(settings['distortion_mm'])
-        spent = time.monotonic() - began
-        report = adapt_library(
-            self._robot, self._library, requested, method=settings['method'],
-            tool_mm=settings['tool_mm'], tool_arm=settings['tool_arm'],
-            distortion_mm=settings['distortion_mm'], continuity=settings['continuity'],
-            quantisations=quantisations,
-            algorithm=settings['algorithm'], preset=settings['preset'],
-            deadline=max(settings['deadline'] - spent, 0.5 * settings['deadline']),
-            seed=settings['seed'],
-            weights=settings['weights'], lock_strategy=settings['lock_strategy'],
-            measured=measured, cancel=cancel, bimanual=settings['bimanual'],
-            collision=settings['collision'])
-        public = _public_settings(settings)
-        public['seed'] = report.seed
-        public['notes'] = list(report.notes)
-        engine = report.typical_result
-        gestures = []
-        for g in report.gestures:
-            e = engine[g.name] if engine is not None else None
-            gestures.append(GestureResult(
-                name=g.name,
-                times=tuple(float(kf.time_from_start) for kf in g.keyframes),
-                positions=tuple(tuple(float(a) for a in kf.positions()) for kf in g.keyframes),
-                # Both the worst point of the whole motion, however it was adapted.
-                score_before=float(g.score_before_max),
-                score_after=float(g.score_max),
-                wall_time=float(report.wall_time + spent), status=str(g.status),
-                message=str(e.message if e and g.method == 'keyframes' else g.message),
-                collides=bool(g.collides),
-                breakdown={k: float(v) for k, v in dict(e.breakdown if e else {}).items()},
-                stage=int(e.stage if e else 1),
-                colliding_pairs=tuple(str(p) for p in g.colliding_pairs),
-                method=g.method, typical_points=len(g.typical),
-                tip_error_mm=float(g.tip_error_mean_mm),
-                max_jump_deg=float(g.jump_after_deg)))
-        # ``per_point`` runs no typical-point engine: its statuses say it all.
-        success = (report.deadline_met and (engine is None or engine.success)
-                   and all(math.isfinite(g.score_after) for g in gestures))
-        return LibraryResult(
-            gestures=tuple(gestures), faults=requested,
-            locks={j: float(a) for j, a in report.locks.items()},
-            frozen_arms=frozen_arms(self._robot, report.locks),
-            wall_time=float(report.wall_time + spent), deadline=settings['deadline'],
-            deadline_met=bool(report.deadline_met), success=bool(success),
-            cancelled=report.cancelled, settings=public,
-            tool_mm=settings['tool_mm'], tool_arm=settings['tool_arm'])
+        return recover(self._robot, self._library, {j: f.angle for j, f in faults.items()},
+                       engine_settings(settings), seed=settings['seed'],
+                       clock=Clock(settings['deadline'], cancel), measured=measured,
+                       quantisations=self._typical_points(settings['distortion_mm']))
 
     def _check_result(self, result, faults=None):
         """Return None if ``result`` is safe to publish, else the reason it is not."""
@@ -927,7 +881,7 @@ class RecoveryNode(Node):
                       (f'{g.name}.typical_points', g.typical_points),
                       (f'{g.name}.tip_error_mm', f'{g.tip_error_mm:.3f}'),
                       (f'{g.name}.max_jump_deg', f'{g.max_jump_deg:.3f}')]
-            if current.settings.get('collision'):
+            if current.settings.get('collision_check'):
                 pairs.append((f'{g.name}.collides', str(g.collides).lower()))
                 if g.colliding_pairs:
                     pairs.append((f'{g.name}.colliding_pairs', ' '.join(g.colliding_pairs)))
@@ -963,11 +917,15 @@ def _tool(length_mm, arm):
     return (float(length_mm), arm) if length_mm > 0 else (0.0, None)
 
 
-def _public_settings(settings):
-    return {'algorithm': settings['algorithm'], 'preset': settings['preset'],
-            'lock_strategy': settings['lock_strategy'], 'seed': settings['seed'],
-            'deadline': settings['deadline'], 'bimanual': settings['bimanual'],
-            'collision': settings['collision']}
+def engine_settings(settings):
+    """Return the engine's RecoverySettings for the node's settings dict."""
+    return RecoverySettings(
+        deadline_sec=settings['deadline'], lock_strategy=settings['lock_strategy'],
+        optimizer=settings['algorithm'], optimizer_preset=settings['preset'],
+        bimanual=settings['bimanual'], collision_check=settings['collision'],
+        tool_length_mm=settings['tool_mm'], tool_arm=settings['tool_arm'],
+        trajectory_method=settings['method'], vq_distortion_mm=settings['distortion_mm'],
+        continuity_weight=settings['continuity'], weights=settings['weights'])
 
 
 _SIGINTS = []

@@ -16,9 +16,9 @@ from std_msgs.msg import ColorRGBA
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker
 
-from .kinematics import forward_kinematics, shoulder_position
-from .robot_model import ARMS, N_JOINTS
-from .state_store import GestureResult, LibraryResult
+from ..model.kinematics import forward_kinematics, shoulder_position
+from ..model.robot import ARMS, N_JOINTS
+from ..recovery.result import reference_result, summary  # noqa: F401 - re-exported
 
 DIAG_PREFIX = 'recovery_node: '
 _MM = 1e-3
@@ -36,18 +36,6 @@ def duration_msg(seconds):
 def duration_seconds(msg):
     """Return a Duration message as float seconds."""
     return msg.sec + msg.nanosec * 1e-9
-
-
-def reference_result(library, deadline=0.0, settings=None):
-    """Return the reference library as a LibraryResult (no faults, every score 0)."""
-    gestures = tuple(
-        GestureResult(name=g.name,
-                      times=tuple(float(kf.time_from_start) for kf in g.keyframes),
-                      positions=tuple(tuple(float(a) for a in kf.positions())
-                                      for kf in g.keyframes),
-                      status='unchanged', message='reference gesture')
-        for g in library)
-    return LibraryResult(gestures=gestures, deadline=deadline, settings=dict(settings or {}))
 
 
 def library_to_msgs(joint_names, result, stamp):
@@ -90,34 +78,6 @@ def trajectory_angles(msg, joint_names=None):
 def fmt_angle(rad):
     """Return an angle as 'X.XXXX rad (Y.YY deg)'."""
     return f'{rad:.4f} rad ({math.degrees(rad):.2f} deg)'
-
-
-def summary(result):
-    """Return the one-line summary of a library version that a person reads."""
-    tool = result.tool_mm > 0
-    if not result.faults and not result.locks and not tool:
-        return (f'no faults: the reference library is published '
-                f'({len(result.gestures)} gestures, unchanged)')
-    changes = [f'{j} at {math.degrees(a):.2f} deg' for j, a in result.locks.items()]
-    if tool:
-        changes.append(f'a {result.tool_mm:g} mm tool in the {result.tool_arm} hand')
-    locks = ', '.join(changes)
-    finite = sum(1 for g in result.gestures if math.isfinite(g.score_after))
-    timing = (f'deadline {result.deadline:.3f} s '
-              f"{'met' if result.deadline_met else 'MISSED, best found so far used'}")
-    parts = [f'{g.name} {g.score_before:.2f} -> {g.score_after:.2f} in {g.wall_time:.3f} s'
-             + ('' if g.status in ('converged', 'unchanged') else f' ({g.status})')
-             + (' (both arms)' if g.stage == 2 else '')
-             + (f" COLLIDES ({', '.join(g.colliding_pairs)})" if g.collides else '')
-             for g in result.gestures]
-    text = (f"{'reconfigured' if result.success else 'FAILED to fully reconfigure'} "
-            f'{finite}/{len(result.gestures)} gestures in {result.wall_time:.3f} s '
-            f'({timing}) for {locks}')
-    if result.frozen_arms:
-        text += f"; frozen arm(s): {', '.join(result.frozen_arms)}"
-    if result.cancelled:
-        text += '; run was cancelled'
-    return text + ': ' + '; '.join(parts)
 
 
 # --- markers -------------------------------------------------------------------------

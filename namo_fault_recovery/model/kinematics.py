@@ -10,7 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .robot_model import ARMS, N_JOINTS
+from .robot import ARMS, N_JOINTS
 
 
 _PLANS = {}   # id(robot) -> (robot, link constants); robots are immutable
@@ -127,10 +127,10 @@ def forward_kinematics(robot, q, arm='right'):
     if arm not in ARMS:
         raise ValueError(f'arm: expected one of {ARMS}, got {arm!r}')
     q = as_joint_array(q)
-    return _forward(robot, q, arm)
+    return batch_forward(robot, q, arm)
 
 
-def _forward(robot, q, arm):
+def batch_forward(robot, q, arm):
     """Forward kinematics without input checks, for callers that already validated q."""
     lead = q.shape[:-1]
     elbow, wrist, tip, palm = _chain(robot, q.reshape(-1, N_JOINTS),
@@ -167,10 +167,10 @@ def forward_kinematics_jacobian(robot, q, arm='right'):
     axes become ``-M z_i`` (a reflection reverses the sense of rotation).
     """
     q = np.atleast_2d(as_joint_array(q))
-    return _forward_jacobian(robot, q, arm)
+    return batch_forward_jacobian(robot, q, arm)
 
 
-def _forward_jacobian(robot, q, arm):
+def batch_forward_jacobian(robot, q, arm):
     n = q.shape[0]
     axes = np.empty((n, N_JOINTS, 3))
     origins = np.empty((n, N_JOINTS, 3))

@@ -8,8 +8,6 @@ message changes nothing: the caller keeps its previous state.
 
 import math
 
-from .robot_model import ARMS
-
 
 class BadInput(ValueError):
     """An input message that is rejected as a whole; the message is the reason."""
@@ -97,9 +95,3 @@ def parse_joint_state(robot, names, positions):
                            f'its limits')
         measured[name] = value
     return measured
-
-
-def frozen_arms(robot, joints):
-    """Return the arms (in robot order) whose joints are all in ``joints``."""
-    joints = set(joints)
-    return tuple(side for side in ARMS if set(robot.arms[side].joint_names) <= joints)

@@ -14,7 +14,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from .kinematics import forward_kinematics
-from .robot_model import N_JOINTS
+from .robot import N_JOINTS
 from .trajectory_csv import write_trajectory_csv
 
 CENTRE_MM = (350.0, -200.0, -50.0)

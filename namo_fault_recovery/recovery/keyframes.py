@@ -20,13 +20,13 @@ import time
 
 import numpy as np
 
-from .collision import CollisionModel
-from .faults import resolve_locks
-from .gestures import Keyframe
-from .kinematics import _forward, _forward_jacobian, ArmLandmarks, take_landmarks
-from .optimize import make_algorithm, minimize, Problem, STATUS_CANCELLED, STATUS_DEADLINE
-from .robot_model import ARMS, N_JOINTS
-from .score import gesture_targets, SimilarityScore
+from .locks import resolve_locks
+from ..model.gestures import Keyframe
+from ..model.kinematics import ArmLandmarks, batch_forward, batch_forward_jacobian, take_landmarks
+from ..model.robot import ARMS, N_JOINTS
+from ..objective.collision import CollisionModel
+from ..objective.score import gesture_targets, SimilarityScore
+from ..optimize import make_algorithm, minimize, Problem, STATUS_CANCELLED, STATUS_DEADLINE
 
 _STATUS_NAMES = {0: 'converged', STATUS_DEADLINE: 'deadline', STATUS_CANCELLED: 'cancelled'}
 BIMANUAL_MODES = ('auto', 'off', 'on')
@@ -69,7 +69,7 @@ class PoseProblem(Problem):
         lower = [robot.arms[s].lower[j] for s, j in self.free]
         upper = [robot.arms[s].upper[j] for s, j in self.free]
         # An arm without free joints does not move: its landmarks are computed once.
-        self.fixed = {side: _forward(robot, self.base[side], side)
+        self.fixed = {side: batch_forward(robot, self.base[side], side)
                       for side in ARMS if not self.columns[side]}
         if x0 is None:   # the starting poses' free joints: a known-good start
             x0 = [[self.base[s][b, j] for s, j in self.free] for b in range(len(target_ids))]
@@ -100,9 +100,10 @@ class PoseProblem(Problem):
             if side in self.fixed:
                 arms[side] = take_landmarks(self.fixed[side], rows)
             elif jacobian:
-                arms[side] = _forward_jacobian(self.robot, q[side].reshape(-1, N_JOINTS), side)
+                arms[side] = batch_forward_jacobian(self.robot, q[side].reshape(-1, N_JOINTS),
+                                                    side)
             else:
-                arms[side] = _forward(self.robot, q[side].reshape(-1, N_JOINTS), side)
+                arms[side] = batch_forward(self.robot, q[side].reshape(-1, N_JOINTS), side)
         return arms, np.repeat(self.target_ids, n)
 
     def _objective(self, x):
@@ -233,8 +234,8 @@ def _solve(robot, scorer, checker, batch, algo, clock_end, cancel, rng, stats=No
     if checker is None:
         return best_r, best_l, status
     ids = batch.target_ids
-    rows = np.nonzero(checker.collides(_forward(robot, best_r, 'right'),
-                                       _forward(robot, best_l, 'left'), ids))[0]
+    rows = np.nonzero(checker.collides(batch_forward(robot, best_r, 'right'),
+                                       batch_forward(robot, best_l, 'left'), ids))[0]
     if rows.size == 0:
         return best_r, best_l, status
     sub = _Batch(batch.right[rows], batch.left[rows], ids[rows],
@@ -248,7 +249,7 @@ def _solve(robot, scorer, checker, batch, algo, clock_end, cancel, rng, stats=No
                                                            batch.left[rows])]
     scores, pens, hits = [], [], []
     for qr, ql in candidates:
-        lm_r, lm_l = _forward(robot, qr, 'right'), _forward(robot, ql, 'left')
+        lm_r, lm_l = batch_forward(robot, qr, 'right'), batch_forward(robot, ql, 'left')
         scores.append(scorer.evaluate(lm_r, lm_l, ids[rows]))
         pens.append(checker.penetration(lm_r, lm_l, ids[rows]).sum(axis=1))
         hits.append(checker.collides(lm_r, lm_l, ids[rows]))
@@ -325,14 +326,14 @@ def _solve_once(robot, scorer, collision, batch, algo, clock_end, cancel, rng, s
     return best_r, best_l, status
 
 
-def _layout(robot, arms_used, locked, moving, allowed=None):
+def free_layout(robot, arms_used, locked, moving, allowed=None):
     """Free variables: unlocked joints of moving arms used (and ``allowed``, if given)."""
     return tuple((s, j) for s in ARMS if s in moving and s in arms_used
                  for j in range(N_JOINTS) if j not in locked[s]
                  and (allowed is None or (s, j) in allowed))
 
 
-def _joint_set(robot, names):
+def joint_set(robot, names):
     return {robot.locate_joint(n) for n in names}
 
 
@@ -410,18 +411,18 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
                 budget_end, cancel, rng)
             notes.append(chosen_note)
 
-    locked = _locked_sets(robot, locks)
-    base_r, base_l = _apply_locks(robot, ref_r, ref_l, locks)
+    locked = locked_sets(robot, locks)
+    base_r, base_l = apply_locks(robot, ref_r, ref_l, locks)
     start_r, start_l = base_r, base_l
     if start_poses is not None:   # the optimal sweep's solution at the chosen locks
-        start_r, start_l = _apply_locks(robot, *start_poses, locks)
+        start_r, start_l = apply_locks(robot, *start_poses, locks)
     frozen = tuple(side for side in ARMS if len(locked[side]) == N_JOINTS)
     for side in frozen:
         notes.append(f'all joints of the {side} arm failed: it is frozen at its lock angles')
 
-    designed = [_joint_set(robot, selected[g].joints) if selected[g].joints else None
+    designed = [joint_set(robot, selected[g].joints) if selected[g].joints else None
                 for g in owners]
-    layouts = [_layout(robot, t.arms, locked, faulted, a) for t, a in zip(targets, designed)]
+    layouts = [free_layout(robot, t.arms, locked, faulted, a) for t, a in zip(targets, designed)]
     status0 = ['frozen' if any(s in faulted for s in t.arms) and not lay else 'unchanged'
                for t, lay in zip(targets, layouts)]
     two_stage = [k for k, t in enumerate(targets)
@@ -462,7 +463,7 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
         rows = [k for k in two_stage
                 if bimanual == 'on' or after[k] > bimanual_threshold]
         if rows:
-            lay2 = [_layout(robot, targets[k].arms, locked, set(ARMS)) for k in rows]
+            lay2 = [free_layout(robot, targets[k].arms, locked, set(ARMS)) for k in rows]
             x0 = {}
             for i, k in enumerate(rows):
                 x0[i] = [(best_r if s == 'right' else best_l)[k, j] for s, j in lay2[i]]
@@ -482,7 +483,7 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
     collides = [None] * len(targets)
     pairs = [()] * len(targets)
     if checker is not None:
-        lm_r, lm_l = _forward(robot, best_r, 'right'), _forward(robot, best_l, 'left')
+        lm_r, lm_l = batch_forward(robot, best_r, 'right'), batch_forward(robot, best_l, 'left')
         collides = [bool(c) for c in checker.collides(lm_r, lm_l, ids)]
         pairs = [tuple(p) for p in checker.colliding_pairs(lm_r, lm_l, ids)]
     wall = time.monotonic() - start
@@ -495,7 +496,7 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
         st = _worst_status([status[k] for k in ks])
         stage_used = int(max(stage[k] for k in ks))
         free = (layouts[ks[0]] if stage_used == 1
-                else _layout(robot, gesture.arms, locked, set(ARMS)))
+                else free_layout(robot, gesture.arms, locked, set(ARMS)))
         expanded = int(max(expansion[k] for k in ks))
         hit = None if checker is None else any(collides[k] for k in ks)
         results.append(GestureReconfiguration(
@@ -540,8 +541,8 @@ def _expand(robot, scorer, checker, selected, owners, targets, ids, locked, faul
             break
         lay = []
         for k in rows:
-            allowed[k] |= _joint_set(robot, selected[owners[k]].expand[level - 1])
-            lay.append(_layout(robot, targets[k].arms, locked, faulted, allowed[k]))
+            allowed[k] |= joint_set(robot, selected[owners[k]].expand[level - 1])
+            lay.append(free_layout(robot, targets[k].arms, locked, faulted, allowed[k]))
         x0 = {i: [(best_r if s == 'right' else best_l)[k, j] for s, j in lay[i]]
               for i, k in enumerate(rows)}
         stage_end = end
@@ -563,7 +564,7 @@ def _expand(robot, scorer, checker, selected, owners, targets, ids, locked, faul
     return expansion
 
 
-def _locked_sets(robot, locks):
+def locked_sets(robot, locks):
     """Return ``{arm: [joint indices locked]}`` for a ``{joint: angle}`` lock set."""
     out = {side: [] for side in ARMS}
     for joint in locks:
@@ -572,7 +573,7 @@ def _locked_sets(robot, locks):
     return out
 
 
-def _apply_locks(robot, ref_r, ref_l, locks):
+def apply_locks(robot, ref_r, ref_l, locks):
     base = {'right': ref_r.copy(), 'left': ref_l.copy()}
     for joint, angle in locks.items():
         side, j = robot.locate_joint(joint)
@@ -583,8 +584,8 @@ def _apply_locks(robot, ref_r, ref_l, locks):
 def _no_worse_collision(checker, r_new, l_new, r_old, l_old, k):
     if checker is None:
         return True
-    pen = [checker.penetration(_forward(checker.robot, r[None], 'right'),
-                               _forward(checker.robot, left[None], 'left'), np.array([k]))
+    pen = [checker.penetration(batch_forward(checker.robot, r[None], 'right'),
+                               batch_forward(checker.robot, left[None], 'left'), np.array([k]))
            .sum() for r, left in ((r_new, l_new), (r_old, l_old))]
     return pen[0] <= pen[1] + 1e-9
 
@@ -620,11 +621,11 @@ def _optimise_locks(robot, scorer, checker, targets, ref_r, ref_l, locks, joints
             base_r, base_l, layouts, tid = [], [], [], []
             for a in candidates:
                 trial = dict(locks, **{joint: float(a)})
-                locked = _locked_sets(robot, trial)
-                br, bl = _apply_locks(robot, ref_r, ref_l, trial)
+                locked = locked_sets(robot, trial)
+                br, bl = apply_locks(robot, ref_r, ref_l, trial)
                 base_r.append(br)
                 base_l.append(bl)
-                layouts += [_layout(robot, t.arms, locked, faulted) for t in targets]
+                layouts += [free_layout(robot, t.arms, locked, faulted) for t in targets]
                 tid.append(np.arange(n_t))
             batch = _Batch(np.concatenate(base_r), np.concatenate(base_l),
                            np.concatenate(tid), layouts)

@@ -12,8 +12,8 @@ d)^2)`` (mm^2) is smooth, and its gradient comes from the landmark Jacobians.
 
 import numpy as np
 
-from .capsules import CapsuleModel
-from .kinematics import forward_kinematics, shoulder_position
+from ..model.capsules import CapsuleModel
+from ..model.kinematics import forward_kinematics, shoulder_position
 
 SEGMENTS = ('upper_arm', 'forearm', 'hand')
 # Pairs checked: each arm segment against the torso, and every right-left segment pair.

@@ -9,12 +9,12 @@ import sys
 
 import numpy as np
 
-from .cli_common import _Parser, gesture_and_keyframe, parse_faults, UsageError
-from .errors import ConfigError
-from .gestures import load_library
-from .kinematics import forward_kinematics
-from .robot_model import load_robot
-from .score import COMPONENTS, ScoreWeights, SimilarityScore
+from .common import gesture_and_keyframe, parse_faults, Parser, UsageError
+from ..errors import ConfigError
+from ..model.gestures import load_library
+from ..model.kinematics import forward_kinematics
+from ..model.robot import load_robot
+from ..objective.score import COMPONENTS, ScoreWeights, SimilarityScore
 
 EXIT_USAGE = 2
 
@@ -139,7 +139,7 @@ def solve_document(report, robot):
 
 def cmd_solve(args, out):
     """Reconfigure gestures for a fault set and print the result."""
-    from .reconfigure import reconfigure_library
+    from ..recovery.keyframes import reconfigure_library
     robot, library = _load_models(args)
     faults = parse_faults(robot, args.fault)
     for name in args.gesture or []:
@@ -182,13 +182,13 @@ def cmd_solve(args, out):
 
 def build_parser():
     """Build the argument parser; later issues register more subcommands here."""
-    parser = _Parser(prog='namo-recovery',
-                     description='Joint-failure recovery for the Namo gesture robot.')
+    parser = Parser(prog='namo-recovery',
+                    description='Joint-failure recovery for the Namo gesture robot.')
     parser.add_argument('--robot-file', default=None,
                         help='robot model YAML (default: the packaged Namo model)')
     parser.add_argument('--gesture-file', default=None,
                         help='gesture library YAML (default: the packaged library)')
-    sub = parser.add_subparsers(dest='command', metavar='COMMAND', parser_class=_Parser)
+    sub = parser.add_subparsers(dest='command', metavar='COMMAND', parser_class=Parser)
     sub.required = True
 
     p = sub.add_parser('show', help='print the gesture library and its landmarks')
@@ -204,9 +204,9 @@ def build_parser():
     p.add_argument('--json', action='store_true', help='print one JSON document')
     p.set_defaults(func=cmd_score)
 
-    from .faults import LOCK_STRATEGIES
-    from .optimize import ALGORITHMS, PRESETS
-    from .reconfigure import BIMANUAL_MODES
+    from ..recovery.locks import LOCK_STRATEGIES
+    from ..optimize import ALGORITHMS, PRESETS
+    from ..recovery.keyframes import BIMANUAL_MODES
     p = sub.add_parser('solve', help='reconfigure the library for a fault set')
     p.add_argument('--fault', action='append', required=True, metavar='JOINT[=DEG]',
                    help='a failed joint, optionally with the angle (deg) it is held at; '
@@ -228,12 +228,11 @@ def build_parser():
     p.add_argument('--json', action='store_true',
                    help='print one JSON document (schema in the README)')
     p.set_defaults(func=cmd_solve)
-    from . import cli_beyond, cli_bench
-    bench_sub = cli_bench.register(sub)
-    cli_beyond.register(bench_sub)
-    from . import ros_cli
-    ros_cli.register(sub)               # fault, clear, reconfigure, library, demo
-    ros_cli.register_bench(bench_sub)   # bench latency
+    from . import bench, beyond, ros_commands
+    bench_sub = bench.register(sub)
+    beyond.register(bench_sub)
+    ros_commands.register(sub)               # fault, clear, reconfigure, library, demo
+    ros_commands.register_bench(bench_sub)   # bench latency
     return parser
 
 

@@ -49,7 +49,7 @@ def node_command():
     found = shutil.which('recovery_node')
     if found:
         return [found]
-    return [sys.executable, '-m', 'namo_fault_recovery.recovery_node']
+    return [sys.executable, '-m', 'namo_fault_recovery.ros.recovery_node']
 
 
 def _private_domain():
@@ -432,7 +432,7 @@ class _ReceivedReport:
     def __init__(self, robot, library_msgs, statuses, locks):
         from types import SimpleNamespace
 
-        from .gestures import Keyframe
+        from ..model.gestures import Keyframe
         values = _values(statuses['reconfiguration'])
         self.locks = dict(locks)
         self.algorithm = values.get('optimizer', '?')
@@ -457,18 +457,14 @@ class _ReceivedReport:
 
 
 def _save_pngs(args, library_msgs, statuses, locks, out_dir, out):
-    """Save one stick figure per gesture with namo_fault_recovery.plotting, if available."""
+    """Save one stick figure per gesture (needs matplotlib)."""
     if importlib.util.find_spec('matplotlib') is None:
         out.write('stick-figure PNG skipped: matplotlib is not installed '
                   "(pip install -e '.[plot]')\n")
         return []
-    if importlib.util.find_spec('namo_fault_recovery.plotting') is None:
-        out.write('stick-figure PNG skipped: namo_fault_recovery.plotting is not part of '
-                  'this version\n')
-        return []
-    from . import plotting
-    from .gestures import load_library
-    from .robot_model import load_robot
+    from ..benchmarks import plotting
+    from ..model.gestures import load_library
+    from ..model.robot import load_robot
     robot = load_robot(getattr(args, 'robot_file', None))
     library = load_library(robot, getattr(args, 'gesture_file', None))
     report = _ReceivedReport(robot, library_msgs, statuses, locks)

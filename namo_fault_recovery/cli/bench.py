@@ -12,7 +12,7 @@ import sys
 
 import numpy as np
 
-from .cli_common import _Parser, gesture_and_keyframe, parse_faults, UsageError
+from .common import gesture_and_keyframe, parse_faults, Parser, UsageError
 
 EXIT_USAGE = 2
 
@@ -28,12 +28,12 @@ def _positive_int(option, value, minimum=1):
 
 
 def _models(args):
-    from .benchmarks import common
+    from ..benchmarks import common
     return common.models(getattr(args, 'robot_file', None), getattr(args, 'gesture_file', None))
 
 
 def _cases_or_usage(robot, library, gestures, joints):
-    from .benchmarks import common
+    from ..benchmarks import common
     try:
         return common.select_cases(robot, library, gestures, joints)
     except (KeyError, ValueError) as exc:
@@ -41,7 +41,7 @@ def _cases_or_usage(robot, library, gestures, joints):
 
 
 def _keys_or_usage(keys, option='--algorithms'):
-    from .benchmarks import common
+    from ..benchmarks import common
     try:
         return [common.lookup_spec(k).key for k in keys]
     except ValueError as exc:
@@ -49,13 +49,13 @@ def _keys_or_usage(keys, option='--algorithms'):
 
 
 def _out_dir(args, name):
-    from .benchmarks import common
+    from ..benchmarks import common
     return Path(args.out) if args.out else Path(common.DEFAULT_OUT_ROOT) / name
 
 
 def cmd_bench_paper(args, out):
     """Reproduce the paper's Tables 3-6 (resumable; see benchmarks.paper)."""
-    from .benchmarks import paper
+    from ..benchmarks import paper
     reps = args.reps if args.reps is not None else (paper.QUICK_REPS if args.quick else 100)
     _positive_int('--reps', reps)
     _positive_int('--jobs', args.jobs)
@@ -75,7 +75,7 @@ def cmd_bench_paper(args, out):
 
 def cmd_bench_optimum(args, out):
     """Find (or load) the best-known optimum of every case and print the gaps to it."""
-    from .benchmarks import common, optimum
+    from ..benchmarks import common, optimum
     _positive_int('--starts', args.starts, 0)
     _positive_int('--seeds', args.seeds, 0)
     _positive_int('--maxiter', args.maxiter)
@@ -104,7 +104,7 @@ def cmd_bench_optimum(args, out):
 
 def cmd_bench_speed(args, out):
     """Time the whole library: our default against the paper ABC, with quality."""
-    from .benchmarks import speed
+    from ..benchmarks import speed
     _positive_int('--reps', args.reps)
     _positive_int('--sequential-reps', args.sequential_reps, 0)
     robot, library = _models(args)
@@ -120,7 +120,7 @@ def cmd_bench_speed(args, out):
 
 def cmd_bench_deadline(args, out):
     """Measure the worst deadline overrun, idle and with a CPU burner."""
-    from .benchmarks import deadline
+    from ..benchmarks import deadline
     _positive_int('--reps', args.reps)
     for d in args.deadlines:
         if not (math.isfinite(d) and d > 0):
@@ -143,9 +143,9 @@ def cmd_plot(args, out):
     A single pose is drawn as arm skeletons; a motion (several keyframes) as fingertip
     paths: desired, unadapted and adapted, like the second source paper's Fig. 5-7.
     """
-    from . import plotting
-    from .gestures import load_library
-    from .reconfigure import reconfigure_library
+    from ..benchmarks import plotting
+    from ..model.gestures import load_library
+    from ..recovery.keyframes import reconfigure_library
     robot = _models(args)[0]
     library = load_library(robot, getattr(args, 'gesture_file', None))
     gesture = gesture_and_keyframe(library, args.gesture, args.keyframe)
@@ -161,8 +161,8 @@ def cmd_plot(args, out):
                    + ([f'tool{args.tool:g}'] if args.tool else []))
     path = Path(args.out) if args.out else Path(f'{gesture.name}_{tag}.png')
     if len(gesture.keyframes) > 1:
-        from .gestures import GestureLibrary
-        from .motion import adapt_library
+        from ..model.gestures import GestureLibrary
+        from ..recovery.motion import adapt_library
         try:
             res = adapt_library(robot, GestureLibrary((gesture,), library.source), faults,
                                 method=args.method, tool_mm=args.tool, seed=args.seed,
@@ -222,13 +222,13 @@ def register(subparsers):
     Returns the ``bench`` command's own subparsers, so that more benchmarks can be
     added to it (``add_parser(...)`` with ``set_defaults(func=...)``).
     """
-    from .benchmarks.common import ALGORITHM_SPECS, PAPER_LINEUP
-    from .benchmarks.deadline import DEADLINES, DEFAULT_KEYS
+    from ..benchmarks.common import ALGORITHM_SPECS, PAPER_LINEUP
+    from ..benchmarks.deadline import DEADLINES, DEFAULT_KEYS
     keys = ', '.join(ALGORITHM_SPECS)
 
     bench = subparsers.add_parser('bench', help='benchmarks that print figures')
     bench_sub = bench.add_subparsers(dest='bench_command', metavar='BENCHMARK',
-                                     parser_class=_Parser)
+                                     parser_class=Parser)
     bench_sub.required = True
 
     p = bench_sub.add_parser('paper', help="reproduce the paper's Tables 3-6 (resumable)")

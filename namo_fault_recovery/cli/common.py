@@ -8,7 +8,7 @@ class UsageError(Exception):
     """A bad command-line value; reported on one line with exit code 2."""
 
 
-class _Parser(argparse.ArgumentParser):
+class Parser(argparse.ArgumentParser):
     """An ArgumentParser whose errors become UsageError instead of exiting."""
 
     def error(self, message):

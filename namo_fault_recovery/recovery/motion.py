@@ -22,19 +22,19 @@ import time
 
 import numpy as np
 
-from .collision import CollisionModel
-from .faults import resolve_locks
-from .gestures import GestureLibrary, Keyframe
-from .kinematics import _forward
+from .keyframes import (apply_locks, DEFAULT_EXPANSION_THRESHOLD, free_layout, joint_set,
+                        locked_sets, PoseProblem, reconfigure_library)
 from .kriging import OrdinaryKriging
-from .optimize import make_algorithm, minimize
-from .optimize.base import Clock
-from .optimize.polish import polish
-from .reconfigure import (_apply_locks, _joint_set, _layout, _locked_sets,
-                          DEFAULT_EXPANSION_THRESHOLD, PoseProblem, reconfigure_library)
-from .robot_model import ARMS, N_JOINTS
-from .score import gesture_targets, SimilarityScore
+from .locks import resolve_locks
 from .vq import quantise
+from ..model.gestures import GestureLibrary, Keyframe
+from ..model.kinematics import batch_forward
+from ..model.robot import ARMS, N_JOINTS
+from ..objective.collision import CollisionModel
+from ..objective.score import gesture_targets, SimilarityScore
+from ..optimize import make_algorithm, minimize
+from ..optimize.base import Clock
+from ..optimize.polish import polish
 
 METHODS = ('auto', 'kriging', 'per_point')
 DEFAULT_DISTORTION_MM = 60.0   # the paper's quantisation distortion threshold
@@ -131,7 +131,7 @@ def typical_points(robot, library, distortion_mm=DEFAULT_DISTORTION_MM,
             out[gesture.name] = None
             continue
         q = gesture.joint_matrix()
-        tips = np.concatenate([_forward(robot, q[:, _cols(side)], side).tip
+        tips = np.concatenate([batch_forward(robot, q[:, _cols(side)], side).tip
                                for side in gesture.arms], axis=1)
         out[gesture.name] = quantise(np.degrees(q), distortion_mm, features=tips, seed=seed)
     return out
@@ -199,7 +199,7 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
         locks = typical_res.locks
         notes += typical_res.notes
 
-    locked = _locked_sets(robot, locks)
+    locked = locked_sets(robot, locks)
     faulted = {s for s in ARMS if locked[s] or model.tool_length(s) > 0}
     targets = [t for g in library for t in gesture_targets(g)]
     scorer = SimilarityScore(model, targets, weights, reference_robot=robot)
@@ -215,7 +215,7 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
         ids = np.arange(offset, offset + n)
         offset += n
         design = gesture.joint_matrix()
-        base_r, base_l = _apply_locks(robot, design[:, :N_JOINTS], design[:, N_JOINTS:], locks)
+        base_r, base_l = apply_locks(robot, design[:, :N_JOINTS], design[:, N_JOINTS:], locks)
         affected = any(s in faulted for s in gesture.arms)
         status, nfev, sigma, stage, how = 'unchanged', 0, (), 0, 'keyframes'
         free = ()
@@ -224,7 +224,7 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
             gres = typical_res[gesture.name]
             status, stage = gres.status, gres.expansion_stage
             free = gres.free_joints
-            layout = _layout(robot, gesture.arms, locked, faulted, _joint_set(robot, free))
+            layout = free_layout(robot, gesture.arms, locked, faulted, joint_set(robot, free))
             how = 'keyframes' if quantisations.get(gesture.name) is None else 'kriging'
             nfev = int(round(typical_res.nfev * len(picks[gesture.name])
                              / max(1, sum(len(p) for p in picks.values()))))
@@ -241,12 +241,12 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
             if typical_res is not None:
                 layouts = [layout]      # the joints the typical points ended with
             else:
-                designed = _joint_set(robot, gesture.joints) if gesture.joints else None
-                layouts = [_layout(robot, gesture.arms, locked, faulted, designed)]
+                designed = joint_set(robot, gesture.joints) if gesture.joints else None
+                layouts = [free_layout(robot, gesture.arms, locked, faulted, designed)]
                 allowed = set(designed) if designed else None
                 for extra in gesture.expand:
-                    allowed |= _joint_set(robot, extra)
-                    layouts.append(_layout(robot, gesture.arms, locked, faulted, allowed))
+                    allowed |= joint_set(robot, extra)
+                    layouts.append(free_layout(robot, gesture.arms, locked, faulted, allowed))
             out = _chain_with_expansion(model, scorer, ids, base_r, base_l, design, layouts,
                                         algo, continuity, expansion_threshold, end, cancel,
                                         rng, q_r, q_l, typical_res is None)
@@ -328,10 +328,10 @@ def _spread(robot, gesture, picks, solved, locks):
         est = OrdinaryKriging(x[list(picks)], r).predict(x)
         out = design + np.radians(est.values)
         sigma = tuple(float(s) for s in np.sqrt(est.variance))
-    q_r, q_l = _apply_locks(robot, out[:, :N_JOINTS], out[:, N_JOINTS:], locks)
+    q_r, q_l = apply_locks(robot, out[:, :N_JOINTS], out[:, N_JOINTS:], locks)
     q_r = robot.arms['right'].clip(q_r)
     q_l = robot.arms['left'].clip(q_l)
-    return _apply_locks(robot, q_r, q_l, locks) + (sigma,)
+    return apply_locks(robot, q_r, q_l, locks) + (sigma,)
 
 
 def _chain_with_expansion(model, scorer, ids, base_r, base_l, design, layouts, algo,
@@ -426,19 +426,19 @@ def _describe(robot, model, scorer, gesture, ids, design, base_r, base_l, q_r, q
     after = scorer.evaluate(q_r, q_l, ids)
     collides, pairs = None, ()
     if checker is not None:
-        lm_r, lm_l = _forward(model, q_r, 'right'), _forward(model, q_l, 'left')
+        lm_r, lm_l = batch_forward(model, q_r, 'right'), batch_forward(model, q_l, 'left')
         collides = bool(checker.collides(lm_r, lm_l, ids).any())
         pairs = tuple(dict.fromkeys(p for row in checker.colliding_pairs(lm_r, lm_l, ids)
                                     for p in row))
     err_before = np.zeros(len(ids))
     err_after = np.zeros(len(ids))
     for side in gesture.arms:
-        want = _forward(robot, design[:, _cols(side)], side).tip
+        want = batch_forward(robot, design[:, _cols(side)], side).tip
         qb, qa = (base_r, q_r) if side == 'right' else (base_l, q_l)
         err_before = np.maximum(err_before, np.linalg.norm(
-            _forward(model, qb, side).tip - want, axis=1))
+            batch_forward(model, qb, side).tip - want, axis=1))
         err_after = np.maximum(err_after, np.linalg.norm(
-            _forward(model, qa, side).tip - want, axis=1))
+            batch_forward(model, qa, side).tip - want, axis=1))
     adapted = np.concatenate((q_r, q_l), axis=1)
     frames = tuple(Keyframe(kf.time_from_start, q_r[i].copy(), q_l[i].copy())
                    for i, kf in enumerate(gesture.keyframes))

@@ -15,8 +15,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .kinematics import (_forward, _forward_jacobian, ArmLandmarks, as_joint_array,
-                         forward_kinematics, take_landmarks)
+from ..model.kinematics import (ArmLandmarks, as_joint_array, batch_forward,
+                                batch_forward_jacobian, forward_kinematics, take_landmarks)
 
 COMPONENTS = ('elbow', 'wrist', 'tip', 'palm', 'wrist_lr', 'tip_lr')
 _ARM_COMPONENTS = 4
@@ -164,7 +164,7 @@ class SimilarityScore:
         err = np.zeros(len(target))
         for i, (side, ref) in enumerate((('right', self._ref_r), ('left', self._ref_l))):
             q = q_right if side == 'right' else q_left
-            d = np.linalg.norm(_forward(self.robot, q, side).tip - ref.tip[target], axis=-1)
+            d = np.linalg.norm(batch_forward(self.robot, q, side).tip - ref.tip[target], axis=-1)
             err = np.maximum(err, d * self._arm_mask[target, i])
         return err
 
@@ -212,8 +212,8 @@ class SimilarityScore:
         (N,) index array.
         """
         n = target.shape[0]
-        lm_r = q_right if isinstance(q_right, ArmLandmarks) else _forward(self.robot, q_right,
-                                                                          'right')
+        lm_r = (q_right if isinstance(q_right, ArmLandmarks)
+                else batch_forward(self.robot, q_right, 'right'))
         comps = np.zeros((n, len(COMPONENTS)))
         right = self._arm_terms(lm_r, 'right', target)
         comps[:, :_ARM_COMPONENTS] += right * self._arm_mask[target, 0:1]
@@ -224,7 +224,7 @@ class SimilarityScore:
             elif isinstance(q_left, ArmLandmarks):
                 lm_l = q_left
             else:
-                lm_l = _forward(self.robot, q_left, 'left')
+                lm_l = batch_forward(self.robot, q_left, 'left')
             left = self._arm_terms(lm_l, 'left', target)
             comps[:, :_ARM_COMPONENTS] += left * self._arm_mask[target, 1:2]
             two = self._two[target]
@@ -265,7 +265,7 @@ class SimilarityScore:
             elif isinstance(q, tuple):
                 lms[side], jacs[side] = q
             else:
-                lms[side], jacs[side] = _forward_jacobian(self.robot, q, side)
+                lms[side], jacs[side] = batch_forward_jacobian(self.robot, q, side)
         w = self._w[target]
         total = np.zeros(n)
         grads = {side: np.zeros((n, 7)) for side in ('right', 'left')}

@@ -9,22 +9,23 @@ one.  A state file that cannot be read back is *set aside* (renamed to
 ``state.json.corrupt-<time>``) and reported; it is never fatal.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 import hashlib
 import json
-import math
 import os
 from pathlib import Path
 import tempfile
 import threading
 import time
 
+from ..recovery.result import finite_number, LibraryResult, MalformedResult
+
 STATE_FILE = 'state.json'
 FORMAT = 'namo_fault_recovery/state'
 FORMAT_VERSION = 1
 
 
-class StateFileError(ValueError):
+class StateFileError(MalformedResult):
     """The state file exists but its content is unusable."""
 
 
@@ -47,137 +48,6 @@ class Fault:
 
 
 @dataclass(frozen=True)
-class GestureResult:
-    """One gesture of a published library version, with its reconfiguration figures."""
-
-    name: str
-    times: tuple            # time_from_start (s) per keyframe
-    positions: tuple        # per keyframe: 14 angles (rad), right arm first
-    score_before: float = 0.0
-    score_after: float = 0.0
-    wall_time: float = 0.0
-    status: str = 'unchanged'
-    message: str = ''
-    collides: bool = False
-    breakdown: dict = field(default_factory=dict)
-    stage: int = 1
-    colliding_pairs: tuple = ()
-    method: str = 'keyframes'    # kriging, per_point or keyframes (every one explored)
-    typical_points: int = 0
-    tip_error_mm: float = 0.0    # mean fingertip distance to the designed path
-    max_jump_deg: float = 0.0    # largest joint step between successive keyframes
-
-    def to_dict(self):
-        """Return a JSON-ready dict."""
-        return {
-            'name': self.name, 'times': list(self.times),
-            'positions': [list(p) for p in self.positions],
-            'score_before': self.score_before, 'score_after': self.score_after,
-            'wall_time': self.wall_time, 'status': self.status, 'message': self.message,
-            'collides': self.collides, 'breakdown': dict(self.breakdown),
-            'stage': self.stage, 'colliding_pairs': list(self.colliding_pairs),
-            'method': self.method, 'typical_points': self.typical_points,
-            'tip_error_mm': self.tip_error_mm, 'max_jump_deg': self.max_jump_deg,
-        }
-
-    @classmethod
-    def from_dict(cls, doc):
-        """Rebuild from :meth:`to_dict` output; raise StateFileError if malformed."""
-        try:
-            times = tuple(_finite(t, 'time') for t in doc['times'])
-            positions = tuple(tuple(_finite(a, 'angle') for a in p) for p in doc['positions'])
-            if len(times) != len(positions) or not times:
-                raise StateFileError(f"gesture {doc.get('name')!r}: {len(times)} times for "
-                                     f'{len(positions)} keyframes')
-            return cls(
-                name=str(doc['name']), times=times, positions=positions,
-                score_before=_number(doc.get('score_before', 0.0)),
-                score_after=_number(doc.get('score_after', 0.0)),
-                wall_time=_number(doc.get('wall_time', 0.0)),
-                status=str(doc.get('status', '')), message=str(doc.get('message', '')),
-                collides=bool(doc.get('collides', False)),
-                breakdown={str(k): _number(v) for k, v in dict(doc.get('breakdown', {})).items()},
-                stage=int(doc.get('stage', 1)),
-                colliding_pairs=tuple(str(p) for p in doc.get('colliding_pairs', ())),
-                method=str(doc.get('method', 'keyframes')),
-                typical_points=int(doc.get('typical_points', 0)),
-                tip_error_mm=_number(doc.get('tip_error_mm', 0.0)),
-                max_jump_deg=_number(doc.get('max_jump_deg', 0.0)),
-            )
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
-            if isinstance(exc, StateFileError):
-                raise
-            raise StateFileError(f'malformed gesture entry: {exc!r}') from None
-
-
-@dataclass(frozen=True)
-class LibraryResult:
-    """
-    One version of the gesture library, as published on ``/gesture_library``.
-
-    ``faults`` is the fault set it was computed for (joint -> requested lock angle or
-    None), ``locks`` the lock angles actually used (rad).
-    """
-
-    gestures: tuple
-    faults: dict = field(default_factory=dict)
-    locks: dict = field(default_factory=dict)
-    frozen_arms: tuple = ()
-    wall_time: float = 0.0
-    deadline: float = 0.0
-    deadline_met: bool = True
-    success: bool = True
-    cancelled: bool = False
-    settings: dict = field(default_factory=dict)
-    tool_mm: float = 0.0
-    tool_arm: str = 'right'
-
-    @property
-    def names(self):
-        """Gesture names in library order."""
-        return tuple(g.name for g in self.gestures)
-
-    def to_dict(self):
-        """Return a JSON-ready dict."""
-        return {
-            'gestures': [g.to_dict() for g in self.gestures],
-            'faults': dict(self.faults), 'locks': dict(self.locks),
-            'frozen_arms': list(self.frozen_arms), 'wall_time': self.wall_time,
-            'deadline': self.deadline, 'deadline_met': self.deadline_met,
-            'success': self.success, 'cancelled': self.cancelled,
-            'settings': dict(self.settings),
-            'tool_mm': self.tool_mm, 'tool_arm': self.tool_arm,
-        }
-
-    @classmethod
-    def from_dict(cls, doc):
-        """Rebuild from :meth:`to_dict` output; raise StateFileError if malformed."""
-        try:
-            gestures = tuple(GestureResult.from_dict(g) for g in doc['gestures'])
-            if not gestures:
-                raise StateFileError('library: no gestures')
-            faults = {str(k): (None if v is None else _finite(v, 'fault angle'))
-                      for k, v in dict(doc.get('faults', {})).items()}
-            locks = {str(k): _finite(v, 'lock angle') for k, v in dict(doc['locks']).items()}
-            return cls(
-                gestures=gestures, faults=faults, locks=locks,
-                frozen_arms=tuple(str(a) for a in doc.get('frozen_arms', ())),
-                wall_time=_number(doc.get('wall_time', 0.0)),
-                deadline=_number(doc.get('deadline', 0.0)),
-                deadline_met=bool(doc.get('deadline_met', True)),
-                success=bool(doc.get('success', True)),
-                cancelled=bool(doc.get('cancelled', False)),
-                settings=dict(doc.get('settings', {})),
-                tool_mm=_number(doc.get('tool_mm', 0.0)),
-                tool_arm=str(doc.get('tool_arm', 'right')),
-            )
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
-            if isinstance(exc, StateFileError):
-                raise
-            raise StateFileError(f'malformed library: {exc!r}') from None
-
-
-@dataclass(frozen=True)
 class PersistedState:
     """What survives a restart: the fault set, the last library and a config fingerprint."""
 
@@ -185,19 +55,6 @@ class PersistedState:
     library: LibraryResult = None
     fingerprint: str = ''
     saved_at: float = 0.0
-
-
-def _number(value):
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise StateFileError(f'expected a number, got {value!r}')
-    return float(value)
-
-
-def _finite(value, what):
-    value = _number(value)
-    if not math.isfinite(value):
-        raise StateFileError(f'{what}: expected a finite number, got {value!r}')
-    return value
 
 
 def fingerprint(*paths):
@@ -229,6 +86,8 @@ def decode_state(text):
         doc = json.loads(text)
     except ValueError as exc:
         raise StateFileError(f'not valid JSON ({exc})') from None
+    except RecursionError:
+        raise StateFileError('not usable JSON (nested too deeply)') from None
     if not isinstance(doc, dict) or doc.get('format') != FORMAT:
         raise StateFileError(f"not a {FORMAT} document (missing or wrong 'format' key)")
     if doc.get('version') != FORMAT_VERSION:
@@ -243,10 +102,13 @@ def decode_state(text):
             raise StateFileError(f'fault {name!r}: expected a mapping, got {entry!r}')
         angle, measured = entry.get('angle'), entry.get('measured')
         faults[str(name)] = Fault(
-            None if angle is None else _finite(angle, f'fault {name!r} angle'),
-            None if measured is None else _finite(measured, f'fault {name!r} measured'))
+            None if angle is None else finite_number(angle, f'fault {name!r} angle'),
+            None if measured is None else finite_number(measured, f'fault {name!r} measured'))
     library = doc.get('library')
-    library = LibraryResult.from_dict(library) if library is not None else None
+    try:
+        library = LibraryResult.from_dict(library) if library is not None else None
+    except MalformedResult as exc:
+        raise StateFileError(str(exc)) from None
     return PersistedState(faults, library, str(doc.get('fingerprint', '')),
                           float(doc.get('saved_at', 0.0) or 0.0))
 
@@ -282,7 +144,7 @@ class StateStore:
             return None, self.set_aside(f'cannot read it ({exc})')
         try:
             return decode_state(text), None
-        except StateFileError as exc:
+        except MalformedResult as exc:
             return None, self.set_aside(str(exc))
 
     def set_aside(self, reason):

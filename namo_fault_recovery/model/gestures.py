@@ -13,12 +13,12 @@ import re
 
 import numpy as np
 
-from . import _yaml_checks as chk
-from .errors import ConfigError
-from .resources import config_path, DEFAULT_GESTURE_FILE
-from .robot_model import ARMS, N_JOINTS
-from .score import ScoreWeights
+from . import yaml_checks as chk
+from .robot import ARMS, N_JOINTS
 from .trajectory_csv import load_trajectory_csv
+from ..errors import ConfigError
+from ..objective.score import ScoreWeights
+from ..resources import config_path, DEFAULT_GESTURE_FILE
 
 _NAME_RE = re.compile(r'^[a-z][a-z0-9_]*$')
 

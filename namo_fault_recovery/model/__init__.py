@@ -1,0 +1,12 @@
+"""
+The robot and its gestures, free of ROS: what Namo is and what it should do.
+
+- :mod:`.robot`: the arm model (DH table, joint names, limits, capsules, a tool) loaded
+  from ``config/namo_robot.yaml``;
+- :mod:`.kinematics`: forward kinematics and its Jacobian, batched over N configurations;
+- :mod:`.capsules`: the capsule geometry of the arms and torso;
+- :mod:`.gestures`: the reference gesture library (keyframes, weights, expansion stages);
+- :mod:`.trajectory_csv`: dense recorded motions stored as CSV files;
+- :mod:`.circle_design`: how the demo circle motion was designed;
+- :mod:`.yaml_checks`: the small validators that name the file and key of a bad value.
+"""

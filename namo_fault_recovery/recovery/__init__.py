@@ -1,0 +1,11 @@
+"""
+From a fault set to an adapted gesture library, free of ROS.
+
+- :mod:`.locks`: lock strategies (``average``, ``measured``, ``optimal``) and lock angles;
+- :mod:`.keyframes`: the batched pose problems of every keyframe, solved within one
+  deadline (the first paper's method, with stage 2 and the collision term);
+- :mod:`.motion`: whole-motion adaptation (the second paper: typical points and Kriging,
+  or point by point);
+- :mod:`.vq`: vector quantisation that picks a motion's typical points;
+- :mod:`.kriging`: the variogram fit and ordinary Kriging.
+"""
