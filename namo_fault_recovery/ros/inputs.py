@@ -9,8 +9,17 @@ message changes nothing: the caller keeps its previous state.
 import math
 
 
+MAX_REASON = 300      # characters: a rejected value never makes a reason unbounded
+
+
 class BadInput(ValueError):
     """An input message that is rejected as a whole; the message is the reason."""
+
+    def __init__(self, reason):
+        reason = str(reason)
+        if len(reason) > MAX_REASON:
+            reason = f'{reason[:MAX_REASON]}... ({len(reason)} characters)'
+        super().__init__(reason)
 
 
 def _fmt(value):
@@ -62,7 +71,10 @@ def parse_fault(robot, names, positions=(), velocities=(), efforts=()):
                         f'position {value:.6g} rad ({math.degrees(value):.4g} deg) of joint '
                         f'{name!r} is outside its limits [{arm.lower[index]:.6g}, '
                         f'{arm.upper[index]:.6g}] rad')
-                angle = value
+                # Within the tolerance of the limits: clamp, so that every published
+                # angle is within its limits bit for bit.
+                arm = robot.arms[side]
+                angle = min(max(value, float(arm.lower[index])), float(arm.upper[index]))
         faults[name] = angle
     return faults
 

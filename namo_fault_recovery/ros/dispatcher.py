@@ -1,0 +1,99 @@
+"""
+The dispatcher: takes the newest request from the run book, runs it, publishes it.
+
+Free of ROS.  One plain thread (never an executor thread) waits for a request, sends it
+to the engine process with the deadline counted from the moment it was requested, checks
+the result, persists it, and publishes it, unless a newer request superseded it meanwhile.
+Publishing and persisting are callables given by the node.  A run with no structure
+change (no fault and no tool) needs no engine: the reference library is published at once.
+"""
+
+import math
+import threading
+
+from .engine_process import EngineError
+from .restore import check_result
+from ..recovery.engine import structure_changed
+from ..recovery.result import reference_result, summary
+
+# Seconds of the deadline kept for what follows the engine: the answer crossing the pipe,
+# the checks, the state file and the messages.
+PUBLISH_MARGIN = 0.02
+
+
+class Dispatcher:
+    """The thread between the run book and the engine process."""
+
+    def __init__(self, book, engine, robot, library, settings, persist, publish, log):
+        self._book = book
+        self._engine = engine
+        self._robot = robot
+        self._library = library
+        self._settings = settings          # callable: the current NodeSettings
+        self._persist = persist            # persist(generation, faults, result) -> saved?
+        self._publish = publish            # publish(result) -> stamp_ns
+        self._log = log                    # log(level, text)
+        self._thread = threading.Thread(target=self._loop, name='dispatcher', daemon=True)
+        self.last_engine_time = 0.0
+
+    def start(self):
+        """Start the dispatcher thread."""
+        self._thread.start()
+
+    def join(self, timeout=5.0):
+        """Wait for the thread to end (after the run book stopped)."""
+        if self._thread.is_alive():
+            self._thread.join(timeout)
+
+    def _loop(self):
+        while True:
+            run = self._book.next_run()
+            if run is None:
+                return
+            try:
+                self._handle(run)
+            except Exception as exc:  # noqa: B902 - the dispatcher must outlive any bug
+                if self._book.stopping:
+                    return
+                self._book.notify(self._book.failed(run.generation,
+                                                    f'{type(exc).__name__}: {exc}'))
+                self._log('error', f'reconfiguration: {type(exc).__name__}: {exc}; '
+                                   f'previous library kept')
+
+    def _handle(self, run):
+        settings = self._settings()
+        engine = settings.engine
+        faults = {j: f.angle for j, f in run.faults.items()}
+        if not structure_changed(faults, engine):
+            result = reference_result(self._library, engine.deadline_sec, engine.public())
+        else:
+            measured = {j: f.measured for j, f in run.faults.items() if f.measured is not None}
+            end = run.requested_at + engine.deadline_sec - PUBLISH_MARGIN
+            try:
+                result, self.last_engine_time = self._engine.run(
+                    run.generation, faults, engine, settings.seed, end, measured)
+            except EngineError as exc:
+                self._fail(run, str(exc))
+                return
+        if not self._book.is_current(run.generation):
+            return                                # superseded: a newer run answers
+        problem = check_result(self._robot, self._library, result, run.faults)
+        if problem:
+            self._fail(run, problem)
+            return
+        if not self._persist(run.generation, run.faults, result):
+            return                                # superseded while checking
+        # Persisted first: once a client has the library, a restart has it too.
+        ready = self._book.publish(run.generation, result, self._publish)
+        if ready is None:
+            return
+        self._book.notify(ready)
+        level = 'info' if result.success else 'warning'
+        if all(math.isfinite(g.score_after) for g in result.gestures):
+            self._log(level, summary(result))
+
+    def _fail(self, run, reason):
+        ready = self._book.failed(run.generation, reason)
+        self._book.notify(ready)
+        if ready or self._book.is_current(run.generation):
+            self._log('error', f'reconfiguration failed: {reason}; previous library kept')

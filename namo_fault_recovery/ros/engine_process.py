@@ -1,0 +1,165 @@
+"""
+The engine in its own process, so that it never shares an interpreter lock with the node.
+
+Free of ROS.  :class:`EngineProcess` starts one child process (``spawn``: no DDS thread is
+forked) that loads the robot and the library once, keeps the typical points, and answers
+one request at a time over a pipe with :func:`~namo_fault_recovery.recovery.engine.recover`.
+The deadline travels as an absolute ``time.monotonic()`` instant (one system-wide clock
+on Linux), and a shared counter cancels a run as soon as a newer one is wanted.  A child
+that dies or hangs is replaced, and the run is reported failed.
+"""
+
+import multiprocessing
+import os
+import signal
+import time
+import traceback
+
+_STOP = None
+
+
+class EngineError(RuntimeError):
+    """The engine process failed a run (the message says why)."""
+
+
+def _serve(conn, robot_file, gesture_file, current):
+    """Child main loop: load the models, warm up, then answer requests until told to stop."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)     # Ctrl-C is the parent's to handle
+    from ..model.gestures import load_library
+    from ..model.robot import load_robot
+    from ..optimize.base import Clock
+    from ..recovery.engine import recover, RecoverySettings
+    from ..recovery.motion import typical_points
+
+    robot = load_robot(robot_file)
+    library = load_library(robot, gesture_file)
+    cache = {}
+
+    def quantisations(distortion_mm):
+        if distortion_mm not in cache:
+            cache.clear()
+            cache[distortion_mm] = typical_points(robot, library, distortion_mm)
+        return cache[distortion_mm]
+
+    # Warm-up: pay the one-off costs (first allocations, caches) before any fault.
+    try:
+        joint = robot.arms['right'].joint_names[0]
+        recover(robot, library, {joint: None}, RecoverySettings(trajectory_method='kriging'),
+                seed=0, clock=Clock(0.3), quantisations=quantisations(
+                    RecoverySettings().vq_distortion_mm))
+    except Exception:  # noqa: B902 - a warm-up problem is reported by the real runs
+        pass
+    conn.send(('ready', os.getpid()))
+    while True:
+        try:
+            request = conn.recv()
+        except (EOFError, OSError):
+            return                                   # the node went away
+        if request is _STOP:
+            return
+        run_id, faults, settings, seed, end, measured = request
+
+        def cancel(run_id=run_id):
+            return current.value != run_id
+
+        try:
+            clock = Clock(None, cancel)
+            clock.end = end
+            began = time.monotonic()
+            quant = quantisations(settings.vq_distortion_mm)
+            result = recover(robot, library, faults, settings, seed=seed, clock=clock,
+                             measured=measured, quantisations=quant)
+            conn.send(('ok', run_id, result, time.monotonic() - began))
+        except Exception as exc:  # noqa: B902 - report every failure to the node
+            conn.send(('error', run_id, f'{type(exc).__name__}: {exc}'[:500],
+                       traceback.format_exc(limit=5)[-2000:]))
+
+
+class EngineProcess:
+    """A child process running the engine; one run at a time, cancellable."""
+
+    def __init__(self, robot_file=None, gesture_file=None, start_timeout=60.0):
+        self._files = (robot_file, gesture_file)
+        self._ctx = multiprocessing.get_context('spawn')
+        self._current = self._ctx.Value('q', 0, lock=False)
+        self._start_timeout = start_timeout
+        self._proc = None
+        self._conn = None
+        self.pid = None
+        self.restarts = 0
+
+    def start(self):
+        """Start the child (returns at once; :meth:`run` waits until it is ready)."""
+        parent, child = self._ctx.Pipe()
+        self._proc = self._ctx.Process(
+            target=_serve, args=(child, *self._files, self._current),
+            name='namo-recovery-engine', daemon=True)
+        self._proc.start()
+        child.close()
+        self._conn = parent
+        self.pid = None
+
+    def _ensure_ready(self, deadline):
+        if self.pid is not None:
+            return
+        if not self._conn.poll(max(deadline - time.monotonic(), 0.0)):
+            raise EngineError('the engine process did not start in time')
+        kind, pid = self._conn.recv()
+        self.pid = pid
+
+    def cancel(self):
+        """Cancel the run under way (it returns soon with its best so far)."""
+        self._current.value = -1
+
+    def run(self, run_id, faults, settings, seed, end, measured, hang_margin=5.0):
+        """
+        Run the engine for one request; return ``(LibraryResult, seconds in the child)``.
+
+        ``end`` is the absolute ``time.monotonic()`` deadline (None: no deadline).  Raises
+        :class:`EngineError` if the run fails, or if the child dies or does not answer
+        within the deadline plus ``hang_margin`` (the child is then replaced).
+        """
+        try:
+            self._ensure_ready(time.monotonic() + self._start_timeout)
+            self._current.value = run_id
+            self._conn.send((run_id, faults, settings, seed, end, measured))
+            limit = None if end is None else max(end - time.monotonic(), 0.0) + hang_margin
+            if not self._conn.poll(limit):
+                raise EngineError(f'the engine process did not answer within '
+                                  f'{limit:.1f} s; it was restarted')
+            answer = self._conn.recv()
+        except (EOFError, OSError, BrokenPipeError) as exc:
+            self._restart()
+            raise EngineError(f'the engine process died ({type(exc).__name__}); it was '
+                              f'restarted') from None
+        except EngineError:
+            self._restart()
+            raise
+        if answer[0] == 'ok':
+            return answer[2], answer[3]
+        raise EngineError(answer[2])
+
+    def _restart(self):
+        self.restarts += 1
+        self._kill()
+        self.start()
+
+    def _kill(self):
+        if self._proc is not None and self._proc.is_alive():
+            self._proc.kill()
+            self._proc.join(timeout=2.0)
+        if self._conn is not None:
+            self._conn.close()
+
+    def stop(self, timeout=2.0):
+        """Ask the child to stop; kill it if it does not."""
+        if self._proc is None:
+            return
+        self.cancel()
+        try:
+            self._conn.send(_STOP)
+        except (OSError, ValueError):
+            pass
+        self._proc.join(timeout=timeout)
+        self._kill()
+        self._proc = None

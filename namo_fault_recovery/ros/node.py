@@ -1,0 +1,411 @@
+"""
+``RecoveryNode``: wires the ROS interfaces to the parts that do the work.
+
+Messages come in, are validated (:mod:`.inputs`) and queued (:mod:`.fault_intake`); the
+run book (:mod:`.run_book`) says which library is wanted; the dispatcher
+(:mod:`.dispatcher`) runs the engine in its own process (:mod:`.engine_process`) and
+publishes.  Nothing here blocks an executor thread: joint states are kept raw (parsed only
+when needed), services answer from ``async`` callbacks that await the run book, and the
+periodic work runs on a steady clock, independent of ``use_sim_time``.
+"""
+
+from collections import deque
+import threading
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from rclpy.task import Future
+from rclpy.time import Time
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import MarkerArray
+
+from . import diagnostics
+from . import messages as conv
+from .dispatcher import Dispatcher
+from .engine_process import EngineProcess
+from .fault_intake import Clear, FaultIntake, Report
+from .inputs import BadInput, parse_fault, parse_joint_state
+from .parameters import (check_parameter, declare_parameters, DEFAULT_STATE_DIR, MARKER_PARAMS,
+                         node_settings, one_line, parameter_specs, RERUN_PARAMS, shorten,
+                         StartupError)
+from .restore import restore_decision, validate_faults
+from .run_book import RunBook
+from .state_store import fingerprint, StateStore
+from ..errors import ConfigError
+from ..model.gestures import load_library
+from ..model.robot import load_robot
+from ..recovery.result import reference_result, summary
+
+NODE_NAME = 'recovery_node'
+FAULT_QUEUE_DEPTH = 10_000        # reports the subscription holds while the intake catches up
+MAX_REJECTIONS_SHOWN = 10
+STATES_PARSE_PERIOD = 0.1         # s: the latest raw joint state is parsed at most this often
+
+
+class RecoveryNode(Node):
+    """The fault-recovery node; see the module docstring and ``msg_docs/``."""
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        self._ready = False
+        self._last_param_reason = None
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.add_post_set_parameters_callback(self._after_set_parameters)
+        values = declare_parameters(self, lambda: self._last_param_reason)
+        self._settings = node_settings(values)
+        try:
+            self._robot = load_robot(values['robot_file'] or None)
+            self._library = load_library(self._robot, values['gesture_file'] or None)
+        except (ConfigError, FileNotFoundError) as exc:
+            raise StartupError(f'invalid configuration: {one_line(exc)}') from None
+        self._prefix = diagnostics.status_prefix(self.get_fully_qualified_name())
+        self._fingerprint = fingerprint(self._robot.source, self._library.source)
+        self._store = StateStore(values['state_dir'] or DEFAULT_STATE_DIR)
+        self._state_problem = None
+        self._lock = threading.Lock()    # the input counters below
+        self._rejections = deque(maxlen=MAX_REJECTIONS_SHOWN)
+        self._rejected_total = 0
+        self._last_accepted = 0.0
+        self._raw_state = None
+        self._states_received = 0
+        self._measured = {}
+        self._last_stamp_ns = 0
+        self._diag_dirty = True
+        self._engine = EngineProcess(values['robot_file'] or None,
+                                     values['gesture_file'] or None)
+        self._engine.start()
+        self._book = RunBook(on_request=self._engine.cancel)
+        self._persist_lock = threading.Lock()
+        self._intake = FaultIntake(self._book, self._commit_faults, self._on_accepted,
+                                   self._measured_now)
+        self._dispatcher = Dispatcher(self._book, self._engine, self._robot, self._library,
+                                      lambda: self._settings, self._persist_library,
+                                      self._publish_library, self._log)
+        try:
+            self._create_interfaces()
+            self._restore()
+        except BaseException:
+            self.stop()
+            raise
+        self._intake.start()
+        self._dispatcher.start()
+        self._ready = True
+        self.get_logger().info(
+            f'robot {self._robot.name} ({self._robot.source}), {len(self._library)} gestures '
+            f'({self._library.source}); state in {self._store.directory}; engine process '
+            f'started')
+
+    # --- interfaces -----------------------------------------------------------------
+
+    def _create_interfaces(self):
+        reliable = {'reliability': ReliabilityPolicy.RELIABLE,
+                    'history': HistoryPolicy.KEEP_LAST}
+        latched = dict(reliable, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self._library_pub = self.create_publisher(
+            JointTrajectory, 'gesture_library', QoSProfile(depth=len(self._library), **latched))
+        self._marker_pub = self.create_publisher(MarkerArray, 'gesture_markers',
+                                                 QoSProfile(depth=1, **latched))
+        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        inputs = MutuallyExclusiveCallbackGroup()
+        self.create_subscription(JointState, 'actuator_fault', self._on_fault,
+                                 QoSProfile(depth=FAULT_QUEUE_DEPTH, **reliable),
+                                 callback_group=inputs)
+        self.create_subscription(JointState, 'joint_states', self._on_joint_states,
+                                 QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
+                                            history=HistoryPolicy.KEEP_LAST),
+                                 callback_group=MutuallyExclusiveCallbackGroup(), raw=True)
+        services = ReentrantCallbackGroup()
+        service_qos = QoSProfile(depth=1000, **reliable)
+        self.create_service(Trigger, 'reconfigure_gestures', self._on_reconfigure,
+                            qos_profile=service_qos, callback_group=services)
+        self.create_service(Trigger, 'clear_faults', self._on_clear,
+                            qos_profile=service_qos, callback_group=services)
+        # Wakes the executor when a run completes a service call's future.
+        self._wake = self.create_guard_condition(lambda: None,
+                                                 callback_group=MutuallyExclusiveCallbackGroup())
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        periodic = MutuallyExclusiveCallbackGroup()
+        self._diag_period = self.get_parameter('diagnostics_period_sec').value
+        self._last_diag = 0.0
+        self.create_timer(STATES_PARSE_PERIOD, self._tick, callback_group=periodic,
+                          clock=steady)
+
+    # --- parameters -----------------------------------------------------------------
+
+    def _on_set_parameters(self, parameters):
+        current = {name: self.get_parameter(name).value for name, _, _ in parameter_specs()
+                   if self.has_parameter(name)}
+        current.update({p.name: p.value for p in parameters})
+        for param in parameters:
+            reason = check_parameter(param.name, param.value, current)
+            if reason:
+                self._last_param_reason = reason
+                if self._ready:
+                    self._reject('parameter', reason)
+                return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _after_set_parameters(self, parameters):
+        if not self._ready:
+            return
+        names = {p.name for p in parameters}
+        self._settings = node_settings({n: self.get_parameter(n).value
+                                        for n, _, _ in parameter_specs()})
+        tool = self._settings.engine.tool_length_mm > 0
+        rerun = bool(names & RERUN_PARAMS) and (
+            bool(self._book.faults) or tool or 'tool_length_mm' in names)
+        if rerun:
+            self._book.request()
+        changed = ', '.join(f'{p.name}={shorten(repr(p.value))}' for p in parameters)
+        self.get_logger().info(f'parameters set: {changed}'
+                               + ('; reconfiguring the library' if rerun else ''))
+        current = self._book.current
+        if names & MARKER_PARAMS and current is not None:
+            self._publish_markers(current, self.get_clock().now().to_msg())
+        self._diag_dirty = True
+
+    # --- inputs ---------------------------------------------------------------------
+
+    def _reject(self, source, reason):
+        reason = shorten(reason, 300)
+        self.get_logger().warning(f'rejected {source}: {reason}; previous state kept',
+                                  throttle_duration_sec=0.2)
+        with self._lock:
+            self._rejected_total += 1
+            self._rejections.append((time.time(), source, reason))
+        self._diag_dirty = True
+
+    def _on_fault(self, msg):
+        try:
+            parsed = parse_fault(self._robot, msg.name, msg.position, msg.velocity, msg.effort)
+        except BadInput as exc:
+            self._reject('/actuator_fault', str(exc))
+            return
+        if not self._intake.submit(Report(parsed)):
+            self._reject('/actuator_fault', 'the fault queue is full; report dropped')
+
+    def _on_joint_states(self, raw):
+        # O(1): keep the latest serialized sample; it is parsed only when needed.
+        self._raw_state = raw
+        self._states_received += 1
+
+    def _measured_now(self):
+        """Parse the latest joint state (if new) and return the measured angles."""
+        raw, self._raw_state = self._raw_state, None
+        if raw is not None:
+            try:
+                msg = deserialize_message(raw, JointState)
+                measured = parse_joint_state(self._robot, msg.name, msg.position)
+            except BadInput as exc:
+                self._reject('/joint_states', str(exc))
+            except Exception as exc:  # noqa: B902 - a malformed sample is just rejected
+                self._reject('/joint_states', f'cannot deserialize: {exc}')
+            else:
+                with self._lock:
+                    self._measured.update(measured)
+        with self._lock:
+            return dict(self._measured)
+
+    def _on_accepted(self, reports, cleared, faults):
+        self._last_accepted = time.time()
+        self._diag_dirty = True
+        if reports:
+            joints = {}
+            for report in reports:
+                joints.update(report.joints)
+            described = ', '.join(
+                f'{j} at {conv.fmt_angle(a)}' if a is not None else
+                f'{j} (lock angle: {self._settings.engine.lock_strategy} strategy)'
+                for j, a in joints.items())
+            self.get_logger().info(f'fault accepted: {shorten(described, 400)} '
+                                   f'({len(reports)} report(s)); reconfiguring the library')
+
+    # --- services -------------------------------------------------------------------
+
+    def _await_outcome(self, register):
+        future = Future()
+
+        def done(outcome):
+            future.set_result(outcome)
+            self._wake.trigger()
+
+        register(done)
+        return future
+
+    async def _on_reconfigure(self, request, response):
+        outcome = await self._await_outcome(self._book.call)
+        response.success = bool(outcome.published and outcome.result.success)
+        if outcome.published:
+            response.message = f'{summary(outcome.result)} [{self._version_text(outcome)}]'
+        else:
+            response.message = outcome.reason + (
+                f' [{self._version_text(outcome)}]' if outcome.version else '')
+        return response
+
+    async def _on_clear(self, request, response):
+        counted = []
+
+        def register(done):
+            def persisted(count):
+                counted.append(count)
+                self._book.call(done)
+            self._intake.submit(Clear(persisted))
+
+        outcome = await self._await_outcome(register)
+        count = counted[0] if counted else 0
+        tool = self._settings.engine.tool_length_mm
+        done = (f'the reference library is published ({len(self._library)} gestures)'
+                if tool <= 0 else f'the library is adapted to the {tool:g} mm tool alone '
+                                  f'(tool_length_mm)')
+        response.success = bool(outcome.published)
+        response.message = (f'cleared {count} fault(s); {done} [{self._version_text(outcome)}]'
+                            if outcome.published else f'cleared {count} fault(s); '
+                                                      f'{outcome.reason}')
+        self.get_logger().info(f'cleared {count} fault(s); {done}')
+        return response
+
+    @staticmethod
+    def _version_text(outcome):
+        stamp = outcome.stamp_ns
+        return (f'library version {outcome.version}, '
+                f'stamp {stamp // 1_000_000_000}.{stamp % 1_000_000_000:09d}')
+
+    # --- outputs, persistence, restore ----------------------------------------------
+
+    def _commit_faults(self, faults):
+        """Persist a new fault set, then hand it to the run book (one step for the disk)."""
+        with self._persist_lock:
+            self._save(faults, self._book.current)
+            self._book.set_faults(faults)
+
+    def _persist_library(self, generation, faults, result):
+        """Persist a run's library unless a newer request superseded it; return if saved."""
+        with self._persist_lock:
+            if not self._book.is_current(generation):
+                return False
+            self._save(faults, result)
+            return True
+
+    def _save(self, faults, library):
+        try:
+            self._store.save(faults, library, self._fingerprint)
+            self._state_problem = None
+        except (OSError, ValueError) as exc:
+            if self._state_problem is None:
+                self.get_logger().error(f'cannot write the state file {self._store.path}: '
+                                        f'{exc}; the state will not survive a restart')
+            self._state_problem = shorten(f'cannot write {self._store.path}: {exc}')
+
+    def _publish_library(self, result):
+        """Publish a library version; return its stamp (ns, strictly increasing)."""
+        stamp_ns = max(self.get_clock().now().nanoseconds, self._last_stamp_ns + 1)
+        self._last_stamp_ns = stamp_ns
+        stamp = Time(nanoseconds=stamp_ns).to_msg()
+        for msg in conv.library_to_msgs(self._robot.joint_names, result, stamp):
+            self._library_pub.publish(msg)
+        self._diag_dirty = True
+        threading.Thread(target=self._publish_markers, args=(result, stamp),
+                         name='markers', daemon=True).start()
+        return stamp_ns
+
+    def _publish_markers(self, result, stamp):
+        try:
+            markers = conv.library_markers(
+                self._robot, reference_result(self._library), result, stamp,
+                self._settings.marker_frame_id, self._settings.marker_spacing)
+            self._marker_pub.publish(MarkerArray(markers=markers))
+        except Exception as exc:  # noqa: B902 - markers are a view; never fatal
+            if self._live():
+                self.get_logger().warning(f'could not publish /gesture_markers: {exc}')
+
+    def _restore(self):
+        """Publish the reference, then restore the persisted fault set (and library)."""
+        self._book.mark_published_without_run(reference_result(self._library),
+                                              self._publish_library(
+                                                  reference_result(self._library)))
+        state, problem = self._store.load()
+        if state is not None:
+            problem = validate_faults(self._robot, state.faults)
+            if problem:
+                problem = self._store.set_aside(problem)
+                state = None
+        if problem:
+            self._state_problem = shorten(problem, 500)
+            self.get_logger().error(f'{self._state_problem}; starting without faults')
+        tool = self._settings.engine.tool_length_mm > 0
+        if state is None or not state.faults:
+            if tool:
+                self._book.request()          # a tool from the start is a structure change
+            return
+        reason = restore_decision(self._robot, self._library, state, self._fingerprint,
+                                  self._settings.engine)
+        self._book.set_faults(state.faults, request=reason is not None)
+        joints = ', '.join(state.faults)
+        if reason is None:
+            self._book.mark_published_without_run(state.library,
+                                                  self._publish_library(state.library))
+            self.get_logger().info(f'restored faults {joints} and their library from '
+                                   f'{self._store.path}')
+        else:
+            self.get_logger().warning(f'restored faults {joints} from {self._store.path}; '
+                                      f'{reason}: reconfiguring')
+
+    # --- periodic work and diagnostics ---------------------------------------------
+
+    def _tick(self):
+        """Steady 10 Hz: refresh the measured angles, publish diagnostics when due."""
+        if self._raw_state is not None:
+            self._measured_now()
+        now = time.monotonic()
+        if self._diag_dirty or now - self._last_diag >= self._diag_period:
+            self._diag_dirty = False
+            self._last_diag = now
+            self.publish_diagnostics()
+
+    def publish_diagnostics(self):
+        """Publish /diagnostics from a snapshot of the state."""
+        book = self._book.snapshot()
+        with self._lock:
+            snap = diagnostics.Snapshot(
+                faults=book['faults'], fault_version=book['fault_version'],
+                current=book['current'], version=book['version'], stamp_ns=book['stamp_ns'],
+                pending=book['pending'], running=book['running'], failed=book['failed'],
+                settings=self._settings, rejections=list(self._rejections),
+                rejected_total=self._rejected_total,
+                joint_states_received=self._states_received,
+                measured_joints=tuple(sorted(self._measured)),
+                last_accepted=self._last_accepted, state_problem=self._state_problem,
+                state_file=str(self._store.path), engine_restarts=self._engine.restarts,
+                waiting_callers=book['waiting_callers'])
+        try:
+            msg = DiagnosticArray()
+            msg.header.stamp = self.get_clock().now().to_msg()
+            msg.status = diagnostics.statuses(self._robot, snap, self._prefix)
+            self._diag_pub.publish(msg)
+        except Exception as exc:  # noqa: B902 - e.g. publishing during shutdown
+            if self._live():
+                self.get_logger().warning(f'could not publish /diagnostics: {exc}')
+
+    def _log(self, level, text):
+        if self._live():
+            getattr(self.get_logger(), level)(text)
+
+    def _live(self):
+        """Return True unless ROS was shut down (e.g. SIGTERM)."""
+        return not self._book.stopping and self.context.ok()
+
+    def stop(self):
+        """Stop the threads and the engine process; tell every waiting caller."""
+        self._book.stop()
+        self._engine.cancel()
+        self._intake.stop()
+        self._dispatcher.join()
+        self._engine.stop()

@@ -1,0 +1,93 @@
+"""
+The checks a library passes before it is published or restored, and the restore decision.
+
+Free of ROS.  :func:`check_result` refuses a library whose gestures, keyframes or locks do
+not match the configuration, or with an angle that is not finite or not within its
+limits exactly; :func:`restore_decision` says whether the library saved in ``state_dir``
+can be republished after a restart or must be recomputed, and why.
+"""
+
+import math
+
+from ..model.robot import ARMS
+
+
+def within_exactly(robot, side, index, angle):
+    """Return True if ``angle`` is within the joint's limits with no tolerance."""
+    arm = robot.arms[side]
+    return float(arm.lower[index]) <= angle <= float(arm.upper[index])
+
+
+def check_result(robot, library, result, faults=None):
+    """Return None if ``result`` is safe to publish, else the reason it is not."""
+    if result.names != library.names:
+        return (f'library gestures {list(result.names)} do not match the configured '
+                f'{list(library.names)}')
+    if faults is not None and set(result.locks) != set(faults):
+        return (f'locked joints {sorted(result.locks)} do not match the fault set '
+                f'{sorted(faults)}')
+    joint_names = tuple(robot.joint_names)
+    columns = {}
+    for joint, angle in result.locks.items():
+        try:
+            side, index = robot.locate_joint(joint)
+        except KeyError as exc:
+            return exc.args[0]
+        if not (math.isfinite(angle) and within_exactly(robot, side, index, angle)):
+            return f'lock angle {angle!r} of {joint} is not usable'
+        columns[ARMS.index(side) * 7 + index] = angle
+    for gesture in result.gestures:
+        if len(gesture.times) != len(library[gesture.name].keyframes):
+            return f'{gesture.name}: wrong number of keyframes'
+        for q in gesture.positions:
+            if len(q) != len(joint_names):
+                return f'{gesture.name}: expected {len(joint_names)} angles'
+            for k, angle in enumerate(q):
+                side, index = robot.locate_joint(joint_names[k])
+                if not (math.isfinite(angle) and within_exactly(robot, side, index, angle)):
+                    return (f'{gesture.name}: angle {angle!r} of {joint_names[k]} '
+                            f'is not finite or outside its limits')
+                if k in columns and angle != columns[k]:
+                    return (f'{gesture.name}: failed joint {joint_names[k]} at '
+                            f'{angle!r}, not at its lock angle {columns[k]!r}')
+    return None
+
+
+def validate_faults(robot, faults):
+    """Return why a persisted fault set cannot be used, or None."""
+    for joint, fault in faults.items():
+        try:
+            side, index = robot.locate_joint(joint)
+        except KeyError as exc:
+            return f'fault on {exc.args[0]}'
+        for value in (fault.angle, fault.measured):
+            if value is not None and not robot.within_limits(side, index, value):
+                return f'angle {value!r} of faulted joint {joint} is outside its limits'
+    return None
+
+
+def _tool(length_mm, arm):
+    """Return a comparable structure change: no tool is the same on either arm."""
+    return (float(length_mm), arm) if length_mm > 0 else (0.0, None)
+
+
+def restore_decision(robot, library, state, fingerprint, settings):
+    """
+    Return None if ``state.library`` can be republished as it is, else the reason.
+
+    ``settings`` are the node's engine settings now; the saved library must have been
+    computed from the same files, for the same fault set, lock strategy and tool.
+    """
+    saved = state.library
+    if saved is None:
+        return 'no library was saved'
+    if state.fingerprint != fingerprint:
+        return 'the robot or gesture file changed since it was saved'
+    if saved.faults != {j: f.angle for j, f in state.faults.items()}:
+        return 'the saved library was computed for another fault set'
+    if saved.settings.get('lock_strategy') != settings.lock_strategy:
+        return 'the lock strategy changed since it was saved'
+    if (_tool(saved.tool_mm, saved.tool_arm)
+            != _tool(settings.tool_length_mm, settings.tool_arm)):
+        return 'the tool (tool_length_mm, tool_arm) changed since it was saved'
+    return check_result(robot, library, saved, state.faults)

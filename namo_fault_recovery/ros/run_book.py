@@ -1,0 +1,192 @@
+"""
+The node's run bookkeeping: which library is wanted, which is running, who waits for it.
+
+Free of ROS and thread-safe.  Every change that makes the published library out of date
+(a new fault set, a parameter, a call of ``/reconfigure_gestures``) *requests* a new
+generation.  The dispatcher takes the newest request, runs it, and *publishes* it only
+if no newer request arrived meanwhile ("a stale run is never published").  A caller
+waits for the generation current when it asked: it is told once that generation (or a
+newer one, which supersedes it) is published, failed, or the node stops.  Callers are
+told through a callback, so that no executor thread ever blocks waiting.
+"""
+
+from dataclasses import dataclass
+import threading
+import time
+
+
+@dataclass(frozen=True)
+class Run:
+    """One generation to compute: the fault set it is for and when it was requested."""
+
+    generation: int
+    faults: dict                 # joint -> Fault
+    requested_at: float          # time.monotonic() of the request (the deadline starts)
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What a waiting caller is told."""
+
+    published: bool
+    result: object = None        # the LibraryResult now published
+    version: int = 0             # library version number of ``result``
+    stamp_ns: int = 0
+    reason: str = ''             # why nothing new was published
+
+
+class RunBook:
+    """The fault set, the request generations and the waiting callers."""
+
+    def __init__(self, on_request=None):
+        self._cond = threading.Condition()
+        self._on_request = on_request    # e.g. cancel the run under way (cheap, non-blocking)
+        self.faults = {}             # joint -> Fault, in arrival order
+        self.fault_version = 0
+        self._requested = 0
+        self._requested_at = time.monotonic()
+        self._taken = 0              # highest generation given to the dispatcher
+        self._running = None
+        self._published = 0
+        self._failed = None          # (generation, reason) of the last failed run
+        self.current = None          # LibraryResult last published
+        self.version = 0             # library version number
+        self.stamp_ns = 0
+        self._waiters = []           # (generation, callback)
+        self.stopping = False
+
+    # --- requests -------------------------------------------------------------------
+
+    def set_faults(self, faults, request=True):
+        """Replace the fault set (already persisted) and request a new library."""
+        with self._cond:
+            self.faults = dict(faults)
+            self.fault_version += 1
+            if request:
+                self._request_locked()
+
+    def request(self):
+        """Request a new library for the current fault set and settings."""
+        with self._cond:
+            self._request_locked()
+
+    def _request_locked(self):
+        self._requested += 1
+        self._requested_at = time.monotonic()
+        self._cond.notify_all()
+        if self._on_request is not None and self._running is not None:
+            self._on_request()
+
+    def call(self, callback):
+        """
+        Register ``callback(Outcome)`` for the library of the current state.
+
+        A pending request is joined; with none pending the current fault set is run
+        again.  The callback runs in the thread that completes the generation (or here,
+        at once, if the node is stopping).
+        """
+        with self._cond:
+            if self.stopping:
+                outcome = Outcome(False, reason='the node is shutting down')
+            else:
+                failed_gen = self._failed[0] if self._failed else 0
+                if self._requested <= max(self._published, failed_gen):
+                    self._request_locked()
+                self._waiters.append((self._requested, callback))
+                return
+        callback(outcome)
+
+    def mark_published_without_run(self, result, stamp_ns):
+        """Publish ``result`` for the newest request at once (no engine run needed)."""
+        with self._cond:
+            self._taken = self._requested
+            return self._published_locked(self._requested, result, stamp_ns)
+
+    # --- the dispatcher -------------------------------------------------------------
+
+    def next_run(self, timeout=None):
+        """Block until a new generation is requested; return its Run (None if stopping)."""
+        with self._cond:
+            end = None if timeout is None else time.monotonic() + timeout
+            while not self.stopping and self._requested <= self._taken:
+                remaining = None if end is None else end - time.monotonic()
+                if remaining is not None and remaining <= 0:
+                    return None
+                self._cond.wait(remaining)
+            if self.stopping:
+                return None
+            self._taken = self._running = self._requested
+            return Run(self._requested, dict(self.faults), self._requested_at)
+
+    def is_current(self, generation):
+        """Return True while ``generation`` is the newest request (not yet superseded)."""
+        return not self.stopping and generation == self._requested
+
+    def publish(self, generation, result, publish):
+        """
+        Publish ``result`` of ``generation`` if it is still the newest request.
+
+        ``publish(result)`` returns the stamp (ns) and runs under the book's lock, so no
+        newer request can slip in between
+        the check and the messages.  Returns the callbacks to tell (call :meth:`notify`
+        with them outside any lock), or None if the generation went stale.
+        """
+        with self._cond:
+            self._running = None
+            if generation != self._requested or self.stopping:
+                return None
+            return self._published_locked(generation, result, publish(result))
+
+    def _published_locked(self, generation, result, stamp_ns):
+        self._published = generation
+        self.current = result
+        self.version += 1
+        self.stamp_ns = stamp_ns
+        outcome = Outcome(True, result, self.version, stamp_ns)
+        return self._release_locked(generation, outcome)
+
+    def failed(self, generation, reason):
+        """Record a failed run; return the callbacks to tell (see :meth:`published`)."""
+        with self._cond:
+            self._running = None
+            if generation != self._requested:
+                return []                      # stale anyway: the newer run will answer
+            self._failed = (generation, reason)
+            outcome = Outcome(False, self.current, self.version, self.stamp_ns,
+                              f'reconfiguration failed: {reason}; previous library kept')
+            return self._release_locked(generation, outcome)
+
+    def _release_locked(self, generation, outcome):
+        ready = [(cb, outcome) for gen, cb in self._waiters if gen <= generation]
+        self._waiters = [(gen, cb) for gen, cb in self._waiters if gen > generation]
+        self._cond.notify_all()
+        return ready
+
+    @staticmethod
+    def notify(ready):
+        """Tell the callers returned by :meth:`published` or :meth:`failed`."""
+        for callback, outcome in ready or ():
+            callback(outcome)
+
+    def stop(self):
+        """Stop: wake the dispatcher and tell every waiting caller."""
+        with self._cond:
+            self.stopping = True
+            ready = [(cb, Outcome(False, reason='the node is shutting down'))
+                     for _, cb in self._waiters]
+            self._waiters = []
+            self._cond.notify_all()
+        self.notify(ready)
+
+    # --- views ----------------------------------------------------------------------
+
+    def snapshot(self):
+        """Return a consistent dict of the state, for diagnostics."""
+        with self._cond:
+            return {
+                'faults': dict(self.faults), 'fault_version': self.fault_version,
+                'current': self.current, 'version': self.version, 'stamp_ns': self.stamp_ns,
+                'pending': self._requested > self._published,
+                'running': self._running is not None, 'failed': self._failed,
+                'waiting_callers': len(self._waiters),
+            }

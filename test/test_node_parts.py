@@ -1,0 +1,206 @@
+"""Fast unit tests of the node's ROS-free parts: run book, fault intake, restore, diagnostics."""
+
+from dataclasses import replace
+import math
+import threading
+
+from namo_fault_recovery.recovery.engine import RecoverySettings
+from namo_fault_recovery.recovery.result import reference_result
+from namo_fault_recovery.ros import diagnostics
+from namo_fault_recovery.ros.fault_intake import Clear, FaultIntake, Report
+from namo_fault_recovery.ros.inputs import BadInput, MAX_REASON, parse_fault
+from namo_fault_recovery.ros.parameters import check_parameter, node_settings, parameter_specs
+from namo_fault_recovery.ros.restore import check_result, restore_decision
+from namo_fault_recovery.ros.run_book import RunBook
+from namo_fault_recovery.ros.state_store import Fault, PersistedState
+import pytest
+
+
+def _defaults():
+    return {name: default for name, default, _ in parameter_specs()}
+
+
+# --- run book ---------------------------------------------------------------------------
+
+def test_a_stale_run_is_never_published():
+    book = RunBook()
+    book.set_faults({'right_arm_joint1': Fault()})
+    run = book.next_run(timeout=1.0)
+    book.set_faults({'right_arm_joint2': Fault()})      # supersedes the run under way
+    published = []
+    assert book.publish(run.generation, 'old', lambda r: published.append(r) or 1) is None
+    assert published == []
+    newer = book.next_run(timeout=1.0)
+    assert newer.generation > run.generation and 'right_arm_joint2' in newer.faults
+    ready = book.publish(newer.generation, 'new', lambda r: published.append(r) or 2)
+    assert ready == [] and published == ['new'] and book.version == 1
+
+
+def test_every_caller_is_told_once_without_blocking():
+    book = RunBook()
+    told = []
+    for _ in range(50):
+        book.call(told.append)                       # returns at once
+    assert told == []
+    run = book.next_run(timeout=1.0)
+    book.call(told.append)                           # joins the pending generation
+    ready = book.publish(run.generation, 'lib', lambda r: 7)
+    book.notify(ready)
+    assert len(told) == 51 and all(o.published and o.version == 1 for o in told)
+    assert book.next_run(timeout=0.01) is None       # nothing more was requested
+
+
+def test_a_call_after_publication_runs_again_and_stop_tells_waiters():
+    book = RunBook()
+    told = []
+    book.request()
+    run = book.next_run(timeout=1.0)
+    book.notify(book.publish(run.generation, 'lib', lambda r: 1))
+    book.call(told.append)
+    assert book.next_run(timeout=1.0) is not None    # a new run for the same fault set
+    book.stop()
+    assert len(told) == 1 and not told[0].published and 'shutting down' in told[0].reason
+    book.call(told.append)
+    assert len(told) == 2 and not told[1].published
+
+
+def test_a_failed_run_answers_its_callers_and_keeps_the_library():
+    book = RunBook()
+    told = []
+    book.call(told.append)
+    run = book.next_run(timeout=1.0)
+    book.notify(book.failed(run.generation, 'boom'))
+    assert told[0].published is False and 'boom' in told[0].reason
+
+
+def test_a_request_cancels_the_run_under_way():
+    cancels = []
+    book = RunBook(on_request=lambda: cancels.append(1))
+    book.request()
+    assert cancels == []                             # nothing was running
+    book.next_run(timeout=1.0)
+    book.request()
+    assert cancels == [1]
+
+
+# --- fault intake -------------------------------------------------------------------------
+
+def test_intake_persists_before_it_acknowledges_and_keeps_order():
+    book = RunBook()
+    events = []
+
+    def commit(faults):
+        events.append(('persist', dict(faults)))
+        book.set_faults(faults)
+
+    def accepted(reports, cleared, faults):
+        events.append(('accepted', len(reports), cleared, dict(faults)))
+
+    intake = FaultIntake(book, commit, accepted, measured=lambda: {'right_arm_joint1': 0.5})
+    done = threading.Event()
+    for k in range(1000):
+        intake.submit(Report({'right_arm_joint1': k * 1e-4}))
+    intake.submit(Report({'right_arm_joint2': None}))
+    intake.submit(Clear(lambda count: done.set()))
+    intake.submit(Report({'left_arm_joint3': 0.1}))
+    intake.start()
+    try:
+        assert done.wait(5.0)
+        for _ in range(100):
+            if book.faults.get('left_arm_joint3'):
+                break
+            threading.Event().wait(0.01)
+    finally:
+        intake.stop()
+    assert events[0][0] == 'persist'
+    for first, second in zip(events, events[1:]):
+        if second[0] == 'accepted':
+            assert first[0] == 'persist' and first[1] == second[3]
+    assert book.faults == {'left_arm_joint3': Fault(0.1, None)}
+
+
+def test_intake_keeps_the_first_measured_angle_of_a_joint_reported_again():
+    book = RunBook()
+    measured = {'right_arm_joint1': 0.25}
+    accepted = threading.Semaphore(0)
+    intake = FaultIntake(book, book.set_faults, lambda *a: accepted.release(),
+                         measured=lambda: dict(measured))
+    intake.start()
+    try:
+        intake.submit(Report({'right_arm_joint1': None}))
+        assert accepted.acquire(timeout=5.0)
+        measured['right_arm_joint1'] = 0.9
+        intake.submit(Report({'right_arm_joint1': None}))
+        assert accepted.acquire(timeout=5.0)
+    finally:
+        intake.stop()
+    assert book.faults['right_arm_joint1'] == Fault(None, 0.25)
+
+
+# --- inputs are bounded ---------------------------------------------------------------------
+
+def test_a_huge_joint_name_gives_a_bounded_reason(robot):
+    with pytest.raises(BadInput) as err:
+        parse_fault(robot, ['x' * 10_000_000])
+    assert len(str(err.value)) < MAX_REASON + 40
+
+
+def test_a_lock_within_tolerance_is_clamped_to_the_limit_exactly(robot):
+    side, index = robot.locate_joint('right_arm_joint1')
+    upper = float(robot.arms[side].upper[index])
+    parsed = parse_fault(robot, ['right_arm_joint1'], [upper + 5e-10])
+    assert parsed['right_arm_joint1'] == upper
+
+
+def test_parameter_reasons_are_bounded():
+    reason = check_parameter('lock_strategy', 'y' * 100_000)
+    assert reason.startswith('lock_strategy') and len(reason) < 400
+
+
+def test_node_settings_are_the_engine_settings_by_name():
+    settings = node_settings(_defaults())
+    assert settings.engine == RecoverySettings()
+    assert settings.seed is None
+
+
+# --- restore and checks ---------------------------------------------------------------------
+
+def test_restore_decision(robot, library):
+    ref = reference_result(library, 1.0, RecoverySettings().public())
+    state = PersistedState({}, ref, 'fp')
+    assert restore_decision(robot, library, state, 'fp', RecoverySettings()) is None
+    assert 'changed' in restore_decision(robot, library, state, 'other', RecoverySettings())
+    faulted = PersistedState({'right_arm_joint1': Fault()}, ref, 'fp')
+    assert 'another fault set' in restore_decision(robot, library, faulted, 'fp',
+                                                   RecoverySettings())
+
+
+def test_check_result_refuses_an_angle_beyond_the_limit_by_any_amount(robot, library):
+    ref = reference_result(library)
+    assert check_result(robot, library, ref) is None
+    side, index = robot.locate_joint('right_arm_joint1')
+    upper = float(robot.arms[side].upper[index])
+    g = ref.gestures[0]
+    bad = tuple((upper + 5e-10,) + tuple(q[1:]) for q in g.positions)
+    broken = replace(ref, gestures=(replace(g, positions=bad),) + ref.gestures[1:])
+    assert 'outside its limits' in check_result(robot, library, broken)
+
+
+# --- diagnostics ----------------------------------------------------------------------------
+
+def test_diagnostics_from_a_snapshot(robot, library):
+    settings = node_settings(_defaults())
+    snap = diagnostics.Snapshot(
+        faults={'right_arm_joint2': Fault()}, fault_version=3, current=reference_result(library),
+        version=2, stamp_ns=5, pending=True, running=True, failed=None, settings=settings,
+        rejections=[(0.0, '/actuator_fault', 'bad')], rejected_total=1)
+    out = {s.name: s for s in diagnostics.statuses(robot, snap, 'robot1/recovery_node: ')}
+    faults = out['robot1/recovery_node: faults']
+    assert {kv.key: kv.value for kv in faults.values}['failed_joints'] == 'right_arm_joint2'
+    recon = {kv.key: kv.value for kv in out['robot1/recovery_node: reconfiguration'].values}
+    assert recon['library_version'] == '2' and recon['up_to_date'] == 'false'
+    assert recon['running'] == 'true'
+    inputs = {kv.key: kv.value for kv in out['robot1/recovery_node: inputs'].values}
+    assert inputs['rejected_total'] == '1'
+    assert diagnostics.status_prefix('/recovery_node') == 'recovery_node: '
+    assert math.isfinite(float(recon['wall_time_sec']))
