@@ -11,6 +11,7 @@ import json
 import math
 from pathlib import Path
 import signal
+import time
 
 from namo_fault_recovery import load_library, load_robot
 from namo_fault_recovery.ros.state_store import decode_state
@@ -120,7 +121,8 @@ def test_restart_with_another_tool_recomputes_instead_of_restoring(tmp_path, cli
     (json.dumps({'format': 'namo_fault_recovery/state', 'version': 1,
                  'faults': {'right_arm_joint1': {'angle': 9.0}}, 'library': None}),
      'outside its limits'),
-], ids=['truncated', 'not a state', 'unknown joint', 'out of limits'])
+    ('[' * 100_000, 'nested too deeply'),
+], ids=['truncated', 'not a state', 'unknown joint', 'out of limits', 'deeply nested'])
 def test_corrupted_state_file_is_set_aside(tmp_path, client, content, reason):
     state = tmp_path / 'state'
     state.mkdir()
@@ -153,6 +155,23 @@ def test_signal_gives_a_clean_exit(tmp_path, client, sig):
     node = NodeProcess(DOMAIN, state_dir=tmp_path)
     try:
         client.wait_library(what='the reference library')
+        node.send(sig)
+        assert node.wait() == 0, node.describe()
+    finally:
+        node.stop()
+    no_traceback(node)
+
+
+@pytest.mark.parametrize('delay', [0.3, 0.7, 1.2, 2.0])
+@pytest.mark.parametrize('sig', [signal.SIGTERM, signal.SIGINT], ids=['SIGTERM', 'SIGINT'])
+def test_a_signal_at_any_moment_of_start_up_exits_cleanly(tmp_path, sig, delay):
+    # Imports, rclpy.init, the engine process start and the restore all take place in
+    # the first second or two: a signal in any of them must end the node with exit 0.
+    # (Only the interpreter's own start, some 30-50 ms before any code of ours runs,
+    # cannot be covered: a signal then has its default effect.)
+    node = NodeProcess(DOMAIN, state_dir=tmp_path)
+    try:
+        time.sleep(delay)
         node.send(sig)
         assert node.wait() == 0, node.describe()
     finally:

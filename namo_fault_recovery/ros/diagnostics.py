@@ -56,6 +56,20 @@ class Snapshot:
     waiting_callers: int = 0
 
 
+def snapshot(book, inputs, settings, state_problem, state_file, engine_restarts):
+    """Return a :class:`Snapshot` of a RunBook, an InputMonitor and the node's state."""
+    b = book.snapshot()
+    return Snapshot(
+        faults=b['faults'], fault_version=b['fault_version'], current=b['current'],
+        version=b['version'], stamp_ns=b['stamp_ns'], pending=b['pending'],
+        running=b['running'], failed=b['failed'], settings=settings,
+        rejections=list(inputs.rejections), rejected_total=inputs.rejected_total,
+        joint_states_received=inputs.states_received,
+        measured_joints=inputs.measured_joints(), last_accepted=inputs.last_accepted,
+        state_problem=state_problem, state_file=str(state_file),
+        engine_restarts=engine_restarts, waiting_callers=b['waiting_callers'])
+
+
 def statuses(robot, snap, prefix=DEFAULT_PREFIX):
     """Return the node's DiagnosticStatus list for ``snap``."""
     hw = robot.name

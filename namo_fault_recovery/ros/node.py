@@ -9,7 +9,6 @@ when needed), services answer from ``async`` callbacks that await the run book, 
 periodic work runs on a steady clock, independent of ``use_sim_time``.
 """
 
-from collections import deque
 import threading
 import time
 
@@ -19,7 +18,6 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallb
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
 from rclpy.task import Future
 from rclpy.time import Time
 from sensor_msgs.msg import JointState
@@ -32,11 +30,12 @@ from . import messages as conv
 from .dispatcher import Dispatcher
 from .engine_process import EngineProcess
 from .fault_intake import Clear, FaultIntake, Report
-from .inputs import BadInput, parse_fault, parse_joint_state
+from .input_monitor import InputMonitor
+from .inputs import BadInput, parse_fault
 from .parameters import (check_parameter, declare_parameters, DEFAULT_STATE_DIR, MARKER_PARAMS,
                          node_settings, one_line, parameter_specs, RERUN_PARAMS, shorten,
                          StartupError)
-from .restore import restore_decision, validate_faults
+from .restore import plan_restart
 from .run_book import RunBook
 from .state_store import fingerprint, StateStore
 from ..errors import ConfigError
@@ -46,7 +45,6 @@ from ..recovery.result import reference_result, summary
 
 NODE_NAME = 'recovery_node'
 FAULT_QUEUE_DEPTH = 10_000        # reports the subscription holds while the intake catches up
-MAX_REJECTIONS_SHOWN = 10
 STATES_PARSE_PERIOD = 0.1         # s: the latest raw joint state is parsed at most this often
 
 
@@ -70,13 +68,7 @@ class RecoveryNode(Node):
         self._fingerprint = fingerprint(self._robot.source, self._library.source)
         self._store = StateStore(values['state_dir'] or DEFAULT_STATE_DIR)
         self._state_problem = None
-        self._lock = threading.Lock()    # the input counters below
-        self._rejections = deque(maxlen=MAX_REJECTIONS_SHOWN)
-        self._rejected_total = 0
-        self._last_accepted = 0.0
-        self._raw_state = None
-        self._states_received = 0
-        self._measured = {}
+        self._inputs = InputMonitor(self._robot, self._log_rejection)
         self._last_stamp_ns = 0
         self._diag_dirty = True
         self._engine = EngineProcess(values['robot_file'] or None,
@@ -85,7 +77,7 @@ class RecoveryNode(Node):
         self._book = RunBook(on_request=self._engine.cancel)
         self._persist_lock = threading.Lock()
         self._intake = FaultIntake(self._book, self._commit_faults, self._on_accepted,
-                                   self._measured_now)
+                                   self._inputs.measured)
         self._dispatcher = Dispatcher(self._book, self._engine, self._robot, self._library,
                                       lambda: self._settings, self._persist_library,
                                       self._publish_library, self._log)
@@ -118,7 +110,7 @@ class RecoveryNode(Node):
         self.create_subscription(JointState, 'actuator_fault', self._on_fault,
                                  QoSProfile(depth=FAULT_QUEUE_DEPTH, **reliable),
                                  callback_group=inputs)
-        self.create_subscription(JointState, 'joint_states', self._on_joint_states,
+        self.create_subscription(JointState, 'joint_states', self._inputs.joint_state,
                                  QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
                                             history=HistoryPolicy.KEEP_LAST),
                                  callback_group=MutuallyExclusiveCallbackGroup(), raw=True)
@@ -149,7 +141,7 @@ class RecoveryNode(Node):
             if reason:
                 self._last_param_reason = reason
                 if self._ready:
-                    self._reject('parameter', reason)
+                    self._inputs.reject('parameter', reason)
                 return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
 
@@ -174,48 +166,22 @@ class RecoveryNode(Node):
 
     # --- inputs ---------------------------------------------------------------------
 
-    def _reject(self, source, reason):
-        reason = shorten(reason, 300)
+    def _log_rejection(self, source, reason):
         self.get_logger().warning(f'rejected {source}: {reason}; previous state kept',
                                   throttle_duration_sec=0.2)
-        with self._lock:
-            self._rejected_total += 1
-            self._rejections.append((time.time(), source, reason))
         self._diag_dirty = True
 
     def _on_fault(self, msg):
         try:
             parsed = parse_fault(self._robot, msg.name, msg.position, msg.velocity, msg.effort)
         except BadInput as exc:
-            self._reject('/actuator_fault', str(exc))
+            self._inputs.reject('/actuator_fault', str(exc))
             return
         if not self._intake.submit(Report(parsed)):
-            self._reject('/actuator_fault', 'the fault queue is full; report dropped')
-
-    def _on_joint_states(self, raw):
-        # O(1): keep the latest serialized sample; it is parsed only when needed.
-        self._raw_state = raw
-        self._states_received += 1
-
-    def _measured_now(self):
-        """Parse the latest joint state (if new) and return the measured angles."""
-        raw, self._raw_state = self._raw_state, None
-        if raw is not None:
-            try:
-                msg = deserialize_message(raw, JointState)
-                measured = parse_joint_state(self._robot, msg.name, msg.position)
-            except BadInput as exc:
-                self._reject('/joint_states', str(exc))
-            except Exception as exc:  # noqa: B902 - a malformed sample is just rejected
-                self._reject('/joint_states', f'cannot deserialize: {exc}')
-            else:
-                with self._lock:
-                    self._measured.update(measured)
-        with self._lock:
-            return dict(self._measured)
+            self._inputs.reject('/actuator_fault', 'the fault queue is full; report dropped')
 
     def _on_accepted(self, reports, cleared, faults):
-        self._last_accepted = time.time()
+        self._inputs.accepted()
         self._diag_dirty = True
         if reports:
             joints = {}
@@ -328,42 +294,30 @@ class RecoveryNode(Node):
 
     def _restore(self):
         """Publish the reference, then restore the persisted fault set (and library)."""
-        self._book.mark_published_without_run(reference_result(self._library),
-                                              self._publish_library(
-                                                  reference_result(self._library)))
-        state, problem = self._store.load()
-        if state is not None:
-            problem = validate_faults(self._robot, state.faults)
-            if problem:
-                problem = self._store.set_aside(problem)
-                state = None
-        if problem:
-            self._state_problem = shorten(problem, 500)
+        reference = reference_result(self._library)
+        self._book.mark_published_without_run(reference, self._publish_library(reference))
+        plan = plan_restart(self._store, self._robot, self._library, self._fingerprint,
+                            self._settings.engine)
+        if plan.problem:
+            self._state_problem = shorten(plan.problem, 500)
             self.get_logger().error(f'{self._state_problem}; starting without faults')
-        tool = self._settings.engine.tool_length_mm > 0
-        if state is None or not state.faults:
-            if tool:
-                self._book.request()          # a tool from the start is a structure change
+        if not plan.faults:
+            if self._settings.engine.tool_length_mm > 0:
+                self._book.request()      # a tool from the start is a structure change
             return
-        reason = restore_decision(self._robot, self._library, state, self._fingerprint,
-                                  self._settings.engine)
-        self._book.set_faults(state.faults, request=reason is not None)
-        joints = ', '.join(state.faults)
-        if reason is None:
-            self._book.mark_published_without_run(state.library,
-                                                  self._publish_library(state.library))
-            self.get_logger().info(f'restored faults {joints} and their library from '
-                                   f'{self._store.path}')
-        else:
-            self.get_logger().warning(f'restored faults {joints} from {self._store.path}; '
-                                      f'{reason}: reconfiguring')
+        self._book.set_faults(plan.faults, request=plan.library is None)
+        if plan.library is not None:
+            self._book.mark_published_without_run(plan.library,
+                                                  self._publish_library(plan.library))
+        log = self.get_logger().info if plan.library is not None else self.get_logger().warning
+        log(plan.message)
 
     # --- periodic work and diagnostics ---------------------------------------------
 
     def _tick(self):
         """Steady 10 Hz: refresh the measured angles, publish diagnostics when due."""
-        if self._raw_state is not None:
-            self._measured_now()
+        if self._inputs.pending_state():
+            self._inputs.measured()
         now = time.monotonic()
         if self._diag_dirty or now - self._last_diag >= self._diag_period:
             self._diag_dirty = False
@@ -372,19 +326,9 @@ class RecoveryNode(Node):
 
     def publish_diagnostics(self):
         """Publish /diagnostics from a snapshot of the state."""
-        book = self._book.snapshot()
-        with self._lock:
-            snap = diagnostics.Snapshot(
-                faults=book['faults'], fault_version=book['fault_version'],
-                current=book['current'], version=book['version'], stamp_ns=book['stamp_ns'],
-                pending=book['pending'], running=book['running'], failed=book['failed'],
-                settings=self._settings, rejections=list(self._rejections),
-                rejected_total=self._rejected_total,
-                joint_states_received=self._states_received,
-                measured_joints=tuple(sorted(self._measured)),
-                last_accepted=self._last_accepted, state_problem=self._state_problem,
-                state_file=str(self._store.path), engine_restarts=self._engine.restarts,
-                waiting_callers=book['waiting_callers'])
+        snap = diagnostics.snapshot(self._book, self._inputs, self._settings,
+                                    self._state_problem, self._store.path,
+                                    self._engine.restarts)
         try:
             msg = DiagnosticArray()
             msg.header.stamp = self.get_clock().now().to_msg()

@@ -7,6 +7,7 @@ limits exactly; :func:`restore_decision` says whether the library saved in ``sta
 can be republished after a restart or must be recomputed, and why.
 """
 
+from dataclasses import dataclass, field
 import math
 
 from ..model.robot import ARMS
@@ -91,3 +92,33 @@ def restore_decision(robot, library, state, fingerprint, settings):
             != _tool(settings.tool_length_mm, settings.tool_arm)):
         return 'the tool (tool_length_mm, tool_arm) changed since it was saved'
     return check_result(robot, library, saved, state.faults)
+
+
+@dataclass(frozen=True)
+class RestartPlan:
+    """What a restarted node does: the faults it restores and the library it republishes."""
+
+    faults: dict = field(default_factory=dict)
+    library: object = None        # the saved LibraryResult if it can be republished
+    problem: str = None           # an unusable state file (it was set aside)
+    message: str = ''
+
+
+def plan_restart(store, robot, library, fingerprint, settings):
+    """Read the state file of ``store`` and decide what to restore (see RestartPlan)."""
+    state, problem = store.load()
+    if state is not None:
+        problem = validate_faults(robot, state.faults)
+        if problem:
+            problem = store.set_aside(problem)
+            state = None
+    if state is None or not state.faults:
+        return RestartPlan(problem=problem)
+    reason = restore_decision(robot, library, state, fingerprint, settings)
+    joints = ', '.join(state.faults)
+    if reason is None:
+        return RestartPlan(dict(state.faults), state.library, problem,
+                           f'restored faults {joints} and their library from {store.path}')
+    return RestartPlan(dict(state.faults), None, problem,
+                       f'restored faults {joints} from {store.path}; {reason}: '
+                       f'reconfiguring')
