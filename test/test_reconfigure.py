@@ -179,7 +179,7 @@ def test_cli_solve_text_and_errors(capsys):
                           (['solve', '--fault', 'right_arm_joint1', '--deadline', '-1'],
                            '--deadline-sec'),
                           (['solve', '--fault', 'right_arm_joint1', '--vq-distortion-mm',
-                            '0'], "--vq-distortion-mm: expected a finite number > 0, got 0.0")):
+                            '0'], '--vq-distortion-mm: expected a finite number > 0, got 0.0')):
         assert main(argv, io.StringIO()) == 2
         err = capsys.readouterr().err
         assert message in err and err.count('\n') == 1
