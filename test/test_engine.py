@@ -78,6 +78,7 @@ def test_solve_one_gesture_keeps_the_whole_library_lock(robot, library):
     ('optimizer', 'pso'), ('optimizer_preset', 'fast'), ('bimanual', 'both'),
     ('tool_length_mm', -5.0), ('tool_arm', 'middle'), ('trajectory_method', 'spline'),
     ('vq_distortion_mm', 0.0), ('continuity_weight', float('inf')),
+    ('collision_check', 'yes'), ('deadline_sec', True), ('weights', {'elbow': 1.0}),
 ])
 def test_settings_reject_a_bad_value_naming_setting_and_value(name, value):
     with pytest.raises(ValueError) as info:

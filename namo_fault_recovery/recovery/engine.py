@@ -67,9 +67,16 @@ class RecoverySettings:
                                  ('tool_length_mm', self.tool_length_mm, -1e-12),
                                  ('vq_distortion_mm', self.vq_distortion_mm, 0.0),
                                  ('continuity_weight', self.continuity_weight, -1e-12)):
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > low):
+            if (isinstance(value, bool) or not isinstance(value, (int, float))
+                    or not math.isfinite(value) or not value > low):
                 raise ValueError(f'{name}: expected a finite number '
                                  f"{'>' if low >= 0 else '>='} 0, got {repr(value)[:80]}")
+        if not isinstance(self.collision_check, bool):
+            raise ValueError(f'collision_check: expected True or False, got '
+                             f'{repr(self.collision_check)[:80]}')
+        if self.weights is not None and not isinstance(self.weights, ScoreWeights):
+            raise ValueError(f'weights: expected a ScoreWeights or None, got '
+                             f'{repr(self.weights)[:80]}')
 
     def with_changes(self, **changes):
         """Return a copy with some settings changed (validated again)."""
