@@ -123,7 +123,7 @@ class GestureResult:
 
     @property
     def keyframes(self):
-        """The published keyframes as :class:`~namo_fault_recovery.model.gestures.Keyframe`."""
+        """Return the published keyframes as :class:`~..model.gestures.Keyframe` objects."""
         from ..model.gestures import Keyframe
         return tuple(Keyframe(t, np.array(p[:N_JOINTS]), np.array(p[N_JOINTS:]))
                      for t, p in zip(self.times, self.positions))
@@ -276,10 +276,9 @@ class LibraryResult:
                       for k, v in dict(doc.get('faults', {})).items()}
             locks = {str(k): finite_number(v, 'lock angle') for k, v in dict(doc['locks']).items()}
             settings = dict(doc.get('settings', {}))
-            seed = doc.get('seed', settings.pop('seed', None))
-            notes = doc.get('notes', settings.pop('notes', ()))
-            settings.pop('seed', None)
-            settings.pop('notes', None)
+            # Older files kept the seed and the notes in ``settings``.
+            seed = doc['seed'] if 'seed' in doc else settings.pop('seed', None)
+            notes = doc['notes'] if 'notes' in doc else settings.pop('notes', ())
             return cls(
                 gestures=gestures, faults=faults, locks=locks,
                 frozen_arms=tuple(str(a) for a in doc.get('frozen_arms', ())),
