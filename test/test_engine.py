@@ -4,6 +4,7 @@ import io
 import json
 
 from namo_fault_recovery.cli.main import main
+from namo_fault_recovery.objective.score import ScoreWeights, SimilarityScore
 from namo_fault_recovery.optimize.base import Clock
 from namo_fault_recovery.recovery.engine import recover, RecoverySettings
 from namo_fault_recovery.recovery.locks import resolve_locks
@@ -127,3 +128,20 @@ def test_old_state_documents_still_load(node_default):
     assert 'seed' not in old.settings and 'notes' not in old.settings
     assert old['circle'].stage1_score is None and old['circle'].nfev == 0
     assert old['circle'].positions == node_default['circle'].positions
+
+
+def test_scores_and_breakdown_are_those_of_the_published_keyframes(robot, product_library,
+                                                                   node_default):
+    for name in ('wai', 'circle'):
+        gesture, g = product_library[name], node_default[name]
+        scores, parts = [], []
+        for k, kf in enumerate(g.keyframes):
+            scorer = SimilarityScore.for_gesture(robot, gesture, k, ScoreWeights())
+            total, part = scorer(kf.right, kf.left, breakdown=True)
+            scores.append(float(total[0]))
+            parts.append({c: float(part[c][0]) for c in g.breakdown})
+        worst = int(np.argmax(scores))
+        assert g.score_after == pytest.approx(scores[worst], rel=1e-9)
+        assert g.score_mean == pytest.approx(np.mean(scores), rel=1e-9)
+        assert g.breakdown == pytest.approx(parts[worst], rel=1e-9, abs=1e-9)
+        assert set(g.breakdown) >= {'elbow', 'wrist', 'tip', 'palm'}

@@ -24,8 +24,8 @@ from .locks import frozen_arms, LOCK_STRATEGIES
 from .motion import adapt_library, DEFAULT_CONTINUITY, DEFAULT_DISTORTION_MM
 from .motion import DEFAULT_STAY_CLOSE, METHODS, typical_points
 from .result import GestureResult, LibraryResult, reference_result
-from ..model.robot import ARMS
-from ..objective.score import ScoreWeights
+from ..model.robot import ARMS, N_JOINTS
+from ..objective.score import gesture_targets, ScoreWeights, SimilarityScore
 from ..optimize import ALGORITHMS, PRESETS
 from ..optimize.base import Clock
 
@@ -141,8 +141,9 @@ def recover(robot, library, faults=None, settings=None, *, seed=None, clock=None
         stay_close=DEFAULT_STAY_CLOSE if motion else 0.0)
     wall = time.monotonic() - began
     engine = report.typical_result
+    breakdowns = worst_breakdowns(robot, library, report.gestures, settings)
     gestures = []
-    for g in report.gestures:
+    for g, breakdown in zip(report.gestures, breakdowns):
         e = engine[g.name] if engine is not None else None
         gestures.append(GestureResult(
             name=g.name,
@@ -153,7 +154,7 @@ def recover(robot, library, faults=None, settings=None, *, seed=None, clock=None
             wall_time=float(wall), status=str(g.status),
             message=str(e.message if e and g.method == 'keyframes' else g.message),
             collides=bool(g.collides),
-            breakdown={k: float(v) for k, v in dict(e.breakdown if e else {}).items()},
+            breakdown=breakdown,
             stage=int(e.stage if e else 1),
             colliding_pairs=tuple(str(p) for p in g.colliding_pairs),
             method=g.method, typical_points=len(g.typical),
@@ -181,3 +182,24 @@ def recover(robot, library, faults=None, settings=None, *, seed=None, clock=None
         cancelled=report.cancelled, settings=public,
         tool_mm=settings.tool_length_mm, tool_arm=settings.tool_arm,
         seed=seed, notes=tuple(str(n) for n in report.notes), nfev=int(report.nfev))
+
+
+def worst_breakdowns(robot, library, adapted, settings):
+    """
+    Return per gesture the score's components at its worst published keyframe.
+
+    ``adapted`` are the adapted gestures (with ``keyframes``), in library order.  The
+    scorer is the engine's: the tool's hand, references on the original structure.
+    """
+    model = robot.with_tool(settings.tool_length_mm, settings.tool_arm)
+    targets = [t for g in library for t in gesture_targets(g)]
+    scorer = SimilarityScore(model, targets, settings.weights, reference_robot=robot)
+    q = np.array([kf.positions() for g in adapted for kf in g.keyframes])
+    total, parts = scorer.evaluate(q[:, :N_JOINTS], q[:, N_JOINTS:], np.arange(len(q)),
+                                   breakdown=True)
+    out, offset = [], 0
+    for g in adapted:
+        worst = offset + int(np.argmax(total[offset:offset + len(g.keyframes)]))
+        offset += len(g.keyframes)
+        out.append({c: float(v[worst]) for c, v in parts.items() if c not in ARMS})
+    return out

@@ -65,8 +65,9 @@ class GestureResult:
     - ``score_before`` / ``score_before_mean``: worst / mean keyframe score as designed
       with the locks applied and nothing re-optimised;
     - ``score_after`` / ``score_mean``: worst / mean keyframe score as published;
-    - ``breakdown``: the score's components at the worst explored keyframe (mm, palm in
-      deg), empty when the gesture was not explored;
+    - ``breakdown``: the score's components (unweighted: mm, palm in deg) at the worst
+      published keyframe, the one ``score_after`` is the score of (empty for the
+      reference library);
     - ``stage``: 2 if the healthy arm moved too (two-handed gestures), else 1;
       ``stage1_score``: worst explored keyframe score at the end of stage 1, before
       the healthy arm joined (None when no keyframe search ran for this gesture);
