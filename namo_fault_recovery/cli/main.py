@@ -171,7 +171,7 @@ def cmd_solve(args, out):
     robot, library = _load_models(args)
     faults = parse_faults(robot, args.fault or [])
     settings, clock = solve_settings(args)
-    whole, requested = library, dict(faults)
+    whole, requested, notes = library, dict(faults), []
     if args.gesture:
         for name in args.gesture:
             if name not in library.names:
@@ -180,7 +180,7 @@ def cmd_solve(args, out):
         if settings.lock_strategy != 'optimal':
             # Lock angles as the whole library gets them (the average is over it).
             try:
-                faults, _ = resolve_locks(robot, whole, faults, settings.lock_strategy)
+                faults, notes = resolve_locks(robot, whole, faults, settings.lock_strategy)
             except ValueError as exc:
                 raise UsageError(f'--fault: {exc}') from None
         library = GestureLibrary(tuple(library[n] for n in dict.fromkeys(args.gesture)),
@@ -189,7 +189,7 @@ def cmd_solve(args, out):
         result = recover(robot, library, faults, settings, seed=args.seed, clock=clock)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    result = replace(result, faults=requested)
+    result = replace(result, faults=requested, notes=tuple(notes) + result.notes)
     if args.json:
         out.write(json.dumps(solve_document(result, robot, library), indent=2) + '\n')
         return 0
