@@ -13,8 +13,8 @@ import threading
 
 from .engine_process import EngineError
 from .restore import check_result
-from ..recovery.engine import structure_changed
-from ..recovery.result import reference_result, summary
+from ..recovery.engine import recover, structure_changed
+from ..recovery.result import summary
 
 # Seconds of the deadline kept for what follows the engine: the answer crossing the pipe,
 # the checks, the state file and the messages.
@@ -65,7 +65,8 @@ class Dispatcher:
         engine = settings.engine
         faults = {j: f.angle for j, f in run.faults.items()}
         if not structure_changed(faults, engine):
-            result = reference_result(self._library, engine.deadline_sec, engine.public())
+            # No structure change: the engine returns the reference library at once.
+            result = recover(self._robot, self._library, faults, engine, seed=settings.seed)
         else:
             measured = {j: f.measured for j, f in run.faults.items() if f.measured is not None}
             end = run.requested_at + engine.deadline_sec - PUBLISH_MARGIN
