@@ -110,17 +110,15 @@ def recover(robot, library, faults=None, settings=None, *, seed=None, clock=None
         return reference_result(library, settings.deadline_sec, public)
     began = time.monotonic()
     if quantisations is None:
-        quantisations = typical_points(robot, library, settings.vq_distortion_mm)
-    remaining = clock.remaining()
-    deadline = None if not math.isfinite(remaining) else max(remaining, 1e-3)
+        quantisations = typical_points(robot, library, settings.vq_distortion_mm, clock=clock)
     report = adapt_library(
         robot, library, faults, method=settings.trajectory_method,
         tool_mm=settings.tool_length_mm, tool_arm=settings.tool_arm,
         distortion_mm=settings.vq_distortion_mm, continuity=settings.continuity_weight,
         quantisations=quantisations, algorithm=settings.optimizer,
-        preset=settings.optimizer_preset, deadline=deadline, seed=seed,
+        preset=settings.optimizer_preset, clock=clock, seed=seed,
         weights=settings.weights, lock_strategy=settings.lock_strategy,
-        measured=measured, cancel=clock.cancel, bimanual=settings.bimanual,
+        measured=measured, bimanual=settings.bimanual,
         collision=settings.collision_check)
     wall = time.monotonic() - began
     public['notes'] = list(report.notes)
