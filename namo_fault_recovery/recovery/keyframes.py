@@ -698,7 +698,8 @@ def _optimise_locks(setup, locks, first, joints, rng, clock, stats):
     start_total = float(setup.totals(first['after'], 1)[0])
     best_total, best_locks, best_out = start_total, dict(locks), first
     cut = False
-    for jn, joint in enumerate(joints):
+    # Scores are distances: nothing does better than a start that scores 0.
+    for jn, joint in enumerate(joints if start_total > 0.0 else ()):
         side, j = robot.locate_joint(joint)
         lo, hi = robot.arms[side].lower[j], robot.arms[side].upper[j]
         candidates = lock_candidates(robot, joint)

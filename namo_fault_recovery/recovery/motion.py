@@ -253,6 +253,10 @@ def _adapt_optimal(job, faults, measured, seed, search):
         return first
     first_total = library_total(first)
     at_average = ', '.join(f'{j} = {np.degrees(averages[j]):.2f} deg' for j in joints)
+    if first_total <= 0.0:   # scores are distances: nothing can do better than 0
+        first.notes.append(f'optimal lock: the average lock {at_average} already scores '
+                           f'0 on every motion')
+        return first
     if search.expired():
         first.notes.append(f'optimal lock: no time left to try other angles; the average '
                            f'lock {at_average} is kept (library total {first_total:.3f})')
@@ -265,8 +269,11 @@ def _adapt_optimal(job, faults, measured, seed, search):
         **job.engine_options())
     chosen = screen.locks
     if all(chosen[j] == averages[j] for j in joints):
+        cut = any(n.startswith('optimal lock') and 'deadline' in n for n in screen.notes)
         first.notes.append(f'optimal lock: the average lock {at_average} is best '
-                           f'(library total {first_total:.3f})')
+                           f'(library total {first_total:.3f})'
+                           + ('; the deadline cut the search for other angles short'
+                              if cut else ''))
         return first
     at_chosen = ', '.join(f'{j} = {np.degrees(chosen[j]):.2f} deg' for j in joints)
     if search.expired():
