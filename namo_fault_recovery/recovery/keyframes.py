@@ -5,12 +5,15 @@ For every keyframe of every gesture the failed joints are set to their lock angl
 the remaining joints of the faulted arms that take part in the gesture become the free
 variables.  Keyframes with the same free-variable layout are solved together as one
 batched problem (one objective call per optimiser phase for all of them), within one
-wall-clock budget for the whole library.  On top of the paper's method:
+wall-clock budget for the whole library (the caller's clock; see :mod:`.budget`).  On
+top of the paper's method:
 
-- lock strategies (``average``, ``measured``, ``optimal``; see :mod:`.faults`);
+- lock strategies (``average``, ``measured``, ``optimal``; see :mod:`.locks`); the
+  ``optimal`` candidates are solved on the very problem of the final result, the
+  starting lock among them, so that ``optimal`` is never worse than its start;
 - stage 2 of a staged DOF expansion (the second source paper): when a two-handed
   gesture still scores above a threshold, the healthy arm moves too;
-- capsule self-collision (:mod:`.collision`) as a penalty inside the optimisation, with
+- capsule self-collision (:mod:`..objective.collision`) as a penalty inside the optimisation, with
   a final check reported per gesture.
 """
 
