@@ -6,6 +6,7 @@ from pathlib import Path
 
 from namo_fault_recovery.cli.main import main
 from namo_fault_recovery.objective.score import gesture_targets, SimilarityScore
+from namo_fault_recovery.optimize.base import Clock
 from namo_fault_recovery.recovery.keyframes import reconfigure_library
 from namo_fault_recovery.resources import config_path, PAPER_GESTURE_FILE
 import numpy as np
@@ -117,6 +118,23 @@ def test_deadline_status_and_finite_result(robot, library):
         assert g.status == 'deadline' and np.isfinite(g.score_after)
         assert g.score_after <= g.score_before
     _check_locks(robot, report)
+
+
+def test_the_callers_clock_owns_the_deadline_and_the_cancel_flag(robot, library):
+    faults = {'right_arm_joint2': 0.1}
+    free = reconfigure_library(robot, library, faults, deadline=None, seed=5)
+    same = reconfigure_library(robot, library, faults, clock=Clock(None), seed=5)
+    assert [g.keyframes[0].positions().tolist() for g in same.gestures] == \
+        [g.keyframes[0].positions().tolist() for g in free.gestures]
+    assert same.deadline is None
+    cut = reconfigure_library(robot, library, faults, clock=Clock(0.0), seed=5)
+    assert all(g.status == 'deadline' for g in cut.gestures) and cut.deadline == 0.0
+    _check_locks(robot, cut)
+    stopped = reconfigure_library(robot, library, faults, seed=5,
+                                  clock=Clock(None, cancel=lambda: True))
+    assert stopped.cancelled
+    with pytest.raises(ValueError, match='cancel flag in the clock'):
+        reconfigure_library(robot, library, faults, clock=Clock(None), cancel=lambda: True)
 
 
 def test_gradient_matches_finite_differences(robot, library):

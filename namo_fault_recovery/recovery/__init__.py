@@ -11,7 +11,8 @@ From a fault set to an adapted gesture library, free of ROS.
 - :mod:`.motion`: whole-motion adaptation (the second paper: typical points and Kriging,
   or point by point);
 - :mod:`.vq`: vector quantisation that picks a motion's typical points;
-- :mod:`.kriging`: the variogram fit and ordinary Kriging.
+- :mod:`.kriging`: the variogram fit and ordinary Kriging;
+- :mod:`.budget`: how the caller's one deadline clock is shared out (reserves, shares).
 
 The stage records of :mod:`.keyframes` and :mod:`.motion` stay inside this package.
 """

@@ -125,9 +125,7 @@ def recover(robot, library, faults=None, settings=None, *, seed=None, clock=None
         return reference_result(library, budget, public, seed)
     began = time.monotonic()
     if quantisations is None:
-        quantisations = typical_points(robot, library, settings.vq_distortion_mm)
-    remaining = clock.remaining()
-    deadline = None if not math.isfinite(remaining) else max(remaining, 1e-3)
+        quantisations = typical_points(robot, library, settings.vq_distortion_mm, clock=clock)
     motion = any(len(g.keyframes) > 1 for g in library)
     report = adapt_library(
         robot, library, faults, method=settings.trajectory_method,
@@ -135,8 +133,8 @@ def recover(robot, library, faults=None, settings=None, *, seed=None, clock=None
         distortion_mm=settings.vq_distortion_mm, continuity=settings.continuity_weight,
         quantisations=quantisations, algorithm=settings.optimizer,
         preset=settings.optimizer_preset, settings=optimizer_overrides or None,
-        deadline=deadline, seed=seed, weights=settings.weights,
-        lock_strategy=settings.lock_strategy, measured=measured, cancel=clock.cancel,
+        clock=clock, seed=seed, weights=settings.weights,
+        lock_strategy=settings.lock_strategy, measured=measured,
         bimanual=settings.bimanual, collision=settings.collision_check,
         stay_close=DEFAULT_STAY_CLOSE if motion else 0.0)
     wall = time.monotonic() - began

@@ -35,11 +35,15 @@ def _serve(conn, robot_file, gesture_file, current):
     library = load_library(robot, gesture_file)
     cache = {}
 
-    def quantisations(distortion_mm):
-        if distortion_mm not in cache:
+    def quantisations(distortion_mm, clock=None):
+        """Typical points per threshold; computed within the run's clock, kept if whole."""
+        if distortion_mm in cache:
+            return cache[distortion_mm]
+        found = typical_points(robot, library, distortion_mm, clock=clock)
+        if not any(q is not None and q.note for q in found.values()):
             cache.clear()
-            cache[distortion_mm] = typical_points(robot, library, distortion_mm)
-        return cache[distortion_mm]
+            cache[distortion_mm] = found      # complete: reuse it in every later run
+        return found
 
     # Warm-up: pay the one-off costs (first allocations, caches) before any fault.
     try:
@@ -65,7 +69,7 @@ def _serve(conn, robot_file, gesture_file, current):
         try:
             clock = Clock(settings.deadline_sec, cancel, start=start)
             began = time.monotonic()
-            quant = quantisations(settings.vq_distortion_mm)
+            quant = quantisations(settings.vq_distortion_mm, clock)
             result = recover(robot, library, faults, settings, seed=seed, clock=clock,
                              measured=measured, quantisations=quant)
             conn.send(('ok', run_id, result, time.monotonic() - began))
