@@ -228,11 +228,12 @@ def build_parser():
     p.add_argument('--json', action='store_true',
                    help='print one JSON document (schema in the README)')
     p.set_defaults(func=cmd_solve)
-    from . import bench, beyond, ros_commands
+    from . import bench, beyond, ros_commands, stream_bench_command
     bench_sub = bench.register(sub)
     beyond.register(bench_sub)
     ros_commands.register(sub)               # fault, clear, reconfigure, library, demo
     ros_commands.register_bench(bench_sub)   # bench latency
+    stream_bench_command.register(bench_sub)   # bench stream
     return parser
 
 
