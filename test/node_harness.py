@@ -47,6 +47,27 @@ def session_domain(offset):
     return base + offset
 
 
+def stress_domain(index):
+    """
+    Return a ROS domain id (index 0..4) for one stress test, apart from the modules' ones.
+
+    The stress tests start a node per test and flood it; a range of their own (102 and
+    up, still below the ids whose ports reach past the ephemeral range) keeps that
+    traffic away from the other modules of this and of parallel sessions.
+    """
+    base = int(os.environ.get('NAMO_TEST_STRESS_DOMAIN_BASE',
+                              102 + (os.getpid() % 20) * 5))
+    return base + index
+
+
+def proc_status_kb(pid, field='VmRSS'):
+    """Return one ``kB`` figure of /proc/<pid>/status (e.g. VmRSS, VmHWM)."""
+    for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+        if line.startswith(field + ':'):
+            return int(line.split()[1])
+    raise KeyError(f'{field} not in /proc/{pid}/status')
+
+
 def ros_env(domain, extra=None):
     """Return an environment for a ROS process in ``domain`` (localhost discovery)."""
     env = dict(os.environ)
@@ -108,6 +129,37 @@ class NodeProcess:
         """Return the exit code and output, for assertion messages."""
         return (f'exit code {self.proc.returncode}\n--- stdout\n{self.stdout}'
                 f'\n--- stderr\n{self.stderr}')
+
+    def wait_output(self, text, timeout=TIMEOUT, poll=0.0005):
+        """
+        Return as soon as ``text`` appears in the node's stdout or stderr.
+
+        Reads only what was appended since the last poll, so the caller can act (e.g.
+        SIGKILL) within about a millisecond of the node writing the line.  Raises
+        AssertionError (with the output) on timeout or if the node exits first.
+        """
+        end = time.monotonic() + timeout
+        tails = {}
+        with open(self._out.name, 'rb') as out, open(self._err.name, 'rb') as err:
+            while True:
+                for stream in (out, err):
+                    chunk = stream.read()
+                    if chunk:
+                        tail = tails.get(stream.name, b'') + chunk
+                        if text.encode() in tail:
+                            return
+                        tails[stream.name] = tail[-len(text) - 4096:]
+                if not self.alive():
+                    raise AssertionError(f'the node exited before writing {text!r}\n'
+                                         + self.describe())
+                if time.monotonic() > end:
+                    raise AssertionError(f'the node did not write {text!r} within '
+                                         f'{timeout:.0f} s\n' + self.describe())
+                time.sleep(poll)
+
+    def memory_kb(self, field='VmRSS'):
+        """Return a memory figure of the node process in kB (``VmRSS``, ``VmHWM``...)."""
+        return proc_status_kb(self.proc.pid, field)
 
     def stop(self, sig=signal.SIGTERM, timeout=TIMEOUT):
         """Stop the process with ``sig`` (SIGKILL if it does not exit); return the code."""
@@ -362,3 +414,108 @@ def statuses_values(status):
 def close_to(a, b, tol=1e-12):
     """Return True if two angles agree to ``tol``."""
     return math.isclose(a, b, rel_tol=0.0, abs_tol=tol)
+
+
+class DiagnosticsProbe:
+    """
+    A lean client for flooding tests: raw ``/diagnostics`` sizes, faults, Trigger calls.
+
+    It takes ``/diagnostics`` as serialized bytes (``raw=True``), so a node that publishes
+    huge diagnostics is measured without the probe holding (or even deserializing) every
+    huge message: only sizes are kept, plus the decoded statuses of the small messages.
+    Its fault publisher is reliable with KEEP_ALL history, so it never drops its own
+    samples however fast they are published.
+    """
+
+    def __init__(self, domain, name='namo_test_probe', decode_below=1 << 20):
+        from rclpy.serialization import deserialize_message
+        self._deserialize = deserialize_message
+        self.decode_below = decode_below
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node(name, context=self.context)
+        self._lock = threading.Condition()
+        self.sizes = []           # byte size of every /diagnostics message, in arrival order
+        self.statuses = []        # (index, {name: {key: value}}) of the small node messages
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 50,
+                                      raw=True)
+        keep_all = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
+                              reliability=ReliabilityPolicy.RELIABLE,
+                              durability=DurabilityPolicy.VOLATILE)
+        self.fault_pub = self.node.create_publisher(JointState, '/actuator_fault', keep_all)
+        self._trigger_clients = {}
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _spin(self):
+        try:
+            self.executor.spin()
+        except Exception:  # noqa: B902 - the context is shut down at the end of a test
+            pass
+
+    def close(self):
+        """Shut the probe down."""
+        self.executor.shutdown(timeout_sec=2.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self._thread.join(timeout=5.0)
+
+    def _on_diag(self, data):
+        decoded = None
+        if len(data) < self.decode_below:
+            msg = self._deserialize(data, DiagnosticArray)
+            decoded = {s.name[len(NODE_PREFIX):]: statuses_values(s) for s in msg.status
+                       if s.name.startswith(NODE_PREFIX)}
+        with self._lock:
+            self.sizes.append(len(data))
+            if decoded:
+                self.statuses.append((len(self.sizes) - 1, decoded))
+            self._lock.notify_all()
+
+    def wait_statuses(self, predicate, timeout=TIMEOUT, since=0, what='diagnostics'):
+        """Wait for a small node diagnostics message (index >= since) matching predicate."""
+        end = time.monotonic() + timeout
+        with self._lock:
+            while True:
+                for index, statuses in reversed(self.statuses):
+                    if index >= since and predicate(statuses):
+                        return statuses
+                remaining = end - time.monotonic()
+                if remaining <= 0:
+                    raise AssertionError(f'timed out after {timeout:.0f} s waiting for {what}')
+                self._lock.wait(min(remaining, 0.1))
+
+    def count(self):
+        """Return how many /diagnostics messages arrived so far."""
+        with self._lock:
+            return len(self.sizes)
+
+    def wait_count(self, count, timeout=TIMEOUT):
+        """Wait until at least ``count`` /diagnostics messages arrived; return the count."""
+        end = time.monotonic() + timeout
+        with self._lock:
+            while len(self.sizes) < count:
+                remaining = end - time.monotonic()
+                if remaining <= 0:
+                    break
+                self._lock.wait(min(remaining, 0.1))
+            return len(self.sizes)
+
+    def latest(self):
+        """Return the decoded statuses of the newest small node diagnostics, or {}."""
+        with self._lock:
+            return self.statuses[-1][1] if self.statuses else {}
+
+    def trigger(self, name, timeout=TIMEOUT):
+        """Call a std_srvs/Trigger service; return the response, or None without answer."""
+        client = self._trigger_clients.get(name)
+        if client is None:
+            client = self._trigger_clients[name] = self.node.create_client(Trigger, name)
+        if not client.wait_for_service(timeout_sec=timeout):
+            raise AssertionError(f'service {name} is not available')
+        done = threading.Event()
+        future = client.call_async(Trigger.Request())
+        future.add_done_callback(lambda _: done.set())
+        return future.result() if done.wait(timeout) else None
