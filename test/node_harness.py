@@ -420,23 +420,23 @@ class DiagnosticsProbe:
     """
     A lean client for flooding tests: raw ``/diagnostics`` sizes, faults, Trigger calls.
 
-    It takes ``/diagnostics`` as serialized bytes (``raw=True``), so a node that publishes
-    huge diagnostics is measured without the probe holding (or even deserializing) every
-    huge message: only sizes are kept, plus the decoded statuses of the small messages.
+    It takes ``/diagnostics`` as serialized bytes (``raw=True``) and keeps only each
+    message's size and its node statuses with every value cut to ``value_chars``, so a
+    node that publishes huge diagnostics is measured without the probe holding them.
     Its fault publisher is reliable with KEEP_ALL history, so it never drops its own
     samples however fast they are published.
     """
 
-    def __init__(self, domain, name='namo_test_probe', decode_below=1 << 20):
+    def __init__(self, domain, name='namo_test_probe', value_chars=1000):
         from rclpy.serialization import deserialize_message
         self._deserialize = deserialize_message
-        self.decode_below = decode_below
+        self.value_chars = value_chars
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain)
         self.node = rclpy.create_node(name, context=self.context)
         self._lock = threading.Condition()
         self.sizes = []           # byte size of every /diagnostics message, in arrival order
-        self.statuses = []        # (index, {name: {key: value}}) of the small node messages
+        self.statuses = []        # (index, {name: {key: value cut at value_chars}})
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 50,
                                       raw=True)
         keep_all = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
@@ -463,11 +463,11 @@ class DiagnosticsProbe:
         self._thread.join(timeout=5.0)
 
     def _on_diag(self, data):
-        decoded = None
-        if len(data) < self.decode_below:
-            msg = self._deserialize(data, DiagnosticArray)
-            decoded = {s.name[len(NODE_PREFIX):]: statuses_values(s) for s in msg.status
-                       if s.name.startswith(NODE_PREFIX)}
+        msg = self._deserialize(data, DiagnosticArray)
+        cut = self.value_chars
+        decoded = {s.name[len(NODE_PREFIX):]: {kv.key[:cut]: kv.value[:cut] for kv in s.values}
+                   for s in msg.status if s.name.startswith(NODE_PREFIX)}
+        del msg
         with self._lock:
             self.sizes.append(len(data))
             if decoded:
@@ -475,7 +475,7 @@ class DiagnosticsProbe:
             self._lock.notify_all()
 
     def wait_statuses(self, predicate, timeout=TIMEOUT, since=0, what='diagnostics'):
-        """Wait for a small node diagnostics message (index >= since) matching predicate."""
+        """Wait for a node diagnostics message (index >= since) matching ``predicate``."""
         end = time.monotonic() + timeout
         with self._lock:
             while True:
@@ -504,7 +504,7 @@ class DiagnosticsProbe:
             return len(self.sizes)
 
     def latest(self):
-        """Return the decoded statuses of the newest small node diagnostics, or {}."""
+        """Return the (cut) statuses of the newest node diagnostics message, or {}."""
         with self._lock:
             return self.statuses[-1][1] if self.statuses else {}
 
