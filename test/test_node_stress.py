@@ -415,6 +415,9 @@ def test_ten_megabyte_joint_names_keep_diagnostics_and_memory_small(tmp_path):
         probe.wait_statuses(lambda s: values_of(s, 'reconfiguration', 'library_version')
                             is not None, timeout=LONG, what='the started node')
         # A first real fault and clear, so the baseline includes a run's allocations.
+        end = time.monotonic() + LONG
+        while probe.fault_pub.get_subscription_count() < 1 and time.monotonic() < end:
+            time.sleep(0.02)
         probe.fault_pub.publish(JointState(name=['right_arm_joint2'], position=[0.2]))
         answer = probe.trigger('/reconfigure_gestures', timeout=LONG)
         assert answer is not None and probe.trigger('/clear_faults', timeout=LONG)
