@@ -312,20 +312,30 @@ def _percentile(values, q):
     return ordered[lo] + (ordered[hi] - ordered[lo]) * (rank - lo)
 
 
-def _one_run(client, joint, count, timeout):
-    """Clear, publish one fault, call /reconfigure_gestures; return the run's record."""
+def _one_run(client, joint, count, timeout, last):
+    """
+    Clear, publish one fault, call /reconfigure_gestures; return the run's record.
+
+    ``last`` is the stamp of the newest library version seen before: the clear's
+    reference library is the first complete version after it, and the fault's library
+    the first after that (so a late part of an earlier version is never taken for it).
+    The record's ``last_stamp`` is the newest stamp seen at the end of the run.
+    """
     record = {'joint': joint}
     cleared = client.trigger('/clear_faults', timeout)
     if cleared is None or not cleared.success:
         raise BenchError(f'/clear_faults did not succeed: '
                          f'{cleared.message if cleared else "no answer"}')
-    base = client.wait(lambda: client.newest_complete(count), timeout)
+    base = client.wait(lambda: client.newest_complete(count, after=last), timeout)
     if base is None:
-        raise BenchError('no library received on /gesture_library')
+        raise BenchError('the reference library did not arrive after /clear_faults')
+    record['last_stamp'] = base[0]
     t0 = time.monotonic()
     client.publish_fault([joint], timeout)
     got = client.wait(lambda: client.newest_complete(count, after=base[0]), timeout)
     record['latency_sec'] = got[1] - t0 if got else None
+    if got:
+        record['last_stamp'] = got[0]
     t1 = time.monotonic()
     answer = client.trigger('/reconfigure_gestures', timeout)
     record['service_sec'] = time.monotonic() - t1
@@ -339,6 +349,8 @@ def _one_run(client, joint, count, timeout):
         return record
     record['library_version'] = int(match.group(1))
     stamp_text = f'{match.group(2)}.{match.group(3)}'
+    record['last_stamp'] = max(record['last_stamp'], got[0] if got else 0,
+                               int(match.group(2)) * 1_000_000_000 + int(match.group(3)))
     values = client.wait(lambda: client.diag_for(stamp_text), timeout)
     if values is None:
         record['deadline_met'] = 'deadline' in answer.message and 'met' in answer.message
@@ -474,6 +486,7 @@ def run_stream_bench(out, rates=DEFAULT_RATES, burner=True, faults=DEFAULT_FAULT
                              f'{timeout:g} s')
         time.sleep(0.5)   # let the whole transient-local version arrive
         count = max(len(v) for v in client.versions.values())
+        last = max(client.versions)
         idle_score = None
         for name, rate, burning in _conditions(rates, burner):
             stream = _StreamProcess(rate, domain_id) if rate > 0 else None
@@ -483,7 +496,8 @@ def run_stream_bench(out, rates=DEFAULT_RATES, burner=True, faults=DEFAULT_FAULT
                     time.sleep(1.0 if stream else 0.0)   # let the stream get matched
                     for _ in range(reps):
                         for joint in faults:
-                            record = _one_run(client, joint, count, timeout)
+                            record = _one_run(client, joint, count, timeout, last)
+                            last = record.pop('last_stamp')
                             runs.append(record)
                             if verbose:
                                 wall = record.get('wall_time_sec', math.nan)
@@ -495,6 +509,8 @@ def run_stream_bench(out, rates=DEFAULT_RATES, burner=True, faults=DEFAULT_FAULT
             finally:
                 stream_report = stream.close() if stream else {}
             client.trigger('/clear_faults', timeout)
+            cleared = client.wait(lambda: client.newest_complete(count, after=last), timeout)
+            last = cleared[0] if cleared else max(client.versions)
             summary = summarise(runs, idle_score)
             if name == 'idle':
                 idle_score = summary['mean_total_score']
