@@ -477,6 +477,9 @@ def run_stream_bench(out, rates=DEFAULT_RATES, burner=True, faults=DEFAULT_FAULT
     report = {'machine': machine_info(), 'gesture_file': gesture_file or '(node default)',
               'faults': list(faults), 'reps': reps, 'slack_sec': SLACK_SEC,
               'conditions': {}}
+    info = report['machine']
+    out.write(f"machine: {info['cpus']} CPUs, load average {info['loadavg']}; gesture file "
+              f"{report['gesture_file']}; faults {', '.join(faults)} x {reps}\n")
     client = None
     try:
         client = _Client(domain_id)
