@@ -321,14 +321,17 @@ def _one_run(client, joint, count, timeout, last):
     the first after that (so a late part of an earlier version is never taken for it).
     The record's ``last_stamp`` is the newest stamp seen at the end of the run.
     """
-    record = {'joint': joint}
+    record = {'joint': joint, 'last_stamp': last, 'answered': False, 'success': False,
+              'deadline_met': False}
     cleared = client.trigger('/clear_faults', timeout)
     if cleared is None or not cleared.success:
-        raise BenchError(f'/clear_faults did not succeed: '
-                         f'{cleared.message if cleared else "no answer"}')
+        record['error'] = (f'/clear_faults: {cleared.message}' if cleared else
+                           f'/clear_faults: no answer within {timeout:g} s')
+        return record
     base = client.wait(lambda: client.newest_complete(count, after=last), timeout)
     if base is None:
-        raise BenchError('the reference library did not arrive after /clear_faults')
+        record['error'] = f'no reference library within {timeout:g} s of /clear_faults'
+        return record
     record['last_stamp'] = base[0]
     t0 = time.monotonic()
     client.publish_fault([joint], timeout)
@@ -340,7 +343,7 @@ def _one_run(client, joint, count, timeout, last):
     answer = client.trigger('/reconfigure_gestures', timeout)
     record['service_sec'] = time.monotonic() - t1
     if answer is None:
-        record.update(answered=False, success=False, deadline_met=False)
+        record['error'] = f'/reconfigure_gestures: no answer within {timeout:g} s'
         return record
     record.update(answered=True, success=bool(answer.success), message=answer.message)
     match = VERSION_RE.search(answer.message)
@@ -384,6 +387,7 @@ def summarise(runs, idle_score=None):
     return {
         'runs': len(runs),
         'answered': sum(1 for r in runs if r.get('answered')),
+        'errors': sum(1 for r in runs if 'error' in r),
         'success': sum(1 for r in runs if r.get('success')),
         'deadline_met': sum(1 for r in runs if r.get('deadline_met') is True),
         'within_deadline_plus_20ms': within,
@@ -439,7 +443,9 @@ def _table(name, summary, deadline, out):
     s = summary
     out.write(f"  runs within deadline + 20 ms : {s['within_deadline_plus_20ms']}/{s['runs']}"
               f"  (node's deadline_met {s['deadline_met']}/{s['runs']}, success "
-              f"{s['success']}/{s['runs']}, answered {s['answered']}/{s['runs']})\n")
+              f"{s['success']}/{s['runs']}, answered {s['answered']}/{s['runs']}"
+              + (f", {s['errors']} with a service or library missing" if s['errors'] else '')
+              + ')\n')
     out.write(f"  node wall time               : worst {s['wall_worst_sec'] * 1000:7.1f} ms"
               f"   p95 {s['wall_p95_sec'] * 1000:7.1f} ms   (deadline "
               f'{deadline * 1000:.0f} ms)\n')
@@ -502,7 +508,9 @@ def run_stream_bench(out, rates=DEFAULT_RATES, burner=True, faults=DEFAULT_FAULT
                             record = _one_run(client, joint, count, timeout, last)
                             last = record.pop('last_stamp')
                             runs.append(record)
-                            if verbose:
+                            if 'error' in record:
+                                out.write(f"  {name}: {joint}: {record['error']}\n")
+                            elif verbose:
                                 wall = record.get('wall_time_sec', math.nan)
                                 latency = record.get('latency_sec') or math.nan
                                 out.write(f'  {name:<18} {joint:<18} wall {wall:.3f} s  '
@@ -511,7 +519,7 @@ def run_stream_bench(out, rates=DEFAULT_RATES, burner=True, faults=DEFAULT_FAULT
                     burner_cpu = ctx.cpu if burning else None
             finally:
                 stream_report = stream.close() if stream else {}
-            client.trigger('/clear_faults', timeout)
+            _ = client.trigger('/clear_faults', timeout)
             cleared = client.wait(lambda: client.newest_complete(count, after=last), timeout)
             last = cleared[0] if cleared else max(client.versions)
             summary = summarise(runs, idle_score)
@@ -531,12 +539,12 @@ def run_stream_bench(out, rates=DEFAULT_RATES, burner=True, faults=DEFAULT_FAULT
             rc = _stop_node(proc, log)
             report['node_exit_code'] = rc
             shutil.rmtree(workdir, ignore_errors=True)
-    if out_dir:
-        path = Path(out_dir)
-        path.mkdir(parents=True, exist_ok=True)
-        target = path / 'stream_bench.json'
-        target.write_text(json.dumps(report, indent=2, default=str))
-        out.write(f'\nwrote {target}\n')
+        if out_dir:   # also what was measured before an error
+            path = Path(out_dir)
+            path.mkdir(parents=True, exist_ok=True)
+            target = path / 'stream_bench.json'
+            target.write_text(json.dumps(report, indent=2, default=str))
+            out.write(f'\nwrote {target}\n')
     return report
 
 
