@@ -13,16 +13,22 @@ it over DDS only, through the interface of msg_docs/interfaces.md:
 4. SIGKILL right after the node logs ``fault accepted``: the restarted node restores it.
 5. Fault reports with 10 MB joint names: diagnostics and memory stay small.
 
+Plus: the burst's own model checked against the node's input validation, and the
+``namo-recovery bench stream`` command run end to end on a small configuration.
+
 Timeouts are generous (the machine is shared); wall-time figures are the benchmark's
 business (``namo-recovery bench stream``), these tests assert outcomes.
 """
 
+import io
+import json
 import random
 import re
 import signal
 import time
 
 from namo_fault_recovery import load_robot
+from namo_fault_recovery.cli.main import main
 from namo_fault_recovery.ros.inputs import BadInput, parse_fault
 from namo_fault_recovery.ros.stream_bench import JointStateStream, reference_pose
 from node_harness import (DiagnosticsProbe, NodeProcess, RosClient, statuses_values,
@@ -489,3 +495,33 @@ def test_burst_plan_matches_the_nodes_input_validation():
     assert len(messages) - rejected == accepted
     assert list(replayed.items()) == list(locks.items())
     assert set(locks) == set(BURST_POOL)
+
+
+# --- the benchmark itself -----------------------------------------------------------------
+
+def test_bench_stream_command_measures_a_private_node(tmp_path):
+    """
+    ``namo-recovery bench stream`` runs end to end against a node it starts itself.
+
+    A small configuration (idle and 100 Hz, one fault, no burner): every run must be
+    answered with a library version and the node's figures, and the JSON must hold the
+    same runs as the printed tables; the figures themselves are not judged here.
+    """
+    out = io.StringIO()
+    code = main(['bench', 'stream', '--start-node', '--rates', '0,100', '--no-burner',
+                 '--faults', 'right_arm_joint2', '--domain-id', str(stress_domain(2)),
+                 '--out', str(tmp_path)], out)
+    text = out.getvalue()
+    report = json.loads((tmp_path / 'stream_bench.json').read_text())
+    assert list(report['conditions']) == ['idle', '100 Hz'], text
+    for name, condition in report['conditions'].items():
+        assert f'== {name}' in text
+        [run] = condition['runs']
+        assert run['answered'] and 'error' not in run, run
+        assert run['library_version'] > 0 and run['wall_time_sec'] > 0, run
+        assert run['latency_sec'] is not None and run['total_score'] > 0, run
+        assert condition['summary']['runs'] == 1
+    assert report['conditions']['100 Hz']['stream']['sent'] > 0
+    assert report['node_exit_code'] == 0
+    assert code == (0 if all(c['summary']['deadline_met'] == 1
+                             for c in report['conditions'].values()) else 1)
