@@ -13,6 +13,7 @@ from pathlib import Path
 import shutil
 import signal
 import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -519,3 +520,61 @@ class DiagnosticsProbe:
         future = client.call_async(Trigger.Request())
         future.add_done_callback(lambda _: done.set())
         return future.result() if done.wait(timeout) else None
+
+
+_BARE_SUBSCRIBER = """
+import signal, sys, threading
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+rclpy.init()
+node = rclpy.create_node('namo_test_bare_subscriber')
+count = [0]
+qos = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
+                 reliability=ReliabilityPolicy.RELIABLE)
+node.create_subscription(JointState, sys.argv[1], lambda msg: count.__setitem__(0, count[0] + 1),
+                         qos)
+stop = threading.Event()
+signal.signal(signal.SIGTERM, lambda *_: stop.set())
+executor = SingleThreadedExecutor()
+executor.add_node(node)
+print('ready', flush=True)
+while not stop.is_set():
+    executor.spin_once(timeout_sec=0.05)
+print(count[0], flush=True)
+"""
+
+
+class BareSubscriber:
+    """
+    A control process: a plain rclpy subscription (reliable, KEEP_ALL) that does nothing.
+
+    Its resident memory shows what DDS and rclpy themselves keep after receiving some
+    traffic (receive buffers, payload pools), so a test can tell the node's own growth
+    from the transport's.  ``count()`` stops it and returns how many messages it took.
+    """
+
+    def __init__(self, domain, topic='/actuator_fault'):
+        self.proc = subprocess.Popen([sys.executable, '-c', _BARE_SUBSCRIBER, topic],
+                                     stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                                     env=ros_env(domain))
+        line = self.proc.stdout.readline()
+        if line.strip() != b'ready':
+            self.proc.kill()
+            raise AssertionError('the bare subscriber did not start')
+
+    def memory_kb(self, field='VmRSS'):
+        """Return a memory figure of the control process in kB."""
+        return proc_status_kb(self.proc.pid, field)
+
+    def count(self):
+        """Stop the process; return how many messages it received."""
+        self.proc.send_signal(signal.SIGTERM)
+        try:
+            out, _ = self.proc.communicate(timeout=TIMEOUT)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.communicate()
+            return None
+        return int(out.split()[-1])
