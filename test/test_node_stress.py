@@ -232,8 +232,9 @@ def test_burst_of_fault_reports_loses_none_and_counts_every_junk_report(tmp_path
     The sender is reliable with KEEP_ALL history: a publisher must not drop its own
     samples, so whatever is lost is lost by the node.  The node's final fault set (in
     arrival order), its locks on /diagnostics, the failed joints in every keyframe of
-    every gesture of the library the answer names, its fault_version (one per accepted
-    report) and its rejected_total (one per junk report) must all equal the test's model.
+    every gesture of the library the answer names and its rejected_total (one per junk
+    report) must all equal the test's model.  (fault_version is reported, not judged: a
+    node may count a batch of reports as one change.)
     """
     messages, locks, accepted, junk = burst_plan()
     assert len(messages) - junk >= 1000
@@ -261,7 +262,6 @@ def test_burst_of_fault_reports_loses_none_and_counts_every_junk_report(tmp_path
         def settled(s):
             faults, inputs = values(s, 'faults'), values(s, 'inputs')
             return (faults['failed_joints'] == expected
-                    and faults['fault_version'] == str(accepted)
                     and inputs['rejected_total'] == str(junk))
         try:
             client.wait_diag(settled, timeout=LONG, what='the burst fully applied')
@@ -269,9 +269,9 @@ def test_burst_of_fault_reports_loses_none_and_counts_every_junk_report(tmp_path
             last = client.wait_diag(lambda s: 'inputs' in s, timeout=LONG)
             faults, inputs = values(last, 'faults'), values(last, 'inputs')
             pytest.fail(f'{burst}; the node ended with failed_joints '
-                        f"{faults['failed_joints']!r} (expected {expected!r}), fault_version "
-                        f"{faults['fault_version']} (expected {accepted}), rejected_total "
-                        f"{inputs['rejected_total']} (expected {junk})")
+                        f"{faults['failed_joints']!r} (expected {expected!r}), rejected_total "
+                        f"{inputs['rejected_total']} (expected {junk}), fault_version "
+                        f"{faults['fault_version']} ({accepted} reports accepted)")
         answer = client.trigger('/reconfigure_gestures', timeout=LONG)
         named = version_of(answer.message)
         assert named is not None, answer.message
