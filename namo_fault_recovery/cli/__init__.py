@@ -10,5 +10,6 @@ The ``namo-recovery`` command line, one module per command group.
 - :mod:`.latency_bench`: ``bench latency``;
 - :mod:`.ros_common`: what the ROS commands share (``--namespace``, errors, tables);
 - :mod:`.private_node`: the node process that ``demo`` and ``bench latency`` start;
-- :mod:`.common`: argument parsing shared by the groups.
+- :mod:`.common`: argument parsing shared by the groups;
+- :mod:`.__main__`: ``python -m namo_fault_recovery.cli``.
 """
