@@ -122,6 +122,17 @@ class FaultOutcome:
     elapsed: float = 0.0     # seconds from publication to the library (or rejection)
 
 
+def node_diagnostics(array, prefix, arrival):
+    """Return the statuses of one DiagnosticArray named with ``prefix``, or None."""
+    n = len(prefix)
+    mine = [s for s in array.status if s.name.startswith(prefix)]
+    if not mine:
+        return None
+    return NodeDiagnostics(arrival, {s.name[n:]: {kv.key: kv.value for kv in s.values}
+                                     for s in mine},
+                           {s.name[n:]: s.message for s in mine})
+
+
 def normalise_namespace(namespace):
     """Return ``namespace`` as an absolute ROS namespace ('' and None are the root)."""
     from rclpy.exceptions import InvalidNamespaceException
@@ -299,14 +310,9 @@ class RecoveryClient:
             self._cond.notify_all()
 
     def _on_diag(self, msg):
-        n = len(self.prefix)
-        mine = [s for s in msg.status if s.name.startswith(self.prefix)]
-        if not mine:
+        entry = node_diagnostics(msg, self.prefix, time.monotonic())
+        if entry is None:
             return
-        entry = NodeDiagnostics(time.monotonic(),
-                                {s.name[n:]: {kv.key: kv.value for kv in s.values}
-                                 for s in mine},
-                                {s.name[n:]: s.message for s in mine})
         with self._cond:
             self._diagnostics.append(entry)
             self._cond.notify_all()
