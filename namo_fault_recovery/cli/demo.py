@@ -92,10 +92,11 @@ def _run(args, client, out):
 def cmd_demo(args, out):
     """Start the node, inject a fault, print scores before/after, save a PNG, shut down."""
     fault_angles(args)                      # bad arguments fail before a node starts
+    ns = namespace(args)
     domain = domain_id(args)
     domain = private_domain() if domain is None else domain
     failed = True
-    node = PrivateNode(args, domain, namespace(args), out)
+    node = PrivateNode(args, domain, ns, out)
     try:
         with open_client(args, domain) as client:
             _run(args, client, out)

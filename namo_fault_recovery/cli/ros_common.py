@@ -50,8 +50,9 @@ def add_connection_arguments(parser, timeout=15.0):
 
 
 def namespace(args):
-    """Return the namespace the command was given ('/' if none)."""
-    return getattr(args, 'namespace', None) or '/'
+    """Return the command's namespace, checked and absolute ('/' if none was given)."""
+    from ..ros.client import normalise_namespace
+    return normalise_namespace(getattr(args, 'namespace', None))
 
 
 def domain_id(args):

@@ -378,7 +378,12 @@ class RecoveryClient:
         return self._describe(found[0], diagnostics_timeout)
 
     def next_library(self, after, timeout, diagnostics_timeout=DIAGNOSTICS_SEC):
-        """Return the first complete version newer than stamp ``after``, or None."""
+        """
+        Return the first complete version newer than stamp ``after``, or None.
+
+        Complete means as many gestures as the library current_library() saw, so call
+        that first.
+        """
         return self._describe_first(self._newer(after), timeout, diagnostics_timeout)
 
     def _newer(self, after):
