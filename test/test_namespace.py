@@ -89,9 +89,6 @@ def test_commands_with_the_namespace_reach_the_node(node, product_library):
     assert _locked(after, lock)
 
 
-@pytest.mark.xfail(strict=True, reason='the node still writes the bare prefix '
-                   "'recovery_node: ' under a namespace; it passes once the writer uses "
-                   'diagnostic_keys.status_prefix(node fqn), then remove this mark')
 def test_the_namespaced_nodes_diagnostics_are_read(node, product_library):
     lock = math.degrees(product_library.lock_averages('right')[1])
     assert run('--namespace', NS, 'clear')[0] == 0

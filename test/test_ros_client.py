@@ -1,25 +1,29 @@
 """
 The ROS client's reading of messages, without DDS: libraries, diagnostics, answers.
 
-A LibraryResult of the engine goes out as the node's JointTrajectory messages (the
-node's own converter) and the 'reconfiguration' and 'joint' statuses written with the
-shared keys; :func:`rebuild_library` must give the same result back.  The command-line
+A LibraryResult of the engine goes out as the node's JointTrajectory messages and
+``/diagnostics`` statuses (the node's own converter and writer);
+:func:`rebuild_library` must give the same result back, and every name and key the
+writer uses must be one of :mod:`diagnostic_keys`.  The command-line
 options of the ROS commands (``--namespace`` before or after the command) are checked
 on the real parser.
 """
 
 import io
 import math
+from types import SimpleNamespace
 
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from namo_fault_recovery.cli.main import build_parser, main
 from namo_fault_recovery.recovery.engine import recover, RecoverySettings
 from namo_fault_recovery.ros import diagnostic_keys as keys
 from namo_fault_recovery.ros.client import (BadNamespace, node_diagnostics,
                                             normalise_namespace, rebuild_library,
                                             TriggerAnswer)
+from namo_fault_recovery.ros.diagnostics import Snapshot, statuses
 from namo_fault_recovery.ros.messages import library_to_msgs
+from namo_fault_recovery.ros.state_store import Fault
 import pytest
 from std_srvs.srv import Trigger
 
@@ -35,32 +39,13 @@ def result(robot, library):
     return recover(robot, library, {JOINT: None}, RecoverySettings(deadline_sec=0.2), seed=0)
 
 
-def _status(prefix, name, pairs):
-    return DiagnosticStatus(name=prefix + name,
-                            values=[KeyValue(key=k, value=str(v)) for k, v in pairs])
-
-
-def _statuses(prefix, result, stamp=STAMP, up_to_date=True):
-    """Return the node's statuses of ``result``, written with the shared keys."""
-    pairs = [(keys.LIBRARY_VERSION, 7), (keys.LIBRARY_STAMP, keys.format_stamp(stamp)),
-             (keys.UP_TO_DATE, keys.flag(up_to_date)), (keys.OPTIMIZER, 'abc'),
-             (keys.DEADLINE_SEC, result.deadline),
-             (keys.WALL_TIME_SEC, f'{result.wall_time:.4f}'),
-             (keys.DEADLINE_MET, keys.flag(result.deadline_met)),
-             (keys.SUCCESS, keys.flag(result.success)),
-             (keys.FROZEN_ARMS, ' '.join(result.frozen_arms))]
-    for g in result.gestures:
-        pairs += [(keys.gesture_key(g.name, keys.SCORE_BEFORE), f'{g.score_before:.6g}'),
-                  (keys.gesture_key(g.name, keys.SCORE_AFTER), f'{g.score_after:.6g}'),
-                  (keys.gesture_key(g.name, keys.TIME_SEC), f'{g.wall_time:.4f}'),
-                  (keys.gesture_key(g.name, keys.STATUS), g.status),
-                  (keys.gesture_key(g.name, keys.STAGE), g.stage)]
-    out = [_status(prefix, keys.RECONFIGURATION, pairs)]
-    for joint, lock in result.locks.items():
-        out.append(_status(prefix, keys.joint_status(joint),
-                           [(keys.JOINT, joint), (keys.LOCK_ANGLE_RAD, repr(lock)),
-                            (keys.LOCK_SOURCE, 'average strategy')]))
-    return out
+def _statuses(robot, prefix, result, stamp=STAMP, pending=False, reported=None):
+    """Return what the node's writer publishes for ``result`` (``reported``: angles)."""
+    faults = {j: Fault((reported or {}).get(j)) for j in result.locks}
+    snap = Snapshot(faults=faults, fault_version=3, current=result, version=7,
+                    stamp_ns=stamp, pending=pending, running=False, failed=None,
+                    settings=SimpleNamespace(engine=RecoverySettings()))
+    return statuses(robot, snap, prefix)
 
 
 def _msgs(robot, result, stamp=STAMP):
@@ -69,7 +54,7 @@ def _msgs(robot, result, stamp=STAMP):
 
 
 def test_a_library_comes_back_as_the_engine_result(robot, result):
-    array = DiagnosticArray(status=_statuses(ROOT, result))
+    array = DiagnosticArray(status=_statuses(robot, ROOT, result))
     diagnostics = node_diagnostics(array, ROOT, arrival=1.0)
     assert diagnostics.describes(STAMP)
     back = rebuild_library(STAMP, _msgs(robot, result), diagnostics, received=2.0)
@@ -87,13 +72,37 @@ def test_a_library_comes_back_as_the_engine_result(robot, result):
         assert (got.status, got.stage) == (sent.status, sent.stage)
 
 
+def _defined_keys(gestures):
+    """Return every status name and key that diagnostic_keys defines."""
+    constants = {v for k, v in vars(keys).items() if k.isupper() and isinstance(v, str)}
+    per_gesture = {keys.gesture_key(g, f) for g in gestures for f in keys.GESTURE_FIELDS}
+    numbered = {f(i) for f in (keys.note_key, keys.rejected_key) for i in range(10)}
+    return constants | per_gesture | numbered
+
+
+def test_every_name_and_key_the_writer_uses_is_shared(robot, result):
+    right = robot.arms['right'].joint_names
+    faults = {j: Fault(0.1) for j in right}          # a frozen arm: every status kind
+    snap = Snapshot(faults=faults, fault_version=3, current=result, version=7,
+                    stamp_ns=STAMP, pending=False, running=False, failed=None,
+                    settings=SimpleNamespace(engine=RecoverySettings()),
+                    rejections=[(0.0, '/actuator_fault', 'unknown joint')], rejected_total=1)
+    written = statuses(robot, snap, ROBOT1)
+    defined = _defined_keys(result.names)
+    names = {s.name[len(ROBOT1):] for s in written}
+    assert names == ({keys.FAULTS, keys.RECONFIGURATION, keys.INPUTS, keys.STATE,
+                      keys.arm_status('right')} | {keys.joint_status(j) for j in right})
+    unknown = sorted({kv.key for s in written for kv in s.values} - defined)
+    assert not unknown, f'keys written but not in diagnostic_keys: {unknown}'
+
+
 def test_diagnostics_of_another_node_or_version_are_not_used(robot, result):
-    other = DiagnosticArray(status=_statuses(ROBOT1, result))
+    other = DiagnosticArray(status=_statuses(robot, ROBOT1, result))
     assert node_diagnostics(other, ROOT, arrival=1.0) is None
     mine = node_diagnostics(other, ROBOT1, arrival=1.0)
     assert mine is not None and not mine.describes(STAMP + 1)
-    pending = node_diagnostics(DiagnosticArray(status=_statuses(ROOT, result,
-                                                                up_to_date=False)),
+    pending = node_diagnostics(DiagnosticArray(status=_statuses(robot, ROOT, result,
+                                                                pending=True)),
                                ROOT, arrival=1.0)
     assert not pending.describes(STAMP)
     back = rebuild_library(STAMP, _msgs(robot, result), None, received=2.0)
@@ -104,11 +113,8 @@ def test_diagnostics_of_another_node_or_version_are_not_used(robot, result):
 
 
 def test_a_reported_lock_angle_is_a_fault_angle(robot, result):
-    statuses = _statuses(ROOT, result)
     lock = result.locks[JOINT]
-    statuses[-1] = _status(ROOT, keys.joint_status(JOINT),
-                           [(keys.JOINT, JOINT), (keys.LOCK_ANGLE_RAD, repr(lock)),
-                            (keys.LOCK_SOURCE, keys.LOCK_SOURCE_REPORT)])
+    statuses = _statuses(robot, ROOT, result, reported={JOINT: lock})
     diagnostics = node_diagnostics(DiagnosticArray(status=statuses), ROOT, arrival=1.0)
     back = rebuild_library(STAMP, _msgs(robot, result), diagnostics, received=2.0)
     assert back.result.faults == {JOINT: lock}

@@ -9,35 +9,12 @@ import importlib.util
 from pathlib import Path
 import time
 
-import numpy as np
-
 from .private_node import private_domain, PrivateNode
 from .ros_common import (add_connection_arguments, CommandError, describe_fault,
                          domain_id, EXIT_FAILURE, fault_angles, namespace, open_client,
                          report_library, wrap)
 
 DEFAULT_FAULT = 'right_arm_joint2'
-
-
-class _PlotView:
-    """A received LibraryResult seen as the engine's report that the plotting reads."""
-
-    def __init__(self, result):
-        from types import SimpleNamespace
-
-        from ..model.gestures import Keyframe
-        self.locks = dict(result.locks)
-        self.algorithm = result.settings.get('optimizer', '?')
-        self._gestures = {
-            g.name: SimpleNamespace(
-                name=g.name, score_before=g.score_before, score_after=g.score_after,
-                status=g.status, wall_time=g.wall_time,
-                keyframes=tuple(Keyframe(t, np.asarray(q[:7]), np.asarray(q[7:]))
-                                for t, q in zip(g.times, g.positions)))
-            for g in result.gestures}
-
-    def __getitem__(self, name):
-        return self._gestures[name]
 
 
 def save_figures(args, result, out_dir, out):
@@ -51,11 +28,10 @@ def save_figures(args, result, out_dir, out):
     from ..model.robot import load_robot
     robot = load_robot(getattr(args, 'robot_file', None))
     library = load_library(robot, getattr(args, 'gesture_file', None))
-    view = _PlotView(result)
     paths = []
     for name in library.names:
         path = Path(out_dir) / f'{name}.png'
-        plotting.plot_reconfiguration(robot, library, view, name, path)
+        plotting.plot_reconfiguration(robot, library, result, name, path)
         out.write(f'stick figure saved: {path}\n')
         paths.append(path)
     return paths

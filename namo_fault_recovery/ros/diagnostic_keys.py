@@ -82,6 +82,8 @@ MEASURED_JOINTS = 'measured_joints'
 LAST_REJECTED_SOURCE = 'last_rejected_source'
 LAST_REJECTED_REASON = 'last_rejected_reason'
 STATE_FILE = 'state_file'
+ENGINE_RESTARTS = 'engine_restarts'
+WAITING_CALLERS = 'waiting_callers'
 
 TRUE = 'true'
 FALSE = 'false'
