@@ -18,7 +18,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from namo_fault_recovery.cli.main import build_parser, main
 from namo_fault_recovery.recovery.engine import recover, RecoverySettings
 from namo_fault_recovery.ros import diagnostic_keys as keys
-from namo_fault_recovery.ros.client import (BadNamespace, node_diagnostics,
+from namo_fault_recovery.ros.client import (BadNamespace, Inbox, node_diagnostics,
                                             normalise_namespace, rebuild_library,
                                             TriggerAnswer)
 from namo_fault_recovery.ros.diagnostics import Snapshot, statuses
@@ -118,6 +118,43 @@ def test_a_reported_lock_angle_is_a_fault_angle(robot, result):
     diagnostics = node_diagnostics(DiagnosticArray(status=statuses), ROOT, arrival=1.0)
     back = rebuild_library(STAMP, _msgs(robot, result), diagnostics, received=2.0)
     assert back.result.faults == {JOINT: lock}
+
+
+def test_the_inbox_waits_for_complete_versions_and_their_diagnostics(robot, result):
+    inbox = Inbox(ROOT)
+    assert inbox.wait(inbox.settled(quiet=0.0), timeout=0.0) is None      # nothing yet
+    for msg in _msgs(robot, result).values():
+        inbox.add_library(msg)
+    assert inbox.wait(inbox.settled(quiet=0.0), timeout=0.0) == (STAMP,)
+    first = inbox.library(STAMP, diagnostics_timeout=0.0)
+    assert not first.described and first.names == result.names
+    later = list(_msgs(robot, result, STAMP + 5).values())
+    for msg in later[:-1]:
+        inbox.add_library(msg)
+    assert inbox.wait(inbox.newer(STAMP), timeout=0.0) is None            # incomplete
+    inbox.add_library(later[-1])
+    assert inbox.wait(inbox.newer(STAMP), timeout=0.0) == (STAMP + 5,)
+    inbox.add_diagnostics(DiagnosticArray(status=_statuses(robot, ROBOT1, result, STAMP + 5)))
+    assert not inbox.library(STAMP + 5, diagnostics_timeout=0.0).described   # not ours
+    inbox.add_diagnostics(DiagnosticArray(status=_statuses(robot, ROOT, result, STAMP + 5)))
+    described = inbox.library(STAMP + 5, diagnostics_timeout=0.0)
+    assert described.described and described.result.locks == result.locks
+
+
+def test_the_inbox_sees_a_rejected_input(robot, result):
+    inbox = Inbox(ROOT)
+    since = 0.0                      # every arrival (time.monotonic()) is after it
+    snap = Snapshot(faults={}, fault_version=1, current=result, version=1, stamp_ns=STAMP,
+                    pending=False, running=False, failed=None,
+                    settings=SimpleNamespace(engine=RecoverySettings()),
+                    rejections=[(0.0, '/actuator_fault', "unknown joint 'x'")],
+                    rejected_total=1)
+    assert inbox.wait(inbox.rejection(since, 0), timeout=0.0) is None
+    inbox.add_diagnostics(DiagnosticArray(status=statuses(robot, snap, ROOT)))
+    assert inbox.wait(inbox.rejection(since, 1), timeout=0.0) is None      # not a new one
+    found = inbox.wait(inbox.rejection(since, 0), timeout=0.0)
+    assert found.get(keys.INPUTS, keys.LAST_REJECTED_REASON) == "unknown joint 'x'"
+    assert inbox.wait(inbox.rejection(since, None), timeout=0.0) is None   # no baseline
 
 
 def test_the_reconfigure_answer_carries_the_version():

@@ -213,6 +213,116 @@ def rebuild_library(stamp, msgs, diagnostics, received):
                             library_version=int(version) if version else None)
 
 
+class Inbox:
+    """
+    What a client received: library versions and its node's diagnostics.
+
+    Thread-safe and free of rclpy (the subscriptions' callbacks feed it; the tests can
+    too).  Every ``wait``-style predicate is called under the lock.
+    """
+
+    def __init__(self, prefix):
+        self.prefix = prefix
+        self._cond = threading.Condition()
+        self._versions = {}       # stamp ns -> {gesture: JointTrajectory}
+        self._arrivals = {}       # stamp ns -> monotonic time of its latest message
+        self._last_arrival = None
+        self._gesture_count = None
+        self._diagnostics = deque(maxlen=_MAX_DIAGNOSTICS)
+
+    def add_library(self, msg):
+        """Take one gesture_library message (a gesture of the version its stamp names)."""
+        key = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        with self._cond:
+            self._versions.setdefault(key, {})[msg.header.frame_id] = msg
+            self._last_arrival = self._arrivals[key] = time.monotonic()
+            self._cond.notify_all()
+
+    def add_diagnostics(self, array):
+        """Take one DiagnosticArray; keep it if it holds statuses of our node."""
+        entry = node_diagnostics(array, self.prefix, time.monotonic())
+        if entry is not None:
+            with self._cond:
+                self._diagnostics.append(entry)
+                self._cond.notify_all()
+
+    def wait(self, predicate, timeout):
+        """Return ``predicate()`` (called under the lock) once truthy, or None at timeout."""
+        end = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                value = predicate()
+                if value:
+                    return value
+                remaining = end - time.monotonic()
+                if remaining <= 0:
+                    return None
+                self._cond.wait(min(remaining, 0.05))
+
+    def settled(self, quiet=SETTLE_SEC):
+        """
+        Return a predicate: ``(stamp,)`` of the newest version once ``quiet`` s passed.
+
+        Transient local hands a late subscriber the whole current version at once; the
+        version is complete when nothing more arrives.  Its size becomes the size every
+        later version must reach (see :meth:`newer`).
+        """
+        def find():
+            if self._last_arrival is None or time.monotonic() - self._last_arrival < quiet:
+                return None
+            stamp = max(self._versions)
+            self._gesture_count = max(self._gesture_count or 0, len(self._versions[stamp]))
+            return stamp,
+        return find
+
+    def newer(self, after):
+        """Return a predicate: ``(stamp,)`` of the first complete version after ``after``."""
+        def find():
+            for stamp in sorted(self._versions):
+                if stamp > after and len(self._versions[stamp]) >= (self._gesture_count or 1):
+                    return stamp,
+            return None
+        return find
+
+    def rejection(self, since, rejected_before):
+        """Return a predicate: diagnostics after ``since`` counting a new rejected input."""
+        def find():
+            if rejected_before is None:
+                return None
+            for entry in reversed(self._diagnostics):
+                if entry.arrival < since:
+                    return None
+                total = entry.rejected_total()
+                if total is not None and total > rejected_before:
+                    return entry
+            return None
+        return find
+
+    def latest_diagnostics(self, predicate=None, since=None, timeout=0.0):
+        """
+        Return the newest NodeDiagnostics (received after ``since``) matching predicate.
+
+        Waits up to ``timeout`` seconds; returns None if none arrives.
+        """
+        def find():
+            for entry in reversed(self._diagnostics):
+                if since is not None and entry.arrival < since:
+                    return None
+                if predicate is None or predicate(entry):
+                    return entry
+            return None
+        return self.wait(find, timeout)
+
+    def library(self, stamp, diagnostics_timeout):
+        """Return version ``stamp`` as a PublishedLibrary, described if diagnostics come."""
+        diagnostics = self.latest_diagnostics(lambda d: d.describes(stamp),
+                                              timeout=diagnostics_timeout)
+        with self._cond:
+            msgs = dict(self._versions[stamp])
+            received = self._arrivals[stamp]
+        return rebuild_library(stamp, msgs, diagnostics, received)
+
+
 class RecoveryClient:
     """A client of the ``recovery_node`` in ``namespace``, in its own rclpy Context."""
 
@@ -227,16 +337,10 @@ class RecoveryClient:
 
         self.namespace = normalise_namespace(namespace)
         self.node_fqn = keys.node_fqn(self.namespace, node_name)
-        self.prefix = keys.status_prefix(self.node_fqn)
+        self.inbox = Inbox(keys.status_prefix(self.node_fqn))
         self.domain_id = domain_id
         self._rclpy = rclpy
         self._joint_state = JointState
-        self._cond = threading.Condition()
-        self._versions = {}       # stamp ns -> {gesture: JointTrajectory}
-        self._arrivals = {}       # stamp ns -> monotonic time of its latest message
-        self._last_arrival = None
-        self._gesture_count = None
-        self._diagnostics = deque(maxlen=_MAX_DIAGNOSTICS)
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain_id)
         try:
@@ -250,15 +354,16 @@ class RecoveryClient:
                              reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._library_sub = self.node.create_subscription(
-            JointTrajectory, LIBRARY_TOPIC, self._on_library, latched)
-        self.node.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, self._on_diag, 50)
+            JointTrajectory, LIBRARY_TOPIC, self.inbox.add_library, latched)
+        self.node.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC,
+                                      self.inbox.add_diagnostics, 50)
         self._fault_pub = self.node.create_publisher(JointState, FAULT_TOPIC, 10)
         self._executor = SingleThreadedExecutor(context=self.context)
         self._executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, daemon=True)
         self._thread.start()
 
-    # --- life cycle -------------------------------------------------------------------
+    # --- life cycle and names ---------------------------------------------------------
 
     def _spin(self):
         try:
@@ -300,82 +405,25 @@ class RecoveryClient:
             domain = os.environ.get('ROS_DOMAIN_ID', '0')
         return f'namespace {self.namespace}, ROS_DOMAIN_ID={domain}'
 
-    # --- callbacks ----------------------------------------------------------------------
-
-    def _on_library(self, msg):
-        key = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-        with self._cond:
-            self._versions.setdefault(key, {})[msg.header.frame_id] = msg
-            self._last_arrival = self._arrivals[key] = time.monotonic()
-            self._cond.notify_all()
-
-    def _on_diag(self, msg):
-        entry = node_diagnostics(msg, self.prefix, time.monotonic())
-        if entry is None:
-            return
-        with self._cond:
-            self._diagnostics.append(entry)
-            self._cond.notify_all()
-
-    def _wait(self, predicate, timeout):
-        """Return ``predicate()`` (called under the lock) once truthy, or None at timeout."""
-        end = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                value = predicate()
-                if value:
-                    return value
-                remaining = end - time.monotonic()
-                if remaining <= 0:
-                    return None
-                self._cond.wait(min(remaining, 0.05))
-
     # --- reading ------------------------------------------------------------------------
 
     def latest_diagnostics(self, predicate=None, since=None, timeout=0.0):
-        """
-        Return the newest NodeDiagnostics (received after ``since``) matching predicate.
-
-        Waits up to ``timeout`` seconds; returns None if none arrives.
-        """
-        def find():
-            for entry in reversed(self._diagnostics):
-                if since is not None and entry.arrival < since:
-                    return None
-                if predicate is None or predicate(entry):
-                    return entry
-            return None
-        return self._wait(find, timeout)
-
-    def _describe(self, stamp, diagnostics_timeout):
-        """Return the PublishedLibrary of version ``stamp`` with its diagnostics if any."""
-        diagnostics = self.latest_diagnostics(lambda d: d.describes(stamp),
-                                              timeout=diagnostics_timeout)
-        with self._cond:
-            msgs = dict(self._versions[stamp])
-            received = self._arrivals[stamp]
-        return rebuild_library(stamp, msgs, diagnostics, received)
+        """Return the newest diagnostics of the node matching ``predicate`` (or None)."""
+        return self.inbox.latest_diagnostics(predicate, since, timeout)
 
     def current_library(self, timeout, diagnostics_timeout=DIAGNOSTICS_SEC):
         """
         Return the library the node publishes now, as a PublishedLibrary.
 
-        Transient local hands a late subscriber the whole current version; it is taken
-        once nothing has arrived for SETTLE_SEC.  Raises NodeUnreachable when nothing
-        arrives within ``timeout``.
+        Raises NodeUnreachable when nothing arrives within ``timeout``.  The library is
+        described (scores, locks) if its diagnostics come within ``diagnostics_timeout``.
         """
-        def settled():
-            if self._last_arrival is None or time.monotonic() - self._last_arrival < SETTLE_SEC:
-                return None
-            stamp = max(self._versions)
-            self._gesture_count = max(self._gesture_count or 0, len(self._versions[stamp]))
-            return stamp,
-        found = self._wait(settled, timeout)
+        found = self.inbox.wait(self.inbox.settled(), timeout)
         if found is None:
             raise NodeUnreachable(
-                f'no recovery_node found: nothing received on {self._library_sub.topic_name} '
+                f'no recovery_node found: nothing received on {self.library_topic} '
                 f'within {timeout:g} s ({self.where()}); is the node running?')
-        return self._describe(found[0], diagnostics_timeout)
+        return self.inbox.library(found[0], diagnostics_timeout)
 
     def next_library(self, after, timeout, diagnostics_timeout=DIAGNOSTICS_SEC):
         """
@@ -384,21 +432,8 @@ class RecoveryClient:
         Complete means as many gestures as the library current_library() saw, so call
         that first.
         """
-        return self._describe_first(self._newer(after), timeout, diagnostics_timeout)
-
-    def _newer(self, after):
-        def find():
-            for stamp in sorted(self._versions):
-                if stamp > after and len(self._versions[stamp]) >= (self._gesture_count or 1):
-                    return stamp,
-            return None
-        return find
-
-    def _describe_first(self, predicate, timeout, diagnostics_timeout):
-        found = self._wait(predicate, timeout)
-        if found is None:
-            return None
-        return self._describe(found[0], diagnostics_timeout)
+        found = self.inbox.wait(self.inbox.newer(after), timeout)
+        return None if found is None else self.inbox.library(found[0], diagnostics_timeout)
 
     # --- acting -------------------------------------------------------------------------
 
@@ -412,7 +447,7 @@ class RecoveryClient:
         end = time.monotonic() + timeout
         while self._fault_pub.get_subscription_count() < 1:
             if time.monotonic() > end:
-                raise NodeUnreachable(f'nobody subscribes to {self._fault_pub.topic_name} '
+                raise NodeUnreachable(f'nobody subscribes to {self.fault_topic} '
                                       f'({self.where()}); is the node running?')
             time.sleep(0.02)
         msg = self._joint_state(name=list(joints), position=[float(a) for a in angles or ()])
@@ -429,31 +464,17 @@ class RecoveryClient:
         """
         current = self.current_library(timeout, diagnostics_timeout=0.0)
         baseline = self.latest_diagnostics(timeout=1.5)
-        rejected_before = None if baseline is None else baseline.rejected_total()
         t0 = time.monotonic()
         self.publish_fault(joints, angles, timeout)
-        newer = self._newer(current.stamp)
-
-        def outcome():
-            found = newer()
-            if found:
-                return 'library', found[0]
-            if rejected_before is None:
-                return None
-            for entry in reversed(self._diagnostics):
-                if entry.arrival < t0:
-                    break
-                total = entry.rejected_total()
-                if total is not None and total > rejected_before:
-                    return 'rejected', entry
-            return None
-        found = self._wait(outcome, timeout)
+        newer = self.inbox.newer(current.stamp)
+        rejection = self.inbox.rejection(t0, baseline and baseline.rejected_total())
+        found = self.inbox.wait(lambda: newer() or rejection(), timeout)
         if found is None:
             raise ClientError(f'no new library within {timeout:g} s of the fault report')
-        if found[0] == 'rejected':
-            return FaultOutcome(rejected=found[1].get(keys.INPUTS, keys.LAST_REJECTED_REASON, '?'),
-                                elapsed=found[1].arrival - t0)
-        library = self._describe(found[1], diagnostics_timeout)
+        if isinstance(found, NodeDiagnostics):
+            return FaultOutcome(rejected=found.get(keys.INPUTS, keys.LAST_REJECTED_REASON, '?'),
+                                elapsed=found.arrival - t0)
+        library = self.inbox.library(found[0], diagnostics_timeout)
         return FaultOutcome(library=library, elapsed=library.received - t0)
 
     def _trigger(self, service, timeout):
