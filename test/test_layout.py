@@ -24,7 +24,7 @@ ROS_SUFFIXES = ('_msgs', '_srvs')
 ROS_CLI_MODULES = {f'{PACKAGE}.cli.{m}' for m in
                    ('node_commands', 'demo', 'latency_bench', 'ros_common', 'private_node')}
 OFFLINE_ENTRY = f'{PACKAGE}.cli.main'
-# Findings on main (384d4c5) in files the author of this test does not own, left to
+# Findings on main (5e746d0) in files the author of this test does not own, left to
 # their owners.  A ratchet, not a waiver: each test fails on a finding not listed here
 # AND on a listed one that is gone, so fixing one means deleting its line.
 KNOWN_FINDINGS = {
@@ -35,7 +35,7 @@ KNOWN_FINDINGS = {
     },
     'docstring': {
         f'{PACKAGE}.benchmarks: common', f'{PACKAGE}.benchmarks: paper_data',
-        f'{PACKAGE}.benchmarks: plotting',
+        f'{PACKAGE}.benchmarks: plotting', f'{PACKAGE}.benchmarks: lock_compare',
         f'{PACKAGE}.optimize: base', f'{PACKAGE}.optimize: bee_colony',
         f'{PACKAGE}.optimize: bfoa', f'{PACKAGE}.optimize: ga', f'{PACKAGE}.optimize: gd',
         f'{PACKAGE}.optimize: polish', f'{PACKAGE}.optimize: registry',
