@@ -43,8 +43,8 @@ if 'ROS_LOG_DIR' not in os.environ:
 
 
 def session_domain(offset):
-    """Return this test session's ROS domain id for a module (offset 0..5)."""
-    base = int(os.environ.get('NAMO_TEST_DOMAIN_BASE', 1 + (os.getpid() % 20) * 6))
+    """Return this test session's ROS domain id for a module (offset 0..4)."""
+    base = int(os.environ.get('NAMO_TEST_DOMAIN_BASE', 1 + (os.getpid() % 20) * 5))
     return base + offset
 
 

@@ -7,6 +7,7 @@ the library there.  The same commands without the namespace look in the root nam
 of the same domain, find no node, and say so with exit code 1.
 """
 
+import contextlib
 import io
 import json
 import math
@@ -20,16 +21,27 @@ import pytest
 
 pytestmark = pytest.mark.slow
 
-DOMAIN = session_domain(5)
+# The demo's domain of test_node_cli: no node runs there while this module runs (modules
+# run one after the other, each stops its nodes), and this module's node is in /robot1.
+DOMAIN = session_domain(4)
 NS = '/robot1'
 JOINT = 'right_arm_joint2'
 SHORT = '1'          # --timeout of the commands that must not find a node
 
 
 def run(*argv):
-    """Run the real command line in this module's domain; return (code, stdout)."""
-    out = io.StringIO()
-    return main(['--domain-id', str(DOMAIN)] + list(argv), out), out.getvalue()
+    """Run the real command line in this module's domain; return (code, stdout, stderr)."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = main(['--domain-id', str(DOMAIN)] + list(argv), out)
+    return code, out.getvalue(), err.getvalue()
+
+
+def ok(*argv):
+    """Run a command that must succeed; return its stdout."""
+    code, text, err = run(*argv)
+    assert code == 0, f'{argv}: exit {code}\n{text}{err}'
+    return text
 
 
 @pytest.fixture(scope='module')
@@ -47,9 +59,7 @@ def node(tmp_path_factory):
 
 
 def _library(*namespace_args):
-    code, text = run(*namespace_args, 'library', '--json')
-    assert code == 0, text
-    return json.loads(text)
+    return json.loads(ok(*namespace_args, 'library', '--json'))
 
 
 def _column(doc, joint):
@@ -70,20 +80,17 @@ def test_the_prefix_names_the_node_and_its_namespace():
 
 def test_commands_with_the_namespace_reach_the_node(node, product_library):
     lock = product_library.lock_averages('right')[1]
-    assert run('--namespace', NS, 'clear')[0] == 0
+    ok('--namespace', NS, 'clear')
     reference = _library('--namespace', NS)
     assert not _locked(reference, lock)
-    code, text = run('--namespace', NS, 'fault', JOINT)
-    assert code == 0, text
+    text = ok('--namespace', NS, 'fault', JOINT)
     assert f'fault reported on {NS}/actuator_fault: {JOINT}' in text
     assert 'new library received' in text
-    code, text = run('--namespace', NS, 'reconfigure')
-    assert code == 0 and text.startswith('success'), text
+    text = ok('--namespace', NS, 'reconfigure')
+    assert text.startswith('success'), text
     assert '[library version' in text
     # The option after the command name works as well as before it.
-    code, text = run('library', '--json', '--namespace', NS)
-    assert code == 0, text
-    after = json.loads(text)
+    after = json.loads(ok('library', '--json', '--namespace', NS))
     assert after['stamp_ns'] > reference['stamp_ns']
     assert set(after['gestures']) == set(product_library.names)
     assert _locked(after, lock)
@@ -91,25 +98,22 @@ def test_commands_with_the_namespace_reach_the_node(node, product_library):
 
 def test_the_namespaced_nodes_diagnostics_are_read(node, product_library):
     lock = math.degrees(product_library.lock_averages('right')[1])
-    assert run('--namespace', NS, 'clear')[0] == 0
-    code, text = run('--namespace', NS, 'fault', JOINT)
-    assert code == 0, text
+    ok('--namespace', NS, 'clear')
+    text = ok('--namespace', NS, 'fault', JOINT)
     assert f'locked: {JOINT} at {lock:.2f} deg' in text
-    code, text = run('--namespace', NS, 'library')
+    text = ok('--namespace', NS, 'library')
     assert f'* = locked joint: {JOINT} at {lock:.2f}' in text
 
 
 @pytest.mark.parametrize('command', [('fault', JOINT), ('reconfigure',), ('library',),
                                      ('clear',)])
-def test_commands_without_the_namespace_do_not_reach_it(node, product_library, capsys,
-                                                        command):
+def test_commands_without_the_namespace_do_not_reach_it(node, product_library, command):
     lock = product_library.lock_averages('right')[1]
-    assert run('--namespace', NS, 'fault', JOINT)[0] == 0
-    capsys.readouterr()
+    ok('--namespace', NS, 'clear')
+    ok('--namespace', NS, 'fault', JOINT)
     t0 = time.monotonic()
-    code, _ = run(*command, '--timeout', SHORT)
+    code, _, err = run(*command, '--timeout', SHORT)
     elapsed = time.monotonic() - t0
-    err = capsys.readouterr().err
     assert code == 1, err
     assert 'no recovery_node found' in err and 'namespace /,' in err, err
     # A generous bound: it gave up after its short timeout, not the 15 s default.
