@@ -44,12 +44,26 @@ class _Samples:
         return report
 
 
-def _fresh(client, stamp, timeout, what):
-    """Return the next library version after ``stamp`` without its diagnostics."""
-    library = client.next_library(stamp, timeout, diagnostics_timeout=0.0)
+def _answered(client, answer, stamp, timeout, what):
+    """Return the stamp of the version a Trigger answer names (else the next one)."""
+    after = stamp if answer.library_stamp is None else answer.library_stamp - 1
+    library = client.next_library(after, timeout, diagnostics_timeout=0.0)
     if library is None:
         raise CommandError(f'{what} did not arrive within {timeout:g} s')
     return library.stamp
+
+
+def _faulted(client, joint, timeout):
+    """Publish a fault of ``joint``; return (its library or None, publication time)."""
+    stamp = client.inbox.newest_stamp()
+    t0 = time.monotonic()
+    client.publish_fault([joint], None, timeout)
+    while True:
+        library = client.next_library(stamp, max(t0 + timeout - time.monotonic(), 0.0))
+        # A version already on its way when the fault went out is not the fault's.
+        if library is None or not library.described or joint in library.result.locks:
+            return library, t0
+        stamp = library.stamp
 
 
 def _measure(args, client, samples, out):
@@ -66,10 +80,9 @@ def _measure(args, client, samples, out):
         answer = client.clear_faults(args.timeout)
         if not answer.success:
             raise CommandError(f'clear_faults failed: {answer.message}')
-        stamp = _fresh(client, stamp, args.timeout, 'the reference library after a clear')
-        t0 = time.monotonic()
-        client.publish_fault([joint], None, args.timeout)
-        library = client.next_library(stamp, args.timeout)
+        stamp = _answered(client, answer, stamp, args.timeout,
+                          'the reference library after a clear')
+        library, t0 = _faulted(client, joint, args.timeout)
         if library is None:
             samples.failures.append(f'{joint}: no library within {args.timeout:g} s')
             continue
@@ -83,8 +96,9 @@ def _measure(args, client, samples, out):
         samples.round_trips.append(time.monotonic() - t1)
         if not answer.success:
             samples.failures.append(f'{joint}: {answer.message}')
-        newer = client.next_library(stamp, args.timeout, diagnostics_timeout=0.0)
-        stamp = newer.stamp if newer is not None else stamp
+        else:
+            stamp = _answered(client, answer, stamp, args.timeout,
+                              'the library of /reconfigure_gestures')
         if args.verbose:
             out.write(f'{i + 1:3d} {joint:<18} fault->library '
                       f'{samples.latencies[-1] * 1000:8.1f} ms   service '

@@ -284,6 +284,11 @@ class Inbox:
             return None
         return find
 
+    def newest_stamp(self):
+        """Return the stamp of the newest version received so far (complete or not), or 0."""
+        with self._cond:
+            return max(self._versions, default=0)
+
     def rejection(self, since, rejected_before):
         """Return a predicate: diagnostics after ``since`` counting a new rejected input."""
         def find():
@@ -462,20 +467,26 @@ class RecoveryClient:
         Raises NodeUnreachable if the node is not there, ClientError if neither a library
         nor a rejection follows within ``timeout``.
         """
-        current = self.current_library(timeout, diagnostics_timeout=0.0)
+        self.current_library(timeout, diagnostics_timeout=0.0)
         baseline = self.latest_diagnostics(timeout=1.5)
+        stamp = self.inbox.newest_stamp()
         t0 = time.monotonic()
+        end = t0 + timeout
         self.publish_fault(joints, angles, timeout)
-        newer = self.inbox.newer(current.stamp)
         rejection = self.inbox.rejection(t0, baseline and baseline.rejected_total())
-        found = self.inbox.wait(lambda: newer() or rejection(), timeout)
-        if found is None:
-            raise ClientError(f'no new library within {timeout:g} s of the fault report')
-        if isinstance(found, NodeDiagnostics):
-            return FaultOutcome(rejected=found.get(keys.INPUTS, keys.LAST_REJECTED_REASON, '?'),
-                                elapsed=found.arrival - t0)
-        library = self.inbox.library(found[0], diagnostics_timeout)
-        return FaultOutcome(library=library, elapsed=library.received - t0)
+        while True:
+            newer = self.inbox.newer(stamp)
+            found = self.inbox.wait(lambda: newer() or rejection(), end - time.monotonic())
+            if found is None:
+                raise ClientError(f'no new library within {timeout:g} s of the fault report')
+            if isinstance(found, NodeDiagnostics):
+                reason = found.get(keys.INPUTS, keys.LAST_REJECTED_REASON, '?')
+                return FaultOutcome(rejected=reason, elapsed=found.arrival - t0)
+            library = self.inbox.library(found[0], diagnostics_timeout)
+            # A version already on its way (e.g. an earlier run) is not this fault's.
+            if not library.described or set(joints) <= set(library.result.locks):
+                return FaultOutcome(library=library, elapsed=library.received - t0)
+            stamp = library.stamp
 
     def _trigger(self, service, timeout):
         from std_srvs.srv import Trigger
