@@ -8,6 +8,7 @@ The ``namo-recovery`` command line, one module per command group.
   running node (rclpy imported lazily, as in every ROS command);
 - :mod:`.demo`: ``demo``, a private node driven end to end;
 - :mod:`.latency_bench`: ``bench latency``;
+- :mod:`.stream_bench_command`: ``bench stream`` (the measurement is in ``ros/``);
 - :mod:`.ros_common`: what the ROS commands share (``--namespace``, errors, tables);
 - :mod:`.private_node`: the node process that ``demo`` and ``bench latency`` start;
 - :mod:`.common`: argument parsing shared by the groups;
