@@ -25,6 +25,7 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
+from . import diagnostic_keys as dk
 from . import diagnostics
 from . import messages as conv
 from .answer_pacer import AnswerPacer
@@ -261,9 +262,7 @@ class RecoveryNode(Node):
 
     @staticmethod
     def _version_text(outcome):
-        stamp = outcome.stamp_ns
-        return (f'library version {outcome.version}, '
-                f'stamp {stamp // 1_000_000_000}.{stamp % 1_000_000_000:09d}')
+        return dk.version_tag(outcome.version, outcome.stamp_ns)[1:-1]
 
     # --- outputs, persistence, restore ----------------------------------------------
 
