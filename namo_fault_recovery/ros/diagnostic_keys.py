@@ -52,6 +52,7 @@ OPTIMIZER = 'optimizer'
 OPTIMIZER_PRESET = 'optimizer_preset'
 DEADLINE_SEC = 'deadline_sec'
 WALL_TIME_SEC = 'wall_time_sec'
+REQUEST_TO_PUBLISH_SEC = 'request_to_publish_sec'   # the span the deadline covers
 DEADLINE_MET = 'deadline_met'
 SUCCESS = 'success'
 FROZEN_ARMS = 'frozen_arms'         # space-separated sides

@@ -51,6 +51,7 @@ class Snapshot:
     state_file: str = ''
     engine_restarts: int = 0
     waiting_callers: int = 0
+    request_to_publish: float = None
 
 
 def snapshot(book, inputs, settings, state_problem, state_file, engine_restarts):
@@ -64,7 +65,8 @@ def snapshot(book, inputs, settings, state_problem, state_file, engine_restarts)
         joint_states_received=inputs.states_received,
         measured_joints=inputs.measured_joints(), last_accepted=inputs.last_accepted,
         state_problem=state_problem, state_file=str(state_file),
-        engine_restarts=engine_restarts, waiting_callers=b['waiting_callers'])
+        engine_restarts=engine_restarts, waiting_callers=b['waiting_callers'],
+        request_to_publish=b['request_to_publish'])
 
 
 def statuses(robot, snap, prefix=DEFAULT_PREFIX):
@@ -142,6 +144,8 @@ def reconfiguration_status(snap, up_to_date, hw, prefix):
         return status(prefix, dk.RECONFIGURATION, 'STALE', 'no library published yet', hw,
                       pairs)
     pairs += [(dk.WALL_TIME_SEC, f'{current.wall_time:.4f}'),
+              (dk.REQUEST_TO_PUBLISH_SEC, '' if snap.request_to_publish is None
+               else f'{snap.request_to_publish:.4f}'),
               (dk.DEADLINE_MET, dk.flag(current.deadline_met)),
               (dk.SUCCESS, dk.flag(current.success)),
               (dk.FROZEN_ARMS, ' '.join(current.frozen_arms)),

@@ -52,6 +52,7 @@ class RunBook:
         self.current = None          # LibraryResult last published
         self.version = 0             # library version number
         self.stamp_ns = 0
+        self.request_to_publish = None   # s from the request to the publication, last run
         self._waiters = []           # (generation, callback)
         self.stopping = False
 
@@ -138,6 +139,8 @@ class RunBook:
             return self._published_locked(generation, result, publish(result))
 
     def _published_locked(self, generation, result, stamp_ns):
+        # From the request to the publication: the span the deadline covers.
+        self.request_to_publish = time.monotonic() - self._requested_at
         self._published = generation
         self.current = result
         self.version += 1
@@ -189,4 +192,5 @@ class RunBook:
                 'pending': self._requested > self._published,
                 'running': self._running is not None, 'failed': self._failed,
                 'waiting_callers': len(self._waiters),
+                'request_to_publish': self.request_to_publish,
             }

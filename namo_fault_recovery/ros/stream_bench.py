@@ -359,6 +359,9 @@ def _one_run(client, joint, count, timeout, last):
         record['deadline_met'] = 'deadline' in answer.message and 'met' in answer.message
         return record
     record['wall_time_sec'] = float(values['wall_time_sec'])
+    if values.get('request_to_publish_sec'):
+        # The span the deadline covers: from the request to the publication.
+        record['request_to_publish_sec'] = float(values['request_to_publish_sec'])
     record['deadline_sec'] = float(values['deadline_sec'])
     record['deadline_met'] = values['deadline_met'] == 'true'
     record['node_success'] = values['success'] == 'true'
@@ -379,8 +382,13 @@ def _one_run(client, joint, count, timeout, last):
 def summarise(runs, idle_score=None):
     """Return the figures of one condition's runs (see the module docstring)."""
     walls = [r['wall_time_sec'] for r in runs if 'wall_time_sec' in r]
+    spans = [r['request_to_publish_sec'] for r in runs if 'request_to_publish_sec' in r]
+
+    def span(r):
+        return r.get('request_to_publish_sec', r['wall_time_sec'])
+
     within = sum(1 for r in runs if 'wall_time_sec' in r
-                 and r['wall_time_sec'] <= r['deadline_sec'] + SLACK_SEC)
+                 and span(r) <= r['deadline_sec'] + SLACK_SEC)
     latencies = [r['latency_sec'] for r in runs if r.get('latency_sec') is not None]
     scores = [r['total_score'] for r in runs if 'total_score' in r]
     mean_score = sum(scores) / len(scores) if scores else math.nan
@@ -393,6 +401,8 @@ def summarise(runs, idle_score=None):
         'within_deadline_plus_20ms': within,
         'wall_worst_sec': max(walls) if walls else math.nan,
         'wall_p95_sec': _percentile(walls, 95),
+        'span_worst_sec': max(spans) if spans else math.nan,
+        'span_p95_sec': _percentile(spans, 95),
         'latency_p50_sec': _percentile(latencies, 50),
         'latency_p95_sec': _percentile(latencies, 95),
         'latency_lost': len(runs) - len(latencies),
@@ -446,9 +456,11 @@ def _table(name, summary, deadline, out):
               f"{s['success']}/{s['runs']}, answered {s['answered']}/{s['runs']}"
               + (f", {s['errors']} with a service or library missing" if s['errors'] else '')
               + ')\n')
-    out.write(f"  node wall time               : worst {s['wall_worst_sec'] * 1000:7.1f} ms"
+    out.write(f"  engine wall time             : worst {s['wall_worst_sec'] * 1000:7.1f} ms"
               f"   p95 {s['wall_p95_sec'] * 1000:7.1f} ms   (deadline "
               f'{deadline * 1000:.0f} ms)\n')
+    out.write(f"  request -> publish (node)    : worst {s['span_worst_sec'] * 1000:7.1f} ms"
+              f"   p95 {s['span_p95_sec'] * 1000:7.1f} ms\n")
     out.write(f"  fault -> library latency     : p50 {s['latency_p50_sec'] * 1000:7.1f} ms"
               f"   p95 {s['latency_p95_sec'] * 1000:7.1f} ms"
               + (f"   ({s['latency_lost']} never arrived)" if s['latency_lost'] else '')
