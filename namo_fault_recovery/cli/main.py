@@ -233,6 +233,8 @@ def build_parser():
     beyond.register(bench_sub)
     ros_commands.register(sub)               # fault, clear, reconfigure, library, demo
     ros_commands.register_bench(bench_sub)   # bench latency
+    from . import urdf as urdf_cli
+    urdf_cli.register(sub)                   # urdf
     return parser
 
 
