@@ -15,8 +15,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         (share, ['package.xml']),
-        (os.path.join(share, 'config'), sorted(glob('config/*.yaml') + glob('config/*.urdf')
-                                           + glob('config/*.rviz'))),
+        (os.path.join(share, 'config'),
+         sorted(glob('config/*.yaml') + glob('config/*.urdf') + glob('config/*.rviz'))),
         (os.path.join(share, 'launch'), sorted(glob('config/launch/*.launch.py'))),
         (os.path.join(share, 'config', 'trajectories'), sorted(glob('config/trajectories/*'))),
         (os.path.join(share, 'msg_docs'), sorted(f for f in glob('msg_docs/*')

@@ -175,12 +175,12 @@ class NamoSim:
 
     @property
     def time(self):
-        """Simulated time, in seconds."""
+        """Return the simulated time, in seconds."""
         return float(self.data.time)
 
     @property
     def timestep(self):
-        """Physics step (s)."""
+        """Return the physics step, in seconds."""
         return float(self.model.opt.timestep)
 
     def positions(self):
