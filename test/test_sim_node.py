@@ -260,7 +260,7 @@ def test_stuck_joint_stays_while_commanded_elsewhere(sim):
     msg = JointState(name=['right_arm_joint2'], position=[stuck])
     client.wait(lambda: client.stick_pub.get_subscription_count() > 0, 'the ~/stick topic')
     client.stick_pub.publish(msg)
-    client.wait(lambda: abs(client.latest()['right_arm_joint2'] - stuck) < math.radians(1),
+    client.wait(lambda: abs(client.latest()['right_arm_joint2'] - stuck) < math.radians(0.05),
                 'the joint to reach its stuck angle')
     t0 = client.now()
     target = np.radians([40, 30, 20, 70, 10, 10, 10])
