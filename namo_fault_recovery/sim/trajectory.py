@@ -11,7 +11,8 @@ plays well on the simulator plays on the robot:
   accelerations) of the wrong length; effort given; a non-zero velocity at the last
   point (unless allowed); a non-zero ``header.stamp`` whose trajectory ends in the past
   (the controller's rule: a past stamp whose trajectory still runs is joined
-  mid-way).
+  mid-way).  Beyond the real controller, non-finite values and duplicate joint names
+  are rejected too (they could only do harm).
 - A zero stamp means "start now".  A new trajectory replaces the current one.
 - Before the first point the controller moves from the state it had when the
   trajectory began; between points it interpolates linearly (positions only), with
