@@ -54,6 +54,15 @@ def test_controller_accepts_what_the_real_one_accepts():
              allow_nonzero_end_velocity=True)
 
 
+def test_strict_option_rejects_any_past_start():
+    late = command([Point(2.0, Q)], stamp=99.0)
+    validate(late, JOINTS, now=100.0)                      # the real controller joins it
+    with pytest.raises(Rejected, match='in the past'):
+        validate(late, JOINTS, now=100.0, reject_past_start=True)
+    validate(command([Point(2.0, Q)], stamp=100.5), JOINTS, now=100.0, reject_past_start=True)
+    validate(command([Point(2.0, Q)]), JOINTS, now=100.0, reject_past_start=True)
+
+
 def test_sampling_interpolates_and_holds():
     zero = (np.zeros(7), np.zeros(7))
     a, b = np.full(7, 1.0), np.full(7, 3.0)

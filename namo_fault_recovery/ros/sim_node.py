@@ -98,6 +98,9 @@ class SimNode(Node):
             'allow_partial_joints_goal': (False, 'accept trajectories naming only '
                                           'some of the joints of a controller',
                                           p.PARAMETER_BOOL),
+            'reject_past_start': (False, 'stricter than the real controller: reject any '
+                                  'non-zero stamp before now, even if its trajectory '
+                                  'still runs', p.PARAMETER_BOOL),
             'allow_nonzero_velocity_at_trajectory_end': (
                 False, 'accept a non-zero velocity at the last point', p.PARAMETER_BOOL),
         }
@@ -176,7 +179,8 @@ class SimNode(Node):
             now = self._now()
             validate(command, cfg['joints'], now,
                      self.p['allow_partial_joints_goal'],
-                     self.p['allow_nonzero_velocity_at_trajectory_end'])
+                     self.p['allow_nonzero_velocity_at_trajectory_end'],
+                     self.p['reject_past_start'])
         except Rejected as exc:
             self.rejections += 1
             self.get_logger().error(f'{controller}: rejected trajectory: {exc}')

@@ -49,8 +49,14 @@ class Command(NamedTuple):
     points: tuple
 
 
-def validate(command, joints, now, allow_partial=False, allow_nonzero_end_velocity=False):
-    """Raise :class:`Rejected` with the reason if ``command`` breaks a controller rule."""
+def validate(command, joints, now, allow_partial=False, allow_nonzero_end_velocity=False,
+             reject_past_start=False):
+    """
+    Raise :class:`Rejected` with the reason if ``command`` breaks a controller rule.
+
+    ``reject_past_start`` is stricter than the real controller: any non-zero stamp
+    earlier than ``now`` is rejected, even if its trajectory still runs.
+    """
     names = list(command.joint_names)
     if not allow_partial and len(names) != len(joints):
         raise Rejected(f"joints on the incoming trajectory ({', '.join(names) or 'none'}) "
@@ -59,6 +65,10 @@ def validate(command, joints, now, allow_partial=False, allow_nonzero_end_veloci
         raise Rejected('empty joint names on the incoming trajectory')
     if len(set(names)) != len(names):
         raise Rejected(f"duplicate joint names on the incoming trajectory: {', '.join(names)}")
+    if reject_past_start and command.stamp != 0.0 and command.stamp < now:
+        raise Rejected(f'received a trajectory with a non-zero start time '
+                       f'({command.stamp:.3f}) in the past (now {now:.3f}; '
+                       'reject_past_start is set)')
     if command.points and command.stamp != 0.0:
         end = command.stamp + command.points[-1].time
         if end < now:
