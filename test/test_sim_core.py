@@ -170,3 +170,23 @@ def test_reference_wai_counts_no_contact_and_the_torso_does(robot, allowances,
     run(sim, np.radians([0, 40, 0, 0, 0, 0, 0] + [0] * 7), 1000)
     assert sim.contact_events >= 1 and sim.max_depth > 1e-3
     assert sim.positions()[1] < math.radians(10.0)
+
+
+@pytest.mark.parametrize('name', ['wai', 'bye', 'salute', 'side_invite'])
+def test_reference_gestures_play_from_rest_without_contact(robot, allowances, product_library,
+                                                           name):
+    """Each paper gesture, played from rest as the controller interpolates it, is clear."""
+    sim = NamoSim(robot, allowances=allowances)
+    gesture = product_library[name]
+    points = tuple(Point(float(kf.time_from_start), tuple(kf.positions()))
+                   for kf in gesture.keyframes)
+    rest = (np.zeros(14), np.zeros(14))
+    traj = ActiveTrajectory(command(points, names=robot.joint_names), robot.joint_names,
+                            0.0, rest)
+    worst = 0.0
+    while sim.time < traj.end + 0.5:
+        sim.set_targets(*traj.sample(sim.time))
+        sim.step(1)
+        worst = max(worst, float(np.abs(sim.positions() - traj.sample(sim.time)[0]).max()))
+    assert sim.contact_events == 0 and sim.contact_steps == 0, name
+    assert worst < math.radians(1.0), (name, math.degrees(worst))
