@@ -20,7 +20,7 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from namo_fault_recovery import load_library, load_robot
-from namo_fault_recovery.cli.ros_commands import node_command
+from namo_fault_recovery.cli.private_node import node_command
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
 import rclpy
 from rclpy.context import Context

@@ -4,12 +4,11 @@ The ROS subcommands of ``namo-recovery``, against a real ``recovery_node`` proce
 fault, clear, reconfigure, library, demo and bench latency are real rclpy clients.
 """
 
-import argparse
 import io
 import json
 import math
 
-from namo_fault_recovery.cli import ros_commands as ros_cli
+from namo_fault_recovery.cli.main import main
 from namo_fault_recovery.recovery.motion import adapt_library
 from node_harness import NodeProcess, RosClient, session_domain
 import pytest
@@ -20,25 +19,13 @@ DOMAIN = session_domain(3)
 DEMO_DOMAIN = session_domain(4)
 
 
-def parser():
-    p = argparse.ArgumentParser(prog='namo-recovery')
-    p.add_argument('--robot-file')
-    p.add_argument('--gesture-file')
-    sub = p.add_subparsers(dest='command', required=True)
-    ros_cli.register(sub)
-    bench = sub.add_parser('bench').add_subparsers(dest='bench', required=True)
-    ros_cli.register_bench(bench)
-    return p
-
-
 def run(*argv, domain=DOMAIN):
-    """Run one subcommand in this domain; return (exit code, stdout text)."""
+    """Run one subcommand of the real command line in this domain; return (code, stdout)."""
     argv = list(argv)
     if '--domain-id' not in argv:
         argv += ['--domain-id', str(domain)]
-    args = parser().parse_args(argv)
     out = io.StringIO()
-    return args.func(args, out), out.getvalue()
+    return main(argv, out), out.getvalue()
 
 
 @pytest.fixture(scope='module')

@@ -204,3 +204,23 @@ def test_diagnostics_from_a_snapshot(robot, library):
     assert inputs['rejected_total'] == '1'
     assert diagnostics.status_prefix('/recovery_node') == 'recovery_node: '
     assert math.isfinite(float(recon['wall_time_sec']))
+
+
+# --- answer pacer -----------------------------------------------------------------------------
+
+def test_answer_pacer_releases_every_answer_in_order_and_a_few_at_a_time():
+    from namo_fault_recovery.ros.answer_pacer import AnswerPacer
+    released, wakes = [], []
+    pacer = AnswerPacer(lambda: wakes.append(len(released)), batch=4, gap=0.001)
+    for k in range(50):
+        pacer.submit(lambda k=k: released.append(k))
+    pacer.start()
+    for _ in range(500):
+        if len(released) == 50:
+            break
+        threading.Event().wait(0.01)
+    pacer.stop()
+    assert released == list(range(50))
+    assert len(wakes) >= 50 // 4 and all(b - a <= 4 for a, b in zip([0] + wakes, wakes))
+    pacer.submit(lambda: released.append('late'))      # after stop: released at once
+    assert released[-1] == 'late'

@@ -64,7 +64,7 @@ def test_without_matplotlib_says_how_to_install(monkeypatch, capsys, tmp_path):
             monkeypatch.delitem(sys.modules, name)
     monkeypatch.setitem(sys.modules, 'matplotlib', None)
     with pytest.raises(plotting.MatplotlibMissing, match='pip install matplotlib'):
-        plotting._figure((1, 1))
+        plotting.figure((1, 1))
     path = tmp_path / 'x.png'
     code = main(['plot', '--gesture', 'wai', '--fault', 'right_arm_joint2', '--out', str(path)],
                 io.StringIO())

@@ -10,7 +10,11 @@ These are commands, not timed tests (``namo-recovery bench ...``).  Each module 
   search, stored in ``config/best_known_optima.yaml``, and every algorithm's gap to it;
 - :mod:`.speed`: whole-library time and quality of our default against the paper ABC;
 - :mod:`.deadline`: the worst deadline overrun, idle and with a CPU burner;
-- :mod:`.beyond`, :mod:`.motion`: the extensions beyond the paper, whole motions.
+- :mod:`.beyond`, :mod:`.motion`: the extensions beyond the paper, whole motions;
+- :mod:`.lock_compare`: ``average`` against ``optimal`` lock angles, every single fault;
+- :mod:`.common`: models, cases, statistics and output files shared by the above;
+- :mod:`.paper_data`: the paper's published tables, to print beside ours;
+- :mod:`.plotting`: the figures (matplotlib, optional).
 
 Every library they need comes from the engine's entry point, ``recover()``, through
 :func:`.common.run_recover` with explicit settings (:data:`.common.PAPER_SETTINGS` for

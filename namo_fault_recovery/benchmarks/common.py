@@ -229,7 +229,7 @@ def write_json(path, doc):
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name, suffix='.tmp', dir=path.parent)
     with os.fdopen(fd, 'w') as fh:
-        json.dump(_plain(doc), fh, indent=1, allow_nan=True)
+        json.dump(plain(doc), fh, indent=1, allow_nan=True)
         fh.write('\n')
     _publish(tmp, path)
 
@@ -270,14 +270,14 @@ def _csv_cell(v):
     return v
 
 
-def _plain(obj):
+def plain(obj):
     """Convert numpy scalars and arrays (recursively) to plain Python for JSON/YAML."""
     if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items()}
+        return {str(k): plain(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
+        return [plain(v) for v in obj]
     if isinstance(obj, np.ndarray):
-        return _plain(obj.tolist())
+        return plain(obj.tolist())
     if isinstance(obj, np.integer):
         return int(obj)
     if isinstance(obj, np.floating):

@@ -212,7 +212,7 @@ def write_optima(path, doc):
     import yaml
     text = ('# Best-known optima of the 28 paper cases (generated data; do not edit by hand).\n'
             f'# Regenerate: {doc["generated_by"]}\n'
-            + yaml.safe_dump(common._plain(doc), sort_keys=False, default_flow_style=None,
+            + yaml.safe_dump(common.plain(doc), sort_keys=False, default_flow_style=None,
                              width=99))
     common.write_text(path, text)
 

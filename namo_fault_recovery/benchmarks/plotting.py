@@ -26,7 +26,7 @@ class MatplotlibMissing(ImportError):
     """matplotlib, an optional extra, is needed for this figure."""
 
 
-def _figure(figsize):
+def figure(figsize):
     """Return a new Figure on an Agg canvas (no pyplot, no display needed)."""
     try:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -85,7 +85,7 @@ def plot_reconfiguration(robot, library, report, gesture, path, keyframe=0, titl
     if not 0 <= keyframe < len(ref.keyframes):
         raise ValueError(f'keyframe: gesture {gesture} has keyframes '
                          f'0..{len(ref.keyframes) - 1}, got {keyframe}')
-    fig = _figure((14.0, 5.2))
+    fig = figure((14.0, 5.2))
     grid = fig.add_gridspec(1, 3, width_ratios=(1.4, 1.0, 1.0))
     ax3 = fig.add_subplot(grid[0], projection='3d')
     front = fig.add_subplot(grid[1])
@@ -142,7 +142,7 @@ def plot_motion(robot, gesture, adaptation, path, dpi=110):
     blue with its explored typical points as circles.  ``adaptation`` is the
     :class:`~namo_fault_recovery.recovery.result.LibraryResult` holding the motion.
     """
-    fig = _figure((7.5, 6.5))
+    fig = figure((7.5, 6.5))
     ax = fig.add_subplot(projection='3d')
     side = gesture.arms[0]
     col = slice(0, 7) if side == 'right' else slice(7, 14)
@@ -211,7 +211,7 @@ def boxplot_paper(runs, keys, cases, out_dir, labels=None, dpi=100, optima=None)
     written = []
     for g in gestures:
         joints = [j for gg, j in cases if gg == g]
-        fig = _figure((2.6 * len(joints) + 1.0, 4.2))
+        fig = figure((2.6 * len(joints) + 1.0, 4.2))
         for n, j in enumerate(joints):
             ax = fig.add_subplot(1, len(joints), n + 1)
             data = [[r['score'] for r in runs[(k, g, j)]] for k in keys]
@@ -232,7 +232,7 @@ def boxplot_paper(runs, keys, cases, out_dir, labels=None, dpi=100, optima=None)
         path = out_dir / f'scores_{g}.png'
         fig.savefig(path, dpi=dpi)
         written.append(path)
-    fig = _figure((3.2 * len(gestures) + 1.0, 4.2))
+    fig = figure((3.2 * len(gestures) + 1.0, 4.2))
     for n, g in enumerate(gestures):
         ax = fig.add_subplot(1, len(gestures), n + 1)
         data = [[r['time'] for (k2, g2, _), rs in runs.items() if k2 == k and g2 == g

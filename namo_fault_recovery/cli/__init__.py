@@ -4,6 +4,13 @@ The ``namo-recovery`` command line, one module per command group.
 - :mod:`.main`: the parser and the offline commands (``show``, ``score``, ``solve``);
 - :mod:`.bench`: ``bench paper | optimum | speed | deadline`` and ``plot``;
 - :mod:`.beyond`: the benchmarks of the extensions beyond the paper;
-- :mod:`.ros_commands`: the commands that talk to a running node (rclpy imported lazily);
-- :mod:`.common`: argument parsing shared by the groups.
+- :mod:`.node_commands`: ``fault``, ``clear``, ``reconfigure``, ``library`` against a
+  running node (rclpy imported lazily, as in every ROS command);
+- :mod:`.demo`: ``demo``, a private node driven end to end;
+- :mod:`.latency_bench`: ``bench latency``;
+- :mod:`.stream_bench_command`: ``bench stream`` (the measurement is in ``ros/``);
+- :mod:`.ros_common`: what the ROS commands share (``--namespace``, errors, tables);
+- :mod:`.private_node`: the node process that ``demo`` and ``bench latency`` start;
+- :mod:`.common`: argument parsing shared by the groups;
+- :mod:`.__main__`: ``python -m namo_fault_recovery.cli``.
 """

@@ -153,7 +153,7 @@ def cmd_plot(args, out):
     if not faults and not args.tool:
         raise _usage('nothing changed: give --fault JOINT[=DEG] and/or --tool MM')
     try:
-        plotting._figure((1, 1))
+        plotting.figure((1, 1))
     except plotting.MatplotlibMissing as exc:
         sys.stderr.write(f'namo-recovery: error: {exc}\n')
         return EXIT_USAGE

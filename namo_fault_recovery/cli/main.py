@@ -311,11 +311,12 @@ def build_parser():
     p.set_defaults(func=cmd_score)
 
     add_solve_parser(sub)
-    from . import bench, beyond, ros_commands, stream_bench_command
+    from . import bench, beyond, demo, latency_bench, node_commands, stream_bench_command
     bench_sub = bench.register(sub)
     beyond.register(bench_sub)
-    ros_commands.register(sub)               # fault, clear, reconfigure, library, demo
-    ros_commands.register_bench(bench_sub)   # bench latency
+    node_commands.register(sub, parser)      # fault, clear, reconfigure, library; --namespace
+    demo.register(sub)                       # demo
+    latency_bench.register_bench(bench_sub)  # bench latency
     stream_bench_command.register(bench_sub)   # bench stream
     from . import urdf as urdf_cli
     urdf_cli.register(sub)                   # urdf

@@ -7,6 +7,13 @@ an :class:`OptimizeResult`::
 
     res = minimize(problem, ABC.paper(), deadline=1.0, seed=0)
     res.x, res.fun, res.nfev, res.nit, res.status, res.message, res.wall_time
+
+- :mod:`.base`: ``Problem``, ``Algorithm``, ``minimize``, ``OptimizeResult``, ``Clock``;
+- :mod:`.bee_colony`: the artificial bee colony (ABC, the paper's and our tuned one);
+- :mod:`.ga`, :mod:`.bfoa`, :mod:`.gd`: the paper's comparisons (GA, BFOA, gradient
+  descent);
+- :mod:`.polish`: the batched quasi-Newton polish;
+- :mod:`.registry`: algorithms and presets by name.
 """
 
 from .base import (Algorithm, Clock, minimize, OptimizeResult, Problem, STATUS_CANCELLED,

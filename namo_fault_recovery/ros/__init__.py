@@ -1,8 +1,26 @@
 """
 The ROS 2 side: the node and everything that touches rclpy or a message package.
 
-- :mod:`.recovery_node`: ``main()`` and the node that wires the interfaces;
-- :mod:`.messages`: results to and from ROS messages, and the RViz markers;
+The node and its parts (the parts are free of DDS, with fast unit tests):
+
+- :mod:`.recovery_node`: ``main()``, light, with the signal handling of start-up;
+- :mod:`.node`: ``RecoveryNode``, which wires the interfaces to the parts below;
+- :mod:`.parameters`: the parameter table, its validator and the node's settings;
+- :mod:`.run_book`: the run bookkeeping (requested, running, published, who waits);
+- :mod:`.fault_intake`: fault reports persisted before they are acknowledged;
+- :mod:`.input_monitor`: the latest joint state, measured angles and rejected inputs;
 - :mod:`.inputs`: validation of fault reports and joint states (no ROS types);
-- :mod:`.state_store`: the persisted fault set and library (no ROS types).
+- :mod:`.dispatcher`: the thread that runs the newest request and publishes it;
+- :mod:`.engine_process`: the engine in its own process (no shared interpreter lock);
+- :mod:`.answer_pacer`: service answers released a few at a time;
+- :mod:`.restore`: the checks before publishing, and the restore decision;
+- :mod:`.state_store`: the persisted fault set and library (no ROS types);
+- :mod:`.diagnostics`: ``/diagnostics`` built from a snapshot;
+- :mod:`.diagnostic_keys`: the ``/diagnostics`` names and keys shared by writer and readers;
+- :mod:`.messages`: results to and from ROS messages, and the RViz markers.
+
+Clients and benchmarks of a running node:
+
+- :mod:`.client`: the typed rclpy client of a running node, used by the ROS commands;
+- :mod:`.stream_bench`: the deadline under a ``/joint_states`` stream and a CPU burner.
 """

@@ -13,16 +13,13 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
+from . import diagnostic_keys as dk
 from .messages import fmt_angle
 from ..recovery.locks import frozen_arms
 from ..recovery.result import summary
 
-DEFAULT_PREFIX = 'recovery_node: '
-
-
-def status_prefix(node_fqn):
-    """Return the status-name prefix of a node: ``ns/name: `` (``name: `` at the root)."""
-    return node_fqn.lstrip('/') + ': '
+DEFAULT_PREFIX = dk.status_prefix(dk.node_fqn())
+status_prefix = dk.status_prefix
 
 
 def status(prefix, name, level, message, hardware_id, pairs=()):
@@ -76,27 +73,27 @@ def statuses(robot, snap, prefix=DEFAULT_PREFIX):
     faults, current = snap.faults, snap.current
     strategy = snap.settings.engine.lock_strategy
     up_to_date = current is not None and not snap.pending and set(current.locks) == set(faults)
-    out = [status(prefix, 'faults', 'ERROR' if faults else 'OK',
+    out = [status(prefix, dk.FAULTS, 'ERROR' if faults else 'OK',
                   f'{len(faults)} failed joint(s): {", ".join(faults)}' if faults
                   else 'no faults', hw,
-                  [('fault_version', snap.fault_version), ('failed_joints', ' '.join(faults)),
-                   ('lock_strategy', strategy)])]
+                  [(dk.FAULT_VERSION, snap.fault_version), (dk.FAILED_JOINTS, ' '.join(faults)),
+                   (dk.LOCK_STRATEGY, strategy)])]
     for joint, fault in faults.items():
         out.append(_joint_status(robot, prefix, joint, fault, current, up_to_date, strategy))
     for side in frozen_arms(robot, faults):
         out.append(status(
-            prefix, f'arm {side}', 'ERROR',
+            prefix, dk.arm_status(side), 'ERROR',
             f'all {len(robot.arms[side].joint_names)} joints of the {side} arm failed: the '
             f'arm is frozen at its lock angles; the other arm is still reconfigured', hw,
-            [('arm', side), ('frozen', 'true')]))
+            [(dk.ARM, side), (dk.FROZEN, dk.TRUE)]))
     out.append(reconfiguration_status(snap, up_to_date, hw, prefix))
     out.append(_inputs_status(snap, hw, prefix))
     problem = snap.state_problem
-    out.append(status(prefix, 'state', 'WARN' if problem else 'OK',
+    out.append(status(prefix, dk.STATE, 'WARN' if problem else 'OK',
                       problem or f'state persisted in {snap.state_file}', hw,
-                      [('state_file', snap.state_file),
-                       ('engine_restarts', snap.engine_restarts),
-                       ('waiting_callers', snap.waiting_callers)]))
+                      [(dk.STATE_FILE, snap.state_file),
+                       (dk.ENGINE_RESTARTS, snap.engine_restarts),
+                       (dk.WAITING_CALLERS, snap.waiting_callers)]))
     return out
 
 
@@ -104,69 +101,67 @@ def _joint_status(robot, prefix, joint, fault, current, up_to_date, strategy):
     side, index = robot.locate_joint(joint)
     if up_to_date and joint in current.locks:
         lock = current.locks[joint]
-        source = 'fault report' if fault.angle is not None else f'{strategy} strategy'
+        source = dk.LOCK_SOURCE_REPORT if fault.angle is not None else f'{strategy} strategy'
         text = f'failed; locked at {fmt_angle(lock)} ({source})'
-        pairs = [('lock_angle_rad', repr(lock)),
-                 ('lock_angle_deg', f'{math.degrees(lock):.4f}'), ('lock_source', source)]
+        pairs = [(dk.LOCK_ANGLE_RAD, repr(lock)),
+                 (dk.LOCK_ANGLE_DEG, f'{math.degrees(lock):.4f}'), (dk.LOCK_SOURCE, source)]
     else:
         text = 'failed; lock angle pending reconfiguration'
-        pairs = [('lock_angle_rad', '' if fault.angle is None else repr(fault.angle)),
-                 ('lock_source', 'pending')]
-    return status(prefix, f'joint {joint}', 'ERROR', text, joint,
-                  [('joint', joint), ('arm', side), ('index', index + 1)] + pairs)
+        pairs = [(dk.LOCK_ANGLE_RAD, '' if fault.angle is None else repr(fault.angle)),
+                 (dk.LOCK_SOURCE, dk.LOCK_SOURCE_PENDING)]
+    return status(prefix, dk.joint_status(joint), 'ERROR', text, joint,
+                  [(dk.JOINT, joint), (dk.ARM, side), (dk.INDEX, index + 1)] + pairs)
 
 
 def _inputs_status(snap, hw, prefix):
     rejections = snap.rejections
     last = rejections[-1] if rejections else None
     recent = last is not None and last[0] >= snap.last_accepted
-    pairs = [('rejected_total', snap.rejected_total),
-             ('joint_states_received', snap.joint_states_received),
-             ('measured_joints', ' '.join(snap.measured_joints))]
+    pairs = [(dk.REJECTED_TOTAL, snap.rejected_total),
+             (dk.JOINT_STATES_RECEIVED, snap.joint_states_received),
+             (dk.MEASURED_JOINTS, ' '.join(snap.measured_joints))]
     if last:
-        pairs += [('last_rejected_source', last[1]), ('last_rejected_reason', last[2])]
-    pairs += [(f'rejected[{i}]', f'{time.strftime("%H:%M:%S", time.localtime(t))} {src}: '
+        pairs += [(dk.LAST_REJECTED_SOURCE, last[1]), (dk.LAST_REJECTED_REASON, last[2])]
+    pairs += [(dk.rejected_key(i), f'{time.strftime("%H:%M:%S", time.localtime(t))} {src}: '
                f'{why}') for i, (t, src, why) in enumerate(reversed(rejections))]
     message = (f'rejected {last[1]}: {last[2]}' if recent else
                f'last rejected input: {last[1]}: {last[2]}' if last else 'no rejected input')
-    return status(prefix, 'inputs', 'WARN' if recent else 'OK', message, hw, pairs)
+    return status(prefix, dk.INPUTS, 'WARN' if recent else 'OK', message, hw, pairs)
 
 
 def reconfiguration_status(snap, up_to_date, hw, prefix):
     """Return the ``reconfiguration`` status: the library published and how it was made."""
     current, running, failed = snap.current, snap.running, snap.failed
     version, stamp, settings = snap.version, snap.stamp_ns, snap.settings.engine
-    pairs = [('library_version', version),
-             ('library_stamp', f'{stamp // 1_000_000_000}.{stamp % 1_000_000_000:09d}'),
-             ('up_to_date', str(up_to_date).lower()),
-             ('running', str(running).lower()), ('optimizer', settings.optimizer),
-             ('optimizer_preset', settings.optimizer_preset),
-             ('deadline_sec', settings.deadline_sec)]
+    pairs = [(dk.LIBRARY_VERSION, version), (dk.LIBRARY_STAMP, dk.format_stamp(stamp)),
+             (dk.UP_TO_DATE, dk.flag(up_to_date)), (dk.RUNNING, dk.flag(running)),
+             (dk.OPTIMIZER, settings.optimizer),
+             (dk.OPTIMIZER_PRESET, settings.optimizer_preset),
+             (dk.DEADLINE_SEC, settings.deadline_sec)]
     if current is None:
-        return status(prefix, 'reconfiguration', 'STALE', 'no library published yet', hw,
+        return status(prefix, dk.RECONFIGURATION, 'STALE', 'no library published yet', hw,
                       pairs)
-    pairs += [('wall_time_sec', f'{current.wall_time:.4f}'),
-              ('deadline_met', str(current.deadline_met).lower()),
-              ('success', str(current.success).lower()),
-              ('frozen_arms', ' '.join(current.frozen_arms)),
-              ('seed', '' if current.seed is None else current.seed),
-              ('tool_length_mm', f'{current.tool_mm:g}'), ('tool_arm', current.tool_arm)]
+    pairs += [(dk.WALL_TIME_SEC, f'{current.wall_time:.4f}'),
+              (dk.DEADLINE_MET, dk.flag(current.deadline_met)),
+              (dk.SUCCESS, dk.flag(current.success)),
+              (dk.FROZEN_ARMS, ' '.join(current.frozen_arms)),
+              (dk.SEED, '' if current.seed is None else current.seed),
+              (dk.TOOL_LENGTH_MM, f'{current.tool_mm:g}'), (dk.TOOL_ARM, current.tool_arm)]
     for g in current.gestures:
-        pairs += [(f'{g.name}.score_before', f'{g.score_before:.6g}'),
-                  (f'{g.name}.score_after', f'{g.score_after:.6g}'),
-                  (f'{g.name}.time_sec', f'{g.wall_time:.4f}'),
-                  (f'{g.name}.status', g.status),
-                  (f'{g.name}.stage', g.stage),
-                  (f'{g.name}.method', g.method),
-                  (f'{g.name}.typical_points', g.typical_points),
-                  (f'{g.name}.tip_error_mm', f'{g.tip_error_mm:.3f}'),
-                  (f'{g.name}.max_jump_deg', f'{g.max_jump_deg:.3f}')]
+        fields = [(dk.SCORE_BEFORE, f'{g.score_before:.6g}'),
+                  (dk.SCORE_AFTER, f'{g.score_after:.6g}'),
+                  (dk.TIME_SEC, f'{g.wall_time:.4f}'), (dk.STATUS, g.status),
+                  (dk.STAGE, g.stage), (dk.METHOD, g.method),
+                  (dk.TYPICAL_POINTS, g.typical_points),
+                  (dk.TIP_ERROR_MM, f'{g.tip_error_mm:.3f}'),
+                  (dk.MAX_JUMP_DEG, f'{g.max_jump_deg:.3f}')]
         if current.settings.get('collision_check'):
-            pairs.append((f'{g.name}.collides', str(g.collides).lower()))
+            fields.append((dk.COLLIDES, dk.flag(g.collides)))
             if g.colliding_pairs:
-                pairs.append((f'{g.name}.colliding_pairs', ' '.join(g.colliding_pairs)))
+                fields.append((dk.COLLIDING_PAIRS, ' '.join(g.colliding_pairs)))
+        pairs += [(dk.gesture_key(g.name, key), value) for key, value in fields]
     for k, note in enumerate(current.notes):
-        pairs.append((f'note[{k}]', note))
+        pairs.append((dk.note_key(k), note))
     level = 'OK'
     message = summary(current)
     if failed and not up_to_date:
@@ -175,4 +170,4 @@ def reconfiguration_status(snap, up_to_date, hw, prefix):
         message = f'reconfiguring; last published: {message}'
     elif not current.success or any(g.collides for g in current.gestures):
         level = 'WARN'
-    return status(prefix, 'reconfiguration', level, message, hw, pairs)
+    return status(prefix, dk.RECONFIGURATION, level, message, hw, pairs)

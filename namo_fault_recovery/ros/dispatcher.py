@@ -54,8 +54,11 @@ class Dispatcher:
                     return
                 self._book.notify(self._book.failed(run.generation,
                                                     f'{type(exc).__name__}: {exc}'))
-                self._log('error', f'reconfiguration: {type(exc).__name__}: {exc}; '
-                                   f'previous library kept')
+                try:
+                    self._log('error', f'reconfiguration: {type(exc).__name__}: {exc}; '
+                                       f'previous library kept')
+                except Exception:  # noqa: B902 - not even a logging problem stops it
+                    pass
 
     def _handle(self, run):
         settings = self._settings()

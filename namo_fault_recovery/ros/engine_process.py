@@ -102,13 +102,30 @@ class EngineProcess:
         self._conn = parent
         self.pid = None
 
+    def wait_ready(self, timeout=60.0, keep_waiting=lambda: True):
+        """
+        Wait until the child has loaded the models and warmed up; raise EngineError if not.
+
+        Polls in short steps so that ``keep_waiting()`` returning False (e.g. ROS was shut
+        down by a signal) ends the wait at once.
+        """
+        end = time.monotonic() + timeout
+        while self.pid is None:
+            if not keep_waiting():
+                raise EngineError('start-up was interrupted')
+            remaining = end - time.monotonic()
+            if remaining <= 0:
+                raise EngineError(f'the engine process was not ready within {timeout:.0f} s')
+            try:
+                if self._conn.poll(min(remaining, 0.05)):
+                    kind, pid = self._conn.recv()
+                    self.pid = pid
+            except (EOFError, OSError):
+                raise EngineError('the engine process died while starting') from None
+
     def _ensure_ready(self, deadline):
-        if self.pid is not None:
-            return
-        if not self._conn.poll(max(deadline - time.monotonic(), 0.0)):
-            raise EngineError('the engine process did not start in time')
-        kind, pid = self._conn.recv()
-        self.pid = pid
+        if self.pid is None:
+            self.wait_ready(max(deadline - time.monotonic(), 0.0))
 
     def cancel(self):
         """Cancel the run under way (it returns soon with its best so far)."""

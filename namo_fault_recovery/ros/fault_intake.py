@@ -41,7 +41,8 @@ class After:
 class FaultIntake:
     """The queue of fault-set changes and the thread that persists and applies them."""
 
-    def __init__(self, book, commit, on_accepted, measured=lambda: {}, max_queue=100_000):
+    def __init__(self, book, commit, on_accepted, measured=lambda: {}, max_queue=100_000,
+                 on_error=None):
         self._book = book
         self._commit = commit              # commit(faults): persist, then book.set_faults
         self._on_accepted = on_accepted    # on_accepted(reports, cleared, faults)
@@ -50,6 +51,7 @@ class FaultIntake:
         self._max_queue = max_queue
         self._cond = threading.Condition()
         self._stopping = False
+        self._on_error = on_error          # on_error(exc): the batch failed (a bug)
         self.dropped = 0
         self._thread = threading.Thread(target=self._loop, name='fault-intake', daemon=True)
 
@@ -76,7 +78,16 @@ class FaultIntake:
                     return
                 batch = list(self._queue)
                 self._queue.clear()
-            self._apply(batch)
+            try:
+                self._apply(batch)
+            except Exception as exc:  # noqa: B902 - the intake must outlive any bug
+                if self._on_error is not None:
+                    self._on_error(exc)
+                for item in batch:             # nobody waits for an answer forever
+                    if isinstance(item, After):
+                        item.then()
+                    elif isinstance(item, Clear):
+                        item.done(0)
 
     def _apply(self, batch):
         if all(isinstance(i, After) for i in batch):
@@ -95,11 +106,11 @@ class FaultIntake:
                 faults = {}
                 continue
             for joint, angle in item.joints.items():
-                old = faults.pop(joint, None)
+                old = faults.get(joint)          # a joint keeps its place (arrival order)
                 if angle is None and old is not None:
-                    faults[joint] = old          # still stuck where it was reported
-                else:
-                    faults[joint] = Fault(angle, measured.get(joint))
+                    continue                     # still stuck where it was reported
+                faults[joint] = Fault(angle, measured.get(joint) if old is None
+                                      else old.measured)
             reports.append(item)
         self._commit(faults)                     # persisted before it is acknowledged
         self._on_accepted(reports, bool(clears), faults)

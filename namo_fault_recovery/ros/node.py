@@ -25,10 +25,12 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
+from . import diagnostic_keys as dk
 from . import diagnostics
 from . import messages as conv
+from .answer_pacer import AnswerPacer
 from .dispatcher import Dispatcher
-from .engine_process import EngineProcess
+from .engine_process import EngineError, EngineProcess
 from .fault_intake import After, Clear, FaultIntake, Report
 from .input_monitor import InputMonitor
 from .inputs import BadInput, parse_fault
@@ -74,10 +76,17 @@ class RecoveryNode(Node):
         self._engine = EngineProcess(values['robot_file'] or None,
                                      values['gesture_file'] or None)
         self._engine.start()
+        # The engine process imports, loads and warms up (about a second): the node is
+        # not ready to meet its deadline before, so it waits here (a signal still ends it).
+        try:
+            self._engine.wait_ready(timeout=60.0, keep_waiting=self.context.ok)
+        except EngineError as exc:
+            self._engine.stop()
+            raise StartupError(f'the engine process did not start: {exc}') from None
         self._book = RunBook(on_request=self._engine.cancel)
         self._persist_lock = threading.Lock()
         self._intake = FaultIntake(self._book, self._commit_faults, self._on_accepted,
-                                   self._inputs.measured)
+                                   self._inputs.measured, on_error=self._intake_error)
         self._dispatcher = Dispatcher(self._book, self._engine, self._robot, self._library,
                                       lambda: self._settings, self._persist_library,
                                       self._publish_library, self._log)
@@ -87,6 +96,8 @@ class RecoveryNode(Node):
         except BaseException:
             self.stop()
             raise
+        self._answers = AnswerPacer(self._wake.trigger)
+        self._answers.start()
         self._intake.start()
         self._dispatcher.start()
         self._ready = True
@@ -166,6 +177,10 @@ class RecoveryNode(Node):
 
     # --- inputs ---------------------------------------------------------------------
 
+    def _intake_error(self, exc):
+        self.get_logger().error(f'fault intake: {type(exc).__name__}: {shorten(exc)}; '
+                                f'the batch of reports was not applied')
+
     def _log_rejection(self, source, reason):
         self.get_logger().warning(f'rejected {source}: {reason}; previous state kept',
                                   throttle_duration_sec=0.2)
@@ -200,8 +215,7 @@ class RecoveryNode(Node):
         future = Future()
 
         def done(outcome):
-            future.set_result(outcome)
-            self._wake.trigger()
+            self._answers.submit(lambda: future.set_result(outcome))
 
         register(done)
         return future
@@ -248,9 +262,7 @@ class RecoveryNode(Node):
 
     @staticmethod
     def _version_text(outcome):
-        stamp = outcome.stamp_ns
-        return (f'library version {outcome.version}, '
-                f'stamp {stamp // 1_000_000_000}.{stamp % 1_000_000_000:09d}')
+        return dk.version_tag(outcome.version, outcome.stamp_ns)[1:-1]
 
     # --- outputs, persistence, restore ----------------------------------------------
 
@@ -347,8 +359,15 @@ class RecoveryNode(Node):
                 self.get_logger().warning(f'could not publish /diagnostics: {exc}')
 
     def _log(self, level, text):
-        if self._live():
-            getattr(self.get_logger(), level)(text)
+        # One call site per severity: rclpy refuses a call site whose severity changes.
+        if not self._live():
+            return
+        if level == 'error':
+            self.get_logger().error(text)
+        elif level == 'warning':
+            self.get_logger().warning(text)
+        else:
+            self.get_logger().info(text)
 
     def _live(self):
         """Return True unless ROS was shut down (e.g. SIGTERM)."""
@@ -361,3 +380,6 @@ class RecoveryNode(Node):
         self._intake.stop()
         self._dispatcher.join()
         self._engine.stop()
+        answers = getattr(self, '_answers', None)
+        if answers is not None:
+            answers.stop()

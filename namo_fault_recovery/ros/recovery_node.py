@@ -112,8 +112,9 @@ def _run(args):
         if not _SIGNALS:
             executor.spin()
     except StartupError as exc:
-        sys.stderr.write(f'{NODE_NAME}: error: {exc}\n')
-        code = EXIT_CONFIG
+        if not _SIGNALS:                 # not a start-up cut short by Ctrl-C or SIGTERM
+            sys.stderr.write(f'{NODE_NAME}: error: {exc}\n')
+            code = EXIT_CONFIG
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:  # noqa: B902

@@ -412,7 +412,7 @@ def _conditions(rates, burner):
 
 
 def _start_node(domain_id, state_dir, gesture_file, robot_file, out):
-    from namo_fault_recovery.cli.ros_commands import node_command
+    from namo_fault_recovery.cli.private_node import node_command
     ros_args = ['-p', f'state_dir:={state_dir}']
     if gesture_file:
         ros_args += ['-p', f'gesture_file:={os.path.abspath(gesture_file)}']

@@ -1,0 +1,311 @@
+"""
+The package's layout rules, checked on the source with ``ast`` (fast, no ROS needed).
+
+- every import of our modules (in the package and in the tests) names a module or
+  name that exists, and the import graph has no cycle (module-level and
+  function-level imports alike, relative ones resolved);
+- no module uses a ``_private`` name of another of our modules;
+- only ``ros/`` and the command-line modules of the ROS commands import rclpy or a
+  message package, and nothing the offline commands load at import time reaches them;
+- every subpackage's ``__init__`` docstring names each of its modules.
+"""
+
+import ast
+from pathlib import Path
+import subprocess
+import sys
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGE = 'namo_fault_recovery'
+ROS_PACKAGES = ('rclpy', 'rcl_interfaces', 'builtin_interfaces')
+ROS_SUFFIXES = ('_msgs', '_srvs')
+# The command-line modules of the ROS commands (they reach ROS through ros.client).
+ROS_CLI_MODULES = {f'{PACKAGE}.cli.{m}' for m in
+                   ('node_commands', 'demo', 'latency_bench', 'ros_common', 'private_node')}
+OFFLINE_ENTRY = f'{PACKAGE}.cli.main'
+# Findings on main (265e0ad) in files the author of this test does not own, left to
+# their owners.  A ratchet, not a waiver: each test fails on a finding not listed here
+# AND on a listed one that is gone, so fixing one means deleting its line.
+KNOWN_FINDINGS = {'private': set(), 'docstring': set()}
+
+
+def assert_only_known(kind, found, scope=''):
+    """
+    Fail on a finding that is not known, and on a known one that is fixed.
+
+    ``found`` maps findings to where they are; ``scope`` limits the known ones to those
+    starting with it (one subpackage).
+    """
+    known = {k for k in KNOWN_FINDINGS[kind] if k.startswith(scope + ':' if scope else '')}
+    new = sorted(set(found) - known)
+    fixed = sorted(known - set(found))
+    assert not new, f'{kind} findings:\n' + '\n'.join(f'{k} ({found[k]})' for k in new)
+    assert not fixed, (f'fixed, delete from KNOWN_FINDINGS[{kind!r}]:\n'
+                       + '\n'.join(fixed))
+
+
+def _module_name(path):
+    parts = list(path.relative_to(ROOT).with_suffix('').parts)
+    if parts[-1] == '__init__':
+        parts.pop()
+    return '.'.join(parts)
+
+
+def _modules():
+    """Return {module name: (path, ast tree)} for every module of the package."""
+    return {_module_name(p): (p, ast.parse(p.read_text(), str(p)))
+            for p in sorted((ROOT / PACKAGE).rglob('*.py'))}
+
+
+MODULES = _modules()
+
+
+class Import:
+    """One import statement's effect: the module it loads and the names it takes."""
+
+    def __init__(self, source, target, names, line, module_level):
+        self.source, self.target, self.names = source, target, names
+        self.line, self.module_level = line, module_level
+
+    def __repr__(self):
+        where = 'module level' if self.module_level else 'in a function'
+        return f'{self.source}:{self.line} imports {self.target} ({where})'
+
+
+def _resolve(source, node):
+    """Return the absolute module name of a ``from ... import`` (relative resolved)."""
+    if not node.level:
+        return node.module
+    path = MODULES[source][0]
+    package = source if path.name == '__init__.py' else source.rpartition('.')[0]
+    base = package.split('.')
+    if node.level > 1:
+        base = base[:-(node.level - 1)]
+    return '.'.join(base + ([node.module] if node.module else []))
+
+
+def _imports(source):
+    """Return every import of one module, each with its targets resolved."""
+    tree = MODULES[source][1]
+    top = {id(n) for n in tree.body}
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                found.append(Import(source, alias.name, (), node.lineno, id(node) in top))
+        elif isinstance(node, ast.ImportFrom):
+            module = _resolve(source, node)
+            for alias in node.names:
+                # `from pkg import sub` loads the submodule pkg.sub if there is one.
+                sub = f'{module}.{alias.name}'
+                if sub in MODULES:
+                    found.append(Import(source, sub, (), node.lineno, id(node) in top))
+                else:
+                    found.append(Import(source, module, (alias.name,), node.lineno,
+                                        id(node) in top))
+    return found
+
+
+IMPORTS = {name: _imports(name) for name in MODULES}
+
+
+def _ours(target):
+    return target in MODULES
+
+
+def find_cycle(edges):
+    """Return one cycle of the directed graph ``edges`` as a list of nodes, or None."""
+    state, stack = {}, []
+
+    def visit(node):
+        state[node] = 'open'
+        stack.append(node)
+        for nxt in sorted(edges.get(node, ())):
+            if state.get(nxt) == 'open':
+                return stack[stack.index(nxt):] + [nxt]
+            if nxt not in state:
+                cycle = visit(nxt)
+                if cycle:
+                    return cycle
+        state[node] = 'done'
+        stack.pop()
+        return None
+    for node in sorted(edges):
+        if node not in state:
+            cycle = visit(node)
+            if cycle:
+                return cycle
+    return None
+
+
+def _graph(module_level_only=False):
+    edges = {}
+    for source, imports in IMPORTS.items():
+        for imp in imports:
+            if _ours(imp.target) and imp.target != source and (
+                    imp.module_level or not module_level_only):
+                edges.setdefault(source, set()).add(imp.target)
+    return edges
+
+
+def test_the_checker_finds_a_cycle_and_resolves_relative_imports():
+    assert find_cycle({'a': {'b'}, 'b': {'c'}, 'c': {'a'}}) == ['a', 'b', 'c', 'a']
+    assert find_cycle({'a': {'b'}, 'b': {'c'}, 'c': set()}) is None
+    targets = {imp.target for imp in IMPORTS[f'{PACKAGE}.cli.main']}
+    assert f'{PACKAGE}.model.robot' in targets          # from ..model.robot import ...
+    assert f'{PACKAGE}.cli.node_commands' in targets    # from . import node_commands
+    levels = {imp.module_level for imp in IMPORTS[f'{PACKAGE}.cli.main']}
+    assert levels == {True, False}                      # both kinds are counted
+
+
+def _defined_names(module):
+    """Return the names bound at module level (None: a module __getattr__ makes any)."""
+    names = set()
+    for node in MODULES[module][1].body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            if node.name == '__getattr__':
+                return None
+            names.add(node.name)
+        elif isinstance(node, (ast.Assign, ast.AnnAssign, ast.AugAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            names |= {n.id for t in targets for n in ast.walk(t) if isinstance(n, ast.Name)}
+        elif isinstance(node, (ast.Import, ast.ImportFrom)):
+            names |= {(a.asname or a.name).partition('.')[0] for a in node.names}
+        elif isinstance(node, (ast.If, ast.Try)):
+            names |= {n.id for n in ast.walk(node)
+                      if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Store)}
+    return names
+
+
+def _test_imports():
+    """Return the imports of our package made by the test modules (absolute ones)."""
+    found = []
+    for path in sorted((ROOT / 'test').glob('*.py')):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.ImportFrom) and not node.level:
+                for alias in node.names:
+                    sub = f'{node.module}.{alias.name}'
+                    target, names = (sub, ()) if sub in MODULES else (node.module, (alias.name,))
+                    found.append(Import(f'test/{path.name}', target, names, node.lineno, True))
+            elif isinstance(node, ast.Import):
+                found += [Import(f'test/{path.name}', a.name, (), node.lineno, True)
+                          for a in node.names]
+    return found
+
+
+def test_every_import_of_our_modules_resolves():
+    broken = []
+    for imports in list(IMPORTS.values()) + [_test_imports()]:
+        for imp in imports:
+            if not imp.target.startswith(PACKAGE):
+                continue
+            if imp.target not in MODULES:
+                broken.append(f'{imp!r}: no such module')
+                continue
+            defined = _defined_names(imp.target)
+            missing = [n for n in imp.names if defined is not None and n not in defined]
+            if missing:
+                broken.append(f'{imp!r}: no {missing}')
+    assert not broken, 'imports that fail at run time:\n' + '\n'.join(broken)
+
+
+def test_the_import_graph_has_no_cycle():
+    cycle = find_cycle(_graph())
+    assert cycle is None, 'import cycle: ' + ' -> '.join(cycle)
+
+
+def _private_uses():
+    """Yield (module, line, what) for every use of another module's _private name."""
+    for source, imports in IMPORTS.items():
+        aliases = {}
+        for imp in imports:
+            if not _ours(imp.target) or imp.target == source:
+                continue
+            for name in imp.names:
+                if name.startswith('_') and not name.startswith('__'):
+                    yield source, imp.line, f'imports {name} from {imp.target}'
+            if imp.target.rpartition('.')[2].startswith('_') and not imp.target.endswith('__'):
+                yield source, imp.line, f'imports the private module {imp.target}'
+        # `from . import messages as conv` then `conv._thing`: private by attribute.
+        tree = MODULES[source][1]
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                pairs = [(a.asname or a.name, a.name) for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                module = _resolve(source, node)
+                pairs = [(a.asname or a.name, f'{module}.{a.name}') for a in node.names]
+            else:
+                continue
+            aliases.update((alias, target) for alias, target in pairs
+                           if _ours(target) and target != source)
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+                    and node.value.id in aliases and node.attr.startswith('_')
+                    and not node.attr.startswith('__')):
+                yield source, node.lineno, f'uses {node.value.id}.{node.attr}'
+
+
+def test_no_module_uses_a_private_name_of_another():
+    found = {f'{source} {what}': f'line {line}' for source, line, what in _private_uses()}
+    assert_only_known('private', found)
+
+
+def _is_ros(target):
+    top = target.partition('.')[0]
+    return top in ROS_PACKAGES or top.endswith(ROS_SUFFIXES)
+
+
+def _may_use_ros(module):
+    return module.startswith(f'{PACKAGE}.ros.') or module in ROS_CLI_MODULES
+
+
+def test_only_the_ros_side_imports_ros():
+    found = [repr(imp) for source, imports in IMPORTS.items() if not _may_use_ros(source)
+             for imp in imports if _is_ros(imp.target)]
+    assert not found, 'ROS imports outside ros/ and the ROS commands:\n' + '\n'.join(found)
+
+
+def test_the_offline_commands_do_not_load_ros_at_import_time():
+    edges = _graph(module_level_only=True)
+    reached, todo = set(), [OFFLINE_ENTRY]
+    while todo:
+        module = todo.pop()
+        if module not in reached:
+            reached.add(module)
+            todo += sorted(edges.get(module, ()))
+    ros_side = sorted(m for m in reached if _may_use_ros(m))
+    assert not ros_side, f'{OFFLINE_ENTRY} loads at import time: {ros_side}'
+
+
+def test_show_score_and_solve_run_without_importing_ros():
+    script = (
+        'import io, sys\n'
+        'from namo_fault_recovery.cli.main import main\n'
+        "for argv in (['show'], ['score', '--gesture', 'wai', '--right'] + ['0'] * 7,\n"
+        "             ['solve', '--fault', 'right_arm_joint2', '--gesture', 'wai',\n"
+        "              '--deadline', '0.05', '--seed', '0']):\n"
+        '    assert main(argv, io.StringIO()) == 0, argv\n'
+        "ros = sorted(m for m in sys.modules if m.split('.')[0] in "
+        f'{ROS_PACKAGES!r} or m.split(".")[0].endswith({ROS_SUFFIXES!r}))\n'
+        'print(ros)\n')
+    proc = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True,
+                          timeout=120, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == '[]', proc.stdout
+
+
+SUBPACKAGES = sorted(name for name, (path, _) in MODULES.items()
+                     if path.name == '__init__.py' and name != PACKAGE)
+
+
+@pytest.mark.parametrize('package', SUBPACKAGES)
+def test_every_subpackage_docstring_names_its_modules(package):
+    path, tree = MODULES[package]
+    doc = ast.get_docstring(tree)
+    assert doc, f'{path} has no docstring'
+    modules = sorted(p.stem for p in path.parent.glob('*.py') if p.name != '__init__.py')
+    missing = {f'{package}: {m}': 'the docstring' for m in modules
+               if f':mod:`.{m}`' not in doc}
+    assert_only_known('docstring', missing, package)

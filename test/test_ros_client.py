@@ -1,0 +1,196 @@
+"""
+The ROS client's reading of messages, without DDS: libraries, diagnostics, answers.
+
+A LibraryResult of the engine goes out as the node's JointTrajectory messages and
+``/diagnostics`` statuses (the node's own converter and writer);
+:func:`rebuild_library` must give the same result back, and every name and key the
+writer uses must be one of :mod:`diagnostic_keys`.  The command-line
+options of the ROS commands (``--namespace`` before or after the command) are checked
+on the real parser.
+"""
+
+import io
+import math
+from types import SimpleNamespace
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray
+from namo_fault_recovery.cli.main import build_parser, main
+from namo_fault_recovery.recovery.engine import recover, RecoverySettings
+from namo_fault_recovery.ros import diagnostic_keys as keys
+from namo_fault_recovery.ros.client import (BadNamespace, Inbox, node_diagnostics,
+                                            normalise_namespace, rebuild_library,
+                                            TriggerAnswer)
+from namo_fault_recovery.ros.diagnostics import Snapshot, statuses
+from namo_fault_recovery.ros.messages import library_to_msgs
+from namo_fault_recovery.ros.state_store import Fault
+import pytest
+from std_srvs.srv import Trigger
+
+JOINT = 'right_arm_joint2'
+STAMP = 1_700_000_000_123_456_789
+ROOT = keys.status_prefix(keys.node_fqn('/'))
+ROBOT1 = keys.status_prefix(keys.node_fqn('/robot1'))
+
+
+@pytest.fixture(scope='module')
+def result(robot, library):
+    """Return a real engine result for one failed joint (the paper's one-keyframe library)."""
+    return recover(robot, library, {JOINT: None}, RecoverySettings(deadline_sec=0.2), seed=0)
+
+
+def _statuses(robot, prefix, result, stamp=STAMP, pending=False, reported=None):
+    """Return what the node's writer publishes for ``result`` (``reported``: angles)."""
+    faults = {j: Fault((reported or {}).get(j)) for j in result.locks}
+    snap = Snapshot(faults=faults, fault_version=3, current=result, version=7,
+                    stamp_ns=stamp, pending=pending, running=False, failed=None,
+                    settings=SimpleNamespace(engine=RecoverySettings()))
+    return statuses(robot, snap, prefix)
+
+
+def _msgs(robot, result, stamp=STAMP):
+    header = Time(sec=stamp // 1_000_000_000, nanosec=stamp % 1_000_000_000)
+    return {m.header.frame_id: m for m in library_to_msgs(robot.joint_names, result, header)}
+
+
+def test_a_library_comes_back_as_the_engine_result(robot, result):
+    array = DiagnosticArray(status=_statuses(robot, ROOT, result))
+    diagnostics = node_diagnostics(array, ROOT, arrival=1.0)
+    assert diagnostics.describes(STAMP)
+    back = rebuild_library(STAMP, _msgs(robot, result), diagnostics, received=2.0)
+    assert back.described and back.library_version == 7 and back.stamp == STAMP
+    assert back.joint_names == tuple(robot.joint_names)
+    assert back.names == result.names
+    assert back.result.locks == result.locks and list(back.result.locks) == [JOINT]
+    assert back.result.faults == {JOINT: None}      # the strategy chose the lock
+    assert back.result.settings['optimizer'] == 'abc'
+    for sent, got in zip(result.gestures, back.result.gestures):
+        assert got.positions == sent.positions    # float64 all the way
+        assert got.times == pytest.approx(sent.times, abs=1e-9)
+        assert got.score_after == pytest.approx(sent.score_after, rel=1e-5)
+        assert got.score_before == pytest.approx(sent.score_before, rel=1e-5)
+        assert (got.status, got.stage) == (sent.status, sent.stage)
+
+
+def _defined_keys(gestures):
+    """Return every status name and key that diagnostic_keys defines."""
+    constants = {v for k, v in vars(keys).items() if k.isupper() and isinstance(v, str)}
+    per_gesture = {keys.gesture_key(g, f) for g in gestures for f in keys.GESTURE_FIELDS}
+    numbered = {f(i) for f in (keys.note_key, keys.rejected_key) for i in range(10)}
+    return constants | per_gesture | numbered
+
+
+def test_every_name_and_key_the_writer_uses_is_shared(robot, result):
+    right = robot.arms['right'].joint_names
+    faults = {j: Fault(0.1) for j in right}          # a frozen arm: every status kind
+    snap = Snapshot(faults=faults, fault_version=3, current=result, version=7,
+                    stamp_ns=STAMP, pending=False, running=False, failed=None,
+                    settings=SimpleNamespace(engine=RecoverySettings()),
+                    rejections=[(0.0, '/actuator_fault', 'unknown joint')], rejected_total=1)
+    written = statuses(robot, snap, ROBOT1)
+    defined = _defined_keys(result.names)
+    names = {s.name[len(ROBOT1):] for s in written}
+    assert names == ({keys.FAULTS, keys.RECONFIGURATION, keys.INPUTS, keys.STATE,
+                      keys.arm_status('right')} | {keys.joint_status(j) for j in right})
+    unknown = sorted({kv.key for s in written for kv in s.values} - defined)
+    assert not unknown, f'keys written but not in diagnostic_keys: {unknown}'
+
+
+def test_diagnostics_of_another_node_or_version_are_not_used(robot, result):
+    other = DiagnosticArray(status=_statuses(robot, ROBOT1, result))
+    assert node_diagnostics(other, ROOT, arrival=1.0) is None
+    mine = node_diagnostics(other, ROBOT1, arrival=1.0)
+    assert mine is not None and not mine.describes(STAMP + 1)
+    pending = node_diagnostics(DiagnosticArray(status=_statuses(robot, ROOT, result,
+                                                                pending=True)),
+                               ROOT, arrival=1.0)
+    assert not pending.describes(STAMP)
+    back = rebuild_library(STAMP, _msgs(robot, result), None, received=2.0)
+    assert not back.described and back.result.locks == {}
+    assert all(math.isnan(g.score_after) for g in back.result.gestures)
+    assert [g.positions for g in back.result.gestures] == \
+        [g.positions for g in result.gestures]
+
+
+def test_a_reported_lock_angle_is_a_fault_angle(robot, result):
+    lock = result.locks[JOINT]
+    statuses = _statuses(robot, ROOT, result, reported={JOINT: lock})
+    diagnostics = node_diagnostics(DiagnosticArray(status=statuses), ROOT, arrival=1.0)
+    back = rebuild_library(STAMP, _msgs(robot, result), diagnostics, received=2.0)
+    assert back.result.faults == {JOINT: lock}
+
+
+def test_the_inbox_waits_for_complete_versions_and_their_diagnostics(robot, result):
+    inbox = Inbox(ROOT)
+    assert inbox.wait(inbox.settled(quiet=0.0), timeout=0.0) is None      # nothing yet
+    for msg in _msgs(robot, result).values():
+        inbox.add_library(msg)
+    assert inbox.wait(inbox.settled(quiet=0.0), timeout=0.0) == (STAMP,)
+    first = inbox.library(STAMP, diagnostics_timeout=0.0)
+    assert not first.described and first.names == result.names
+    later = list(_msgs(robot, result, STAMP + 5).values())
+    for msg in later[:-1]:
+        inbox.add_library(msg)
+    assert inbox.wait(inbox.newer(STAMP), timeout=0.0) is None            # incomplete
+    inbox.add_library(later[-1])
+    assert inbox.wait(inbox.newer(STAMP), timeout=0.0) == (STAMP + 5,)
+    inbox.add_diagnostics(DiagnosticArray(status=_statuses(robot, ROBOT1, result, STAMP + 5)))
+    assert not inbox.library(STAMP + 5, diagnostics_timeout=0.0).described   # not ours
+    inbox.add_diagnostics(DiagnosticArray(status=_statuses(robot, ROOT, result, STAMP + 5)))
+    described = inbox.library(STAMP + 5, diagnostics_timeout=0.0)
+    assert described.described and described.result.locks == result.locks
+
+
+def test_the_inbox_sees_a_rejected_input(robot, result):
+    inbox = Inbox(ROOT)
+    since = 0.0                      # every arrival (time.monotonic()) is after it
+    snap = Snapshot(faults={}, fault_version=1, current=result, version=1, stamp_ns=STAMP,
+                    pending=False, running=False, failed=None,
+                    settings=SimpleNamespace(engine=RecoverySettings()),
+                    rejections=[(0.0, '/actuator_fault', "unknown joint 'x'")],
+                    rejected_total=1)
+    assert inbox.wait(inbox.rejection(since, 0), timeout=0.0) is None
+    inbox.add_diagnostics(DiagnosticArray(status=statuses(robot, snap, ROOT)))
+    assert inbox.wait(inbox.rejection(since, 1), timeout=0.0) is None      # not a new one
+    found = inbox.wait(inbox.rejection(since, 0), timeout=0.0)
+    assert found.get(keys.INPUTS, keys.LAST_REJECTED_REASON) == "unknown joint 'x'"
+    assert inbox.wait(inbox.rejection(since, None), timeout=0.0) is None   # no baseline
+
+
+def test_the_reconfigure_answer_carries_the_version():
+    message = f'reconfigured 4/4 gestures ... {keys.version_tag(12, STAMP)}'
+    answer = TriggerAnswer.from_response(Trigger.Response(success=True, message=message))
+    assert (answer.success, answer.library_version, answer.library_stamp) == (True, 12, STAMP)
+    cleared = TriggerAnswer.from_response(Trigger.Response(success=True, message='cleared'))
+    assert (cleared.library_version, cleared.library_stamp) == (None, None)
+    assert keys.parse_stamp(keys.format_stamp(STAMP)) == STAMP
+    assert keys.parse_stamp('12.5') is None
+
+
+def test_namespaces_are_normalised_or_refused():
+    assert normalise_namespace('') == '/'
+    assert normalise_namespace(None) == '/'
+    assert normalise_namespace('robot1') == '/robot1'
+    assert normalise_namespace('/robot1/') == '/robot1'
+    with pytest.raises(BadNamespace, match='1robot'):
+        normalise_namespace('/1robot')
+
+
+def test_a_bad_namespace_is_a_usage_error(capsys):
+    assert main(['--namespace', '/bad name', 'library'], io.StringIO()) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("namo-recovery: error: invalid namespace '/bad name'")
+    assert err.count('\n') == 1
+
+
+@pytest.mark.parametrize('argv, namespace, domain', [
+    (['library'], '/', None),
+    (['--namespace', '/robot1', 'library'], '/robot1', None),
+    (['library', '--namespace', '/robot1', '--domain-id', '5'], '/robot1', 5),
+    (['--namespace', '/a', '--domain-id', '3', 'fault', JOINT, '--namespace', '/b'], '/b', 3),
+    (['--namespace', '/robot1', 'bench', 'latency', '-n', '1'], '/robot1', None),
+    (['demo', '--namespace', '/robot2'], '/robot2', None),
+])
+def test_namespace_and_domain_before_or_after_the_command(argv, namespace, domain):
+    args = build_parser().parse_args(argv)
+    assert (args.namespace, args.domain_id) == (namespace, domain)
