@@ -9,6 +9,7 @@ The ``namo-recovery`` command line, one module per command group.
 - :mod:`.demo`: ``demo``, a private node driven end to end;
 - :mod:`.latency_bench`: ``bench latency``;
 - :mod:`.stream_bench_command`: ``bench stream`` (the measurement is in ``ros/``);
+- :mod:`.urdf`: ``urdf``, Namo's URDF from the robot file;
 - :mod:`.ros_common`: what the ROS commands share (``--namespace``, errors, tables);
 - :mod:`.private_node`: the node process that ``demo`` and ``bench latency`` start;
 - :mod:`.common`: argument parsing shared by the groups;

@@ -318,6 +318,8 @@ def build_parser():
     demo.register(sub)                       # demo
     latency_bench.register_bench(bench_sub)  # bench latency
     stream_bench_command.register(bench_sub)   # bench stream
+    from . import urdf as urdf_cli
+    urdf_cli.register(sub)                   # urdf
     return parser
 
 

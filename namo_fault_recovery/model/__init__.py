@@ -8,5 +8,7 @@ The robot and its gestures, free of ROS: what Namo is and what it should do.
 - :mod:`.gestures`: the reference gesture library (keyframes, weights, expansion stages);
 - :mod:`.trajectory_csv`: dense recorded motions stored as CSV files;
 - :mod:`.circle_design`: how the demo circle motion was designed;
+- :mod:`.urdf`: Namo's URDF generated from the robot file (robot_state_publisher, RViz,
+  the simulator);
 - :mod:`.yaml_checks`: the small validators that name the file and key of a bad value.
 """

@@ -23,4 +23,9 @@ Clients and benchmarks of a running node:
 
 - :mod:`.client`: the typed rclpy client of a running node, used by the ROS commands;
 - :mod:`.stream_bench`: the deadline under a ``/joint_states`` stream and a CPU burner.
+
+The simulated robot:
+
+- :mod:`.sim_node`: ``namo_sim``, Namo in MuJoCo behind two joint trajectory controllers
+  (the physics and the controller rules are in ``sim/``, free of ROS).
 """
