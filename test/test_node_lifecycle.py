@@ -46,6 +46,17 @@ def test_sigkill_then_restart_restores_and_republishes(tmp_path, client):
         faulted = client.wait_library(
             lambda v: all(a == 0.2 for a in v.column('left_arm_joint1')),
             after=reference.stamp, what='the library for the faults')
+        # The library is written right after it is published (off the publish path; the
+        # faults were written before they were acknowledged): kill once it is on disk.
+        end = time.monotonic() + 10.0
+        while time.monotonic() < end:
+            saved = decode_state((state / 'state.json').read_text()).library
+            if saved is not None and set(saved.locks) == {'right_arm_joint3',
+                                                          'left_arm_joint1'}:
+                break
+            time.sleep(0.01)
+        else:
+            pytest.fail('the library for the faults was not written to the state file')
         node.send(signal.SIGKILL)
         assert node.wait() == -signal.SIGKILL
     finally:

@@ -4,9 +4,10 @@ The dispatcher: takes the newest request from the run book, runs it, publishes i
 Free of ROS.  One plain thread (never an executor thread) waits for a request, sends it
 to the engine process with the deadline counted from the moment it was requested (the
 engine keeps a margin of it for the work after the search, publishing included), checks
-the result, persists it, and publishes it, unless a newer request superseded it meanwhile.
-Publishing and persisting are callables given by the node.  A run with no structure
-change (no fault and no tool) needs no engine: the reference library is published at once.
+the result and publishes it, unless a newer request superseded it meanwhile (the node then
+writes it to the state file, off this path).  Publishing is a callable given by the node.
+A run with no structure change (no fault and no tool) needs no engine: the reference
+library is published at once.
 """
 
 import math
@@ -21,14 +22,13 @@ from ..recovery.result import summary
 class Dispatcher:
     """The thread between the run book and the engine process."""
 
-    def __init__(self, book, engine, robot, library, settings, persist, publish, log):
+    def __init__(self, book, engine, robot, library, settings, publish, log):
         self._book = book
         self._engine = engine
         self._robot = robot
         self._library = library
         self._settings = settings          # callable: the current NodeSettings
-        self._persist = persist            # persist(generation, faults, result) -> saved?
-        self._publish = publish            # publish(result) -> stamp_ns
+        self._publish = publish            # publish(generation, faults, result) -> callers
         self._log = log                    # log(level, text)
         self._thread = threading.Thread(target=self._loop, name='dispatcher', daemon=True)
         self.last_engine_time = 0.0
@@ -81,10 +81,8 @@ class Dispatcher:
         if problem:
             self._fail(run, problem)
             return
-        if not self._persist(run.generation, run.faults, result):
-            return                                # superseded while checking
-        # Persisted first: once a client has the library, a restart has it too.
-        ready = self._book.publish(run.generation, result, self._publish)
+        # Published if still current, then written to the state file off this path.
+        ready = self._publish(run.generation, run.faults, result)
         if ready is None:
             return
         self._book.notify(ready)

@@ -9,6 +9,7 @@ when needed), services answer from ``async`` callbacks that await the run book, 
 periodic work runs on a steady clock, independent of ``use_sim_time``.
 """
 
+import itertools
 import threading
 import time
 
@@ -39,7 +40,7 @@ from .parameters import (check_parameter, declare_parameters, DEFAULT_STATE_DIR,
                          StartupError)
 from .restore import plan_restart
 from .run_book import Outcome, RunBook
-from .state_store import fingerprint, StateStore
+from .state_store import BackgroundWriter, fingerprint, StateStore
 from ..errors import ConfigError
 from ..model.gestures import load_library
 from ..model.robot import load_robot
@@ -85,11 +86,13 @@ class RecoveryNode(Node):
             raise StartupError(f'the engine process did not start: {exc}') from None
         self._book = RunBook(on_request=self._engine.cancel)
         self._persist_lock = threading.Lock()
+        self._seq = itertools.count(1)
+        self._writer = BackgroundWriter(self._save)
         self._intake = FaultIntake(self._book, self._commit_faults, self._on_accepted,
                                    self._inputs.measured, on_error=self._intake_error)
         self._dispatcher = Dispatcher(self._book, self._engine, self._robot, self._library,
-                                      lambda: self._settings, self._persist_library,
-                                      self._publish_library, self._log)
+                                      lambda: self._settings, self._publish_and_persist,
+                                      self._log)
         try:
             self._create_interfaces()
             self._restore()
@@ -98,6 +101,7 @@ class RecoveryNode(Node):
             raise
         self._answers = AnswerPacer(self._wake.trigger)
         self._answers.start()
+        self._writer.start()
         self._intake.start()
         self._dispatcher.start()
         self._ready = True
@@ -267,22 +271,27 @@ class RecoveryNode(Node):
     # --- outputs, persistence, restore ----------------------------------------------
 
     def _commit_faults(self, faults):
-        """Persist a new fault set, then hand it to the run book (one step for the disk)."""
+        """Persist a new fault set (synced), then hand it to the run book: one step."""
         with self._persist_lock:
-            self._save(faults, self._book.current)
+            self._save(faults, self._book.current, next(self._seq))
             self._book.set_faults(faults)
 
-    def _persist_library(self, generation, faults, result):
-        """Persist a run's library unless a newer request superseded it; return if saved."""
-        with self._persist_lock:
-            if not self._book.is_current(generation):
-                return False
-            self._save(faults, result)
-            return True
+    def _publish_and_persist(self, generation, faults, result):
+        """
+        Publish a run's library if still current, then queue it for the state file.
 
-    def _save(self, faults, library):
+        Under the lock that orders fault commits, so the sequence number says which of a
+        library and a new fault set is newer; the write itself is off the publish path.
+        """
+        with self._persist_lock:
+            ready = self._book.publish(generation, result, self._publish_library)
+            if ready is not None:
+                self._writer.submit(faults, result, next(self._seq))
+        return ready
+
+    def _save(self, faults, library, seq=None):
         try:
-            self._store.save(faults, library, self._fingerprint)
+            self._store.save(faults, library, self._fingerprint, seq)
             self._state_problem = None
         except (OSError, ValueError) as exc:
             if self._state_problem is None:
@@ -380,6 +389,9 @@ class RecoveryNode(Node):
         self._intake.stop()
         self._dispatcher.join()
         self._engine.stop()
+        writer = getattr(self, '_writer', None)
+        if writer is not None:
+            writer.stop()
         answers = getattr(self, '_answers', None)
         if answers is not None:
             answers.stop()

@@ -205,3 +205,70 @@ def _fsync_dir(directory):
         pass
     finally:
         os.close(fd)
+
+
+class BackgroundWriter:
+    """
+    Writes the newest snapshot of the state off the publishing path, in order.
+
+    A library is written right after it is published (a crash in between loses only the
+    library, never a fault: the fault set was written before it was acknowledged, and a
+    restart recomputes a library whose fault set does not match).  Snapshots carry the
+    sequence numbers of :meth:`StateStore.save`, so a slow write never overwrites a newer
+    fault set; several pending snapshots collapse into the newest one.
+    """
+
+    def __init__(self, save):
+        self._save = save                  # save(faults, library, seq)
+        self._cond = threading.Condition()
+        self._pending = None
+        self._stopping = False
+        self._busy = False
+        self._thread = threading.Thread(target=self._loop, name='state-writer', daemon=True)
+
+    def start(self):
+        """Start the writer thread."""
+        self._thread.start()
+
+    def submit(self, faults, library, seq):
+        """Queue a snapshot (replaces any older one not yet written)."""
+        with self._cond:
+            if self._pending is None or seq > self._pending[2]:
+                self._pending = (dict(faults), library, seq)
+            self._cond.notify_all()
+
+    def flush(self, timeout=5.0):
+        """Wait until every queued snapshot is written (e.g. before stopping)."""
+        end = time.monotonic() + timeout
+        with self._cond:
+            while (self._pending is not None or self._busy) and self._thread.is_alive():
+                remaining = end - time.monotonic()
+                if remaining <= 0:
+                    return False
+                self._cond.wait(remaining)
+        return True
+
+    def _loop(self):
+        while True:
+            with self._cond:
+                while self._pending is None and not self._stopping:
+                    self._cond.wait()
+                if self._pending is None:
+                    return
+                snapshot, self._pending = self._pending, None
+                self._busy = True
+            try:
+                self._save(*snapshot)
+            finally:
+                with self._cond:
+                    self._busy = False
+                    self._cond.notify_all()
+
+    def stop(self):
+        """Write what is pending, then stop."""
+        self.flush()
+        with self._cond:
+            self._stopping = True
+            self._cond.notify_all()
+        if self._thread.is_alive():
+            self._thread.join(timeout=5.0)
