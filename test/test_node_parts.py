@@ -224,3 +224,20 @@ def test_answer_pacer_releases_every_answer_in_order_and_a_few_at_a_time():
     assert len(wakes) >= 50 // 4 and all(b - a <= 4 for a, b in zip([0] + wakes, wakes))
     pacer.submit(lambda: released.append('late'))      # after stop: released at once
     assert released[-1] == 'late'
+
+
+# --- background state writer ------------------------------------------------------------------
+
+def test_background_writer_never_writes_an_older_snapshot_over_a_newer_one(tmp_path):
+    from namo_fault_recovery.ros.state_store import BackgroundWriter, decode_state, StateStore
+    store = StateStore(tmp_path)
+    store.save({'right_arm_joint1': Fault(0.1)}, None, 'fp', seq=5)     # a fault commit
+    writer = BackgroundWriter(lambda faults, library, seq: store.save(faults, library,
+                                                                      'fp', seq))
+    writer.start()
+    writer.submit({}, None, 3)            # an older library snapshot: dropped
+    assert writer.flush()
+    assert list(decode_state(store.path.read_text()).faults) == ['right_arm_joint1']
+    writer.submit({'left_arm_joint2': Fault(0.2)}, None, 6)
+    writer.stop()                         # writes what is pending first
+    assert list(decode_state(store.path.read_text()).faults) == ['left_arm_joint2']
