@@ -149,7 +149,7 @@ class Playback:
             worst = int(np.argmax(off))
             self.outcome = Outcome(False, f'timeout: {self.plan.joint_names[worst]} still '
                                    f'{math.degrees(off[worst]):.1f} deg off its goal '
-                                   f'{self.settings.goal_time:g} s after the motion\'s end')
+                                   f'{self.settings.goal_time:g} s after the end of the motion')
         return self.outcome
 
     def abort(self, reason):
