@@ -228,11 +228,13 @@ def build_parser():
     p.add_argument('--json', action='store_true',
                    help='print one JSON document (schema in the README)')
     p.set_defaults(func=cmd_solve)
-    from . import bench, beyond, ros_commands
+    from . import bench, beyond, export, player_commands, ros_commands
     bench_sub = bench.register(sub)
     beyond.register(bench_sub)
     ros_commands.register(sub)               # fault, clear, reconfigure, library, demo
     ros_commands.register_bench(bench_sub)   # bench latency
+    export.register(sub)                     # export --format play_motion2
+    player_commands.register(sub, bench_sub)   # demo --sim, bench detection
     return parser
 
 
