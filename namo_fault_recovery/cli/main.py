@@ -234,7 +234,9 @@ def build_parser():
     ros_commands.register(sub)               # fault, clear, reconfigure, library, demo
     ros_commands.register_bench(bench_sub)   # bench latency
     export.register(sub)                     # export --format play_motion2
-    player_commands.register(sub, bench_sub)   # demo --sim, bench detection
+    player_commands.register(sub, bench_sub)   # play, bench detection
+    from . import urdf as urdf_cli
+    urdf_cli.register(sub)                   # urdf
     return parser
 
 

@@ -1,0 +1,1 @@
+"""The simulated Namo (MuJoCo) and its trajectory controllers, free of ROS."""
