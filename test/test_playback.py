@@ -181,3 +181,22 @@ def test_settings_refuse_nonsense():
         MonitorSettings(fault_hold=0.0)
     with pytest.raises(ValueError, match='approach_velocity'):
         TimingSettings(approach_velocity=0.0)
+
+
+def test_detection_benchmark_on_the_physics():
+    """The benchmark's own figures on one gesture: a stuck elbow found, no false alarm."""
+    pytest.importorskip('mujoco', reason='the simulator physics needs mujoco')
+    from namo_fault_recovery.benchmarks import detection
+    from namo_fault_recovery.sim.physics import designed_allowances, NamoSim
+    allowances = designed_allowances(ROBOT, LIBRARY)
+    doc = detection.run(ROBOT, LIBRARY, lambda: NamoSim(ROBOT, allowances=allowances),
+                        gestures=['wai'], joints=['right_arm_joint2', 'left_arm_joint4'])
+    s = detection.summary(doc)
+    assert s['false_alarms'] == 0 and s['normal_finished'] == 1
+    stuck = doc['stuck']['wai']
+    assert stuck['left_arm_joint4']['detected'] and not stuck['left_arm_joint4']['wrong_joints']
+    # wai moves right_arm_joint2 by 5 deg only: below the threshold, it cannot be seen
+    assert stuck['right_arm_joint2']['excursion_deg'] == pytest.approx(5.0)
+    assert not stuck['right_arm_joint2']['detected']
+    rec = doc['recovery']['wai']['left_arm_joint4']
+    assert rec['replay_ok'] and rec['lock_commanded_elsewhere'] == 0

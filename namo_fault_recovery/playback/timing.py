@@ -81,6 +81,14 @@ class PlannedMotion:
             q[..., j] = angle
         return q
 
+    def velocity_at(self, t):
+        """Return the commanded velocity at time(s) ``t`` (rad/s; 0 for locked joints)."""
+        t = np.clip(np.asarray(t, dtype=float), 0.0, self.duration)
+        qd = self._spline.derivative()(t)
+        for j, _ in self._lock_columns():
+            qd[..., j] = 0.0
+        return qd
+
     def _lock_columns(self):
         return [(self.joint_names.index(n), a) for n, a in self.locks.items()
                 if n in self.joint_names]
