@@ -16,8 +16,10 @@ latency; ``bench latency`` measures that part).  For every gesture:
   threshold cannot be told from a healthy one);
 - for the gestures in ``recover_gestures``: the time from the stuck joint to the first
   correct play (detection + reconfiguration by the engine + the replay with the lock,
-  simulated time plus the engine's wall time), the replay's score gap to the library's
-  own ``score_after``, and the self-contacts the physics counted during the replay.
+  simulated time plus the engine's wall time), the gap between the scores of the
+  replay's executed final pose and of the library's final keyframe (for a one-keyframe
+  gesture that is the library's own ``score_after``), and the self-contacts the
+  physics counted during the replay.
 """
 
 import math
@@ -135,18 +137,19 @@ def run(robot, library, sim_factory, gestures=None, joints=None, recover_gesture
                 locks={joint: lock}, monitor=monitor)
             commanded = np.array([cmd[j] for _, cmd, _ in trace2])
             executed = _score(robot, gesture, sim.positions())
+            planned = _score(robot, gesture, adapted.positions[-1])
             doc['recovery'].setdefault(name, {})[joint] = {
                 'replay_ok': replay.ok, 'reason': replay.reason,
                 'stuck_to_correct_play_s': elapsed + engine + elapsed2,
                 'detection_s': elapsed, 'engine_s': engine, 'replay_s': elapsed2,
-                'score_after': adapted.score_after, 'executed_score': executed,
-                'score_gap': abs(executed - adapted.score_after),
+                'score_after': adapted.score_after, 'planned_score': planned,
+                'executed_score': executed, 'score_gap': abs(executed - planned),
                 'lock_commanded_elsewhere': int(np.count_nonzero(commanded != lock)),
                 'contact_events': sim.contact_events}
             if progress:
                 progress(f'{name:12s} {joint}: detected {entry["after_departure_s"]:.2f} s '
                          f'after departure; replay {replay.reason}; score '
-                         f'{executed:.4f} vs {adapted.score_after:.4f}')
+                         f'{executed:.4f} vs planned {planned:.4f}')
     return doc
 
 
