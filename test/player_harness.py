@@ -162,15 +162,20 @@ class Recorder:
                 KeyValue(key='lock_angle_rad', value=repr(angle))]))
         self.diag_pub.publish(DiagnosticArray(status=statuses))
 
-    def play(self, gesture, timeout=30.0):
-        client = self.node.create_client(Trigger, f'/gesture_player/play/{gesture}')
-        assert client.wait_for_service(timeout_sec=20.0), f'no play service for {gesture}'
+    def trigger(self, service, timeout=30.0):
+        """Call a std_srvs/Trigger service; return the response (assert on timeout)."""
+        client = self.node.create_client(Trigger, service)
+        assert client.wait_for_service(timeout_sec=20.0), f'no service {service}'
         future = client.call_async(Trigger.Request())
         end = time.monotonic() + timeout
         while not future.done() and time.monotonic() < end:
             time.sleep(0.02)
-        assert future.done(), f'no answer to play {gesture} within {timeout} s'
+        assert future.done(), f'no answer from {service} within {timeout} s'
         return future.result()
+
+    def play(self, gesture, timeout=30.0):
+        """Play one gesture on the gesture_player; return the Trigger response."""
+        return self.trigger(f'/gesture_player/play/{gesture}', timeout)
 
 
 class FakeArms(Recorder):
