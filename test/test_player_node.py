@@ -16,7 +16,7 @@ import time
 from namo_fault_recovery.cli.player_commands import player_command
 from node_harness import NodeProcess, ros_env
 import numpy as np
-from player_harness import CONTROLLERS, FakeArms, LIBRARY
+from player_harness import CONTROLLERS, FakeArms, LIBRARY, NAMES
 import pytest
 
 pytestmark = pytest.mark.slow
@@ -103,3 +103,32 @@ def test_one_and_two_arm_gestures_finish(player):
     response = arms.play('circle', timeout=60.0)
     assert response.success, response.message
     assert 'finished' in response.message
+
+
+def test_cli_play_and_export_from_the_running_library(player, tmp_path):
+    import io
+
+    from namo_fault_recovery.cli.main import main
+    from namo_fault_recovery.playback.export import load_motions
+    node, arms = player
+    out = io.StringIO()
+    assert main(['play', 'side_invite', '--domain-id', str(DOMAIN)], out) == 0, out.getvalue()
+    assert out.getvalue().startswith('success: side_invite: finished')
+    path = tmp_path / 'motions.yaml'
+    assert main(['export', '--out', str(path), '--domain-id', str(DOMAIN)], out) == 0
+    motions = load_motions(path.read_text())
+    newest = arms.newest_library()
+    assert sorted(motions) == sorted(newest)
+    for name, (joints, times, positions) in motions.items():
+        assert joints == NAMES
+        assert np.array_equal(positions, newest[name])
+
+
+def test_bad_parameter_refused_in_one_line():
+    proc = NodeProcess(DOMAIN + 2, command=player_command(),
+                       args=['-p', 'fault_hold_sec:=0.0'], env=ros_env(DOMAIN + 2))
+    code = proc.wait()
+    stderr = proc.stderr
+    proc.stop()
+    assert code == 1, stderr
+    assert 'fault_hold must be > 0' in stderr and 'Traceback' not in stderr, stderr
