@@ -200,3 +200,17 @@ def test_detection_benchmark_on_the_physics():
     assert not stuck['right_arm_joint2']['detected']
     rec = doc['recovery']['wai']['left_arm_joint4']
     assert rec['replay_ok'] and rec['lock_commanded_elsewhere'] == 0
+
+
+def test_play_figure_draws_the_joints_that_moved(tmp_path):
+    pytest.importorskip('matplotlib', reason='figures need matplotlib')
+    from namo_fault_recovery.playback.plot import plot_play
+    p = plan('wai', locks={'right_arm_joint2': math.radians(-20.0)})
+    t, q = simulate(p)
+    commands = [(ti, dict(zip(NAMES, qi))) for ti, qi in zip(p.times, p.positions)]
+    measured = [(ti, dict(zip(NAMES, qi))) for ti, qi in zip(t, q)]
+    moved = plot_play(tmp_path / 'wai.png', NAMES, commands, measured, 'wai',
+                      locks={'right_arm_joint2': math.radians(-20.0)})
+    assert 'right_arm_joint2' in moved and 'right_arm_joint4' in moved
+    assert 'right_arm_joint5' in moved        # wai moves it by 10 deg
+    assert (tmp_path / 'wai.png').stat().st_size > 10000
