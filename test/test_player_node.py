@@ -132,3 +132,23 @@ def test_bad_parameter_refused_in_one_line():
     proc.stop()
     assert code == 1, stderr
     assert 'fault_hold must be > 0' in stderr and 'Traceback' not in stderr, stderr
+
+
+def test_demo_play_runs_the_loop_step_by_step(tmp_path, monkeypatch):
+    import io
+    import sys
+
+    from namo_fault_recovery.cli import player_commands
+    from namo_fault_recovery.cli.main import main
+    fake = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'fake_sim_node.py')
+    monkeypatch.setattr(player_commands, 'sim_command', lambda: [sys.executable, fake])
+    out = io.StringIO()
+    code = main(['demo-play', '--domain-id', str(DOMAIN + 3), '--plot', str(tmp_path)], out)
+    text = out.getvalue()
+    assert code == 0, text
+    assert 'FAILURE' in text.split('4. play:')[1].split('\n')[0]
+    assert '5. /actuator_fault from the player: right_arm_joint2 held at -20.00 deg' in text
+    assert '6. recovery_node reconfigured the library' in text
+    assert 'success' in text.split('7. play again:')[1].split('\n')[0]
+    assert '0 away from -20.00 deg' in text
+    assert (tmp_path / 'wai_2_replay.png').is_file()

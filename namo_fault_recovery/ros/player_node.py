@@ -20,6 +20,7 @@ import functools
 import math
 import signal
 import sys
+import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -73,6 +74,7 @@ def _declare(node):
         goal_time=node.declare_parameter('goal_time_sec', 2.0).value)
     waits = {'library': node.declare_parameter('library_wait_sec', 10.0).value,
              'joint_states': node.declare_parameter('joint_states_timeout_sec', 1.0).value,
+             'first_states': node.declare_parameter('joint_states_wait_sec', 5.0).value,
              'report_faults': node.declare_parameter('report_faults', True).value}
     return robot, groups, timing, monitor, waits
 
@@ -90,7 +92,8 @@ class GesturePlayer(Node):
         self._measured = {}           # joint -> angle
         self._measured_at = None
         self._play = None             # (gesture, Playback, start time, future)
-        self._waiters = []            # (deadline, future) for a newer library
+        self._waiters = []            # (deadline, future): woken by inputs or the deadline
+        self._waiter_lock = threading.Lock()
         self._play_services = {}
         self._wake = self.create_guard_condition(lambda: None)
         inputs = MutuallyExclusiveCallbackGroup()
@@ -151,6 +154,8 @@ class GesturePlayer(Node):
         for name, angle in zip(msg.name, msg.position):
             self._measured[name] = float(angle)
         self._measured_at = now
+        if self._waiters:
+            self._resolve_waiters(lambda deadline: True)
         if self._play is None:
             return
         gesture, playback, start, future = self._play
@@ -172,15 +177,20 @@ class GesturePlayer(Node):
                                             'motion finished'))
         self._resolve_waiters(lambda deadline: now >= deadline)
 
+    def _wait(self, deadline):
+        """Return a future done at the next library or joint state, or at ``deadline``."""
+        future = Future()
+        with self._waiter_lock:
+            self._waiters.append((deadline, future))
+        return future
+
     def _resolve_waiters(self, due):
-        keep = []
-        for deadline, future in self._waiters:
-            if due(deadline):
-                future.set_result(None)
-            else:
-                keep.append((deadline, future))
-        if len(keep) != len(self._waiters):
-            self._waiters = keep
+        with self._waiter_lock:
+            done = [f for d, f in self._waiters if due(d)]
+            self._waiters = [(d, f) for d, f in self._waiters if not due(d)]
+        for future in done:
+            future.set_result(None)
+        if done:
             self._wake.trigger()
 
     # --- playing --------------------------------------------------------------------
@@ -195,13 +205,15 @@ class GesturePlayer(Node):
     async def _play_gesture(self, gesture):
         if self._play is not None:
             return Outcome(False, f'busy playing {self._play[0]!r}')
-        if self._book.library_outdated():
-            future = Future()
-            self._waiters.append((time.monotonic() + self._waits['library'], future))
-            await future
+        end = time.monotonic() + self._waits['library']
+        while self._book.library_outdated() and time.monotonic() < end:
+            await self._wait(end)
         track = self._book.gesture(gesture)
         if track is None:
             return Outcome(False, 'not in the library')
+        end = time.monotonic() + self._waits['first_states']
+        while any(j not in self._measured for j in self._joints) and time.monotonic() < end:
+            await self._wait(end)   # none yet (just started, or slow discovery)
         fresh = self._measured_at is not None and \
             time.monotonic() - self._measured_at <= self._waits['joint_states']
         missing = [j for j in self._joints if j not in self._measured]
