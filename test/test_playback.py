@@ -214,3 +214,29 @@ def test_play_figure_draws_the_joints_that_moved(tmp_path):
     assert 'right_arm_joint2' in moved and 'right_arm_joint4' in moved
     assert 'right_arm_joint5' in moved        # wai moves it by 10 deg
     assert (tmp_path / 'wai.png').stat().st_size > 10000
+
+
+def test_player_book_versions_and_lock_sources():
+    from namo_fault_recovery.playback.book import GestureTrack, parse_lock_angle, PlayerBook
+    book = PlayerBook()
+    track = GestureTrack('wai', tuple(NAMES), np.array([2.0]), np.zeros((1, 14)), stamp=5)
+    book.add_gesture(track, now=1.0)
+    newer = GestureTrack('wai', tuple(NAMES), np.array([2.0]), np.ones((1, 14)), stamp=9)
+    book.add_gesture(newer, now=2.0)
+    assert book.gesture('wai').stamp == 9 and book.current_stamp == 9
+    assert book.locks() == {}
+    # the player's own report holds until the node lists the joint...
+    book.report('right_arm_joint2', -0.35, now=3.0)
+    assert book.library_outdated()
+    assert book.locks() == {'right_arm_joint2': -0.35}
+    book.node_status(['right_arm_joint2'], {'right_arm_joint2': None})   # lock pending
+    assert book.locks({'right_arm_joint2': -0.30}) == {'right_arm_joint2': -0.30}
+    book.node_status(['right_arm_joint2'], {'right_arm_joint2': -0.34})
+    assert book.locks() == {'right_arm_joint2': -0.34}     # ...then the node's angle
+    book.add_gesture(GestureTrack('wai', tuple(NAMES), np.array([2.0]), np.ones((1, 14)),
+                                  stamp=12), now=4.0)
+    assert not book.library_outdated()
+    book.node_status([], {})                               # cleared
+    assert book.locks() == {}
+    assert parse_lock_angle('') is None and parse_lock_angle('nan') is None
+    assert parse_lock_angle('-0.5') == -0.5
