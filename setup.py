@@ -15,7 +15,9 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         (share, ['package.xml']),
-        (os.path.join(share, 'config'), sorted(glob('config/*.yaml'))),
+        (os.path.join(share, 'config'),
+         sorted(glob('config/*.yaml') + glob('config/*.urdf') + glob('config/*.rviz'))),
+        (os.path.join(share, 'launch'), sorted(glob('config/launch/*.launch.py'))),
         (os.path.join(share, 'config', 'trajectories'), sorted(glob('config/trajectories/*'))),
         (os.path.join(share, 'msg_docs'), sorted(f for f in glob('msg_docs/*')
                                                  if os.path.isfile(f))),
@@ -34,8 +36,11 @@ setup(
                  # test_colcon_build.py builds the package the way a ROS install does.
                  'colcon-core', 'colcon-ros',
                  # The optional figures are tested too.
-                 'matplotlib'],
+                 'matplotlib',
+                 # The simulator's tests, and the URDF checked by an independent library.
+                 'mujoco', 'yourdfpy'],
         'plot': ['matplotlib'],
+        'sim': ['mujoco'],   # namo_sim, the simulated Namo
     },
     zip_safe=True,
     maintainer='namo_fault_recovery developers',
@@ -48,6 +53,7 @@ setup(
             'recovery_node = namo_fault_recovery.ros.recovery_node:main',
             'gesture_player = namo_fault_recovery.ros.player_node:main',
             'namo-recovery = namo_fault_recovery.cli.main:main',
+            'namo_sim = namo_fault_recovery.ros.sim_node:main',
         ],
     },
 )

@@ -175,12 +175,12 @@ class NamoSim:
 
     @property
     def time(self):
-        """Return the simulated time (s)."""
+        """Return the simulated time, in seconds."""
         return float(self.data.time)
 
     @property
     def timestep(self):
-        """Return the physics step (s)."""
+        """Return the physics step, in seconds."""
         return float(self.model.opt.timestep)
 
     def positions(self):
@@ -188,7 +188,7 @@ class NamoSim:
         return self.data.qpos[self._qadr].copy()
 
     def velocities(self):
-        """Return the 14 joint velocities (rad/s)."""
+        """Return the velocities of the 14 joints, in rad/s."""
         return self.data.qvel[self._dadr].copy()
 
     def index(self, name):

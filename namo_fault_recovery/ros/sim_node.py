@@ -1,0 +1,357 @@
+"""
+``namo_sim``: a simulated Namo in MuJoCo, driven like the real robot's controllers.
+
+What it offers, so that a gesture player can be tried without the robot:
+
+- Two trajectory controllers, as ros2_control's JointTrajectoryController on
+  ``/<controller>/joint_trajectory`` (trajectory_msgs/JointTrajectory): by default
+  ``right_arm_controller`` (right_arm_joint1..7) and ``left_arm_controller``.  The rules
+  (what is rejected, with the reason logged; zero stamp = now; interpolation) are in
+  :mod:`..sim.trajectory`.
+- ``/joint_states`` (all 14 joints, position and velocity) at ``joint_state_rate``
+  (100 Hz).
+- Stuck joints, as a failed actuator: the ``stuck_joints`` parameter (``'NAME'`` = where
+  it is, ``'NAME:DEG'`` = at that angle) and the ``~/stick`` topic
+  (sensor_msgs/JointState: names and positions in rad, NaN or no positions = where it
+  is); ``~/release`` (names) frees them.  A stuck joint is held by the physics and
+  ignores commands.
+- Self-contacts (arm-arm, arm-torso) as MuJoCo finds them, on ``~/contacts``
+  (diagnostic_msgs/DiagnosticArray, ``contact_report_rate``): the contacts of now and
+  the running counts since start or the last ``~/reset_contacts`` (std_srvs/Trigger).
+
+The physics runs in its own thread on the steady clock (``timestep``, real time), not
+in the executor, so no callback waits for it and it never waits for a callback.
+"""
+
+import math
+import sys
+import threading
+import time
+
+NODE_NAME = 'namo_sim'
+EXIT_CONFIG = 1
+_MAX_LAG = 1.0      # s behind real time before the physics lets time go
+
+
+def _make_node():
+    """Import ROS and build the node class (kept out of import time of the module)."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    import numpy as np
+    from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+    from rclpy.node import Node
+    from sensor_msgs.msg import JointState
+    from std_srvs.srv import Trigger
+    from trajectory_msgs.msg import JointTrajectory
+
+    from ..model.gestures import load_library
+    from ..model.robot import load_robot
+    from ..sim.physics import designed_allowances, NamoSim
+    from ..sim.trajectory import ActiveTrajectory, Command, Point, Rejected, validate
+
+    def describe(text, kind, read_only=True):
+        return ParameterDescriptor(description=text, type=kind, read_only=read_only)
+
+    class SimNode(Node):
+        """The simulator node; see the module docstring for its interface."""
+
+        def __init__(self):
+            super().__init__(NODE_NAME)
+            p = ParameterType
+            params = {
+                'robot_file': ('', 'robot model YAML (empty: the packaged Namo model)',
+                               p.PARAMETER_STRING),
+                'gesture_file': ('', 'gesture library whose two-handed gestures define '
+                                 'the designed hand contact (empty: the packaged one)',
+                                 p.PARAMETER_STRING),
+                'right_controller': ('right_arm_controller', 'trajectory controller of the '
+                                     'right arm', p.PARAMETER_STRING),
+                'left_controller': ('left_arm_controller', 'trajectory controller of the '
+                                    'left arm', p.PARAMETER_STRING),
+                'timestep': (0.002, 'physics step (s), run in real time',
+                             p.PARAMETER_DOUBLE),
+                'kp': (300.0, 'position actuator stiffness (N m/rad)', p.PARAMETER_DOUBLE),
+                'kv': (30.0, 'position actuator damping (N m s/rad)', p.PARAMETER_DOUBLE),
+                'gravity': (True, 'gravity on (the arms are gravity-compensated)',
+                            p.PARAMETER_BOOL),
+                'joint_state_rate': (100.0, '/joint_states rate (Hz)', p.PARAMETER_DOUBLE),
+                'contact_report_rate': (10.0, '~/contacts rate (Hz)', p.PARAMETER_DOUBLE),
+                'contact_tolerance_mm': (1.0, 'penetration (mm) below which a contact '
+                                         'is not counted', p.PARAMETER_DOUBLE),
+                'initial_positions': ([0.0] * 14, 'start angles (rad) of the 14 joints, '
+                                      'right arm first', p.PARAMETER_DOUBLE_ARRAY),
+                'stuck_joints': ([''], "joints stuck from the start: 'NAME' (where it "
+                                 "is) or 'NAME:DEG'", p.PARAMETER_STRING_ARRAY),
+                'allow_partial_joints_goal': (False, 'accept trajectories naming only '
+                                              'some of the joints of a controller',
+                                              p.PARAMETER_BOOL),
+                'allow_nonzero_velocity_at_trajectory_end': (
+                    False, 'accept a non-zero velocity at the last point', p.PARAMETER_BOOL),
+            }
+            self.p = {}
+            for name, (default, text, kind) in params.items():
+                self.declare_parameter(name, default, describe(text, kind))
+                value = self.get_parameter(name).value
+                self.p[name] = value
+            self.robot = load_robot(self.p['robot_file'] or None)
+            library = load_library(self.robot, self.p['gesture_file'] or None)
+            for name in ('timestep', 'kp', 'joint_state_rate', 'contact_report_rate'):
+                if not self.p[name] > 0:
+                    raise ValueError(f'parameter {name} must be > 0, got {self.p[name]}')
+            self.sim = NamoSim(self.robot, timestep=self.p['timestep'], kp=self.p['kp'],
+                               kv=self.p['kv'], gravity=self.p['gravity'],
+                               allowances=designed_allowances(self.robot, library),
+                               tolerance=self.p['contact_tolerance_mm'] * 1e-3)
+            q0 = list(self.p['initial_positions'])
+            if len(q0) != len(self.sim.joint_names):
+                raise ValueError(f'initial_positions: expected {len(self.sim.joint_names)} '
+                                 f'angles, got {len(q0)}')
+            self.sim.set_positions(q0)
+            self.desired = (np.array(q0, dtype=float), np.zeros(len(q0)))
+            for spec in self.p['stuck_joints']:
+                if spec:
+                    name, _, deg = spec.partition(':')
+                    angle = math.radians(float(deg)) if deg.strip() else None
+                    self.sim.stick(name.strip(), angle)
+            self.lock = threading.Lock()
+            self.controllers = {}
+            for side in ('right', 'left'):
+                controller = self.p[f'{side}_controller']
+                joints = tuple(self.robot.arms[side].joint_names)
+                self.controllers[controller] = {
+                    'joints': joints, 'index': [self.sim.index(j) for j in joints],
+                    'active': None}
+                self.create_subscription(
+                    JointTrajectory, f'/{controller}/joint_trajectory',
+                    lambda msg, c=controller: self._on_trajectory(c, msg), 10)
+            self.state_pub = self.create_publisher(JointState, '/joint_states', 10)
+            self.contact_pub = self.create_publisher(DiagnosticArray, '~/contacts', 10)
+            self.create_subscription(JointState, '~/stick', self._on_stick, 10)
+            self.create_subscription(JointState, '~/release', self._on_release, 10)
+            self.create_service(Trigger, '~/reset_contacts', self._on_reset)
+            self._msg_types = (JointState, DiagnosticArray, DiagnosticStatus, KeyValue)
+            self._np = np
+            self._active_cls = ActiveTrajectory
+            self._command = (Command, Point, Rejected, validate)
+            self.rejections = 0
+            self._stop = threading.Event()
+            self._thread = threading.Thread(target=self._physics, name='physics',
+                                            daemon=True)
+            self._thread.start()
+            self.get_logger().info(
+                f'simulating {self.robot.name}: controllers {", ".join(self.controllers)}; '
+                f'stuck {self._stuck_text()}')
+
+        # --- helpers ---
+
+        def _now(self):
+            return self.get_clock().now().nanoseconds * 1e-9
+
+        def _stuck_text(self):
+            return ', '.join(f'{n} at {math.degrees(a):.2f} deg'
+                             for n, a in self.sim.stuck.items()) or 'none'
+
+        # --- callbacks (executor) ---
+
+        def _on_trajectory(self, controller, msg):
+            Command, Point, Rejected, validate = self._command
+            try:
+                def values(seq):
+                    return tuple(float(v) for v in seq)
+                points = tuple(Point(p.time_from_start.sec + p.time_from_start.nanosec * 1e-9,
+                                     values(p.positions), values(p.velocities),
+                                     values(p.accelerations), values(p.effort))
+                               for p in msg.points)
+                stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+                command = Command(tuple(msg.joint_names), stamp, points)
+                cfg = self.controllers[controller]
+                now = self._now()
+                validate(command, cfg['joints'], now,
+                         self.p['allow_partial_joints_goal'],
+                         self.p['allow_nonzero_velocity_at_trajectory_end'])
+            except Rejected as exc:
+                self.rejections += 1
+                self.get_logger().error(f'{controller}: rejected trajectory: {exc}')
+                return
+            with self.lock:
+                q = self.sim.positions()[cfg['index']]
+                qd = self.sim.velocities()[cfg['index']]
+                cfg['active'] = self._active_cls(command, cfg['joints'], now, (q, qd))
+            self.get_logger().info(
+                f'{controller}: accepted a trajectory of {len(points)} points '
+                f'({points[-1].time:.3f} s)')
+
+        def _joint_names(self, msg, what):
+            for name in msg.name:
+                if name not in self.sim.joint_names:
+                    self.get_logger().error(
+                        f'{what}: unknown joint {name!r}; expected one of '
+                        f'{", ".join(self.sim.joint_names)}')
+                    return False
+            return True
+
+        def _on_stick(self, msg):
+            if not self._joint_names(msg, '~/stick'):
+                return
+            if msg.position and len(msg.position) != len(msg.name):
+                self.get_logger().error(f'~/stick: {len(msg.name)} names but '
+                                        f'{len(msg.position)} positions')
+                return
+            with self.lock:
+                for i, name in enumerate(msg.name):
+                    angle = msg.position[i] if msg.position else math.nan
+                    self.sim.stick(name, None if math.isnan(angle) else angle)
+            self.get_logger().info(f'stuck: {self._stuck_text()}')
+
+        def _on_release(self, msg):
+            if not self._joint_names(msg, '~/release'):
+                return
+            with self.lock:
+                for name in msg.name:
+                    self.sim.release(name)
+            self.get_logger().info(f'stuck: {self._stuck_text()}')
+
+        def _on_reset(self, request, response):
+            with self.lock:
+                self.sim.reset_contact_count()
+            response.success = True
+            response.message = 'contact counts reset'
+            return response
+
+        # --- physics thread ---
+
+        def _control(self, now):
+            """Set the actuator targets from each controller's trajectory at ``now``."""
+            q, qd = self.desired
+            for cfg in self.controllers.values():
+                active = cfg['active']
+                if active is None:
+                    continue
+                sample = active.sample(now)
+                if sample is None:
+                    continue
+                q[cfg['index']] = sample[0]
+                qd[cfg['index']] = sample[1]
+                if now >= active.end:
+                    cfg['active'] = None
+                    qd[cfg['index']] = 0.0
+            self.sim.set_targets(q, qd)
+
+        def _physics(self):
+            """
+            Step the physics in real time on the steady clock.
+
+            Simulated time is anchored to ROS time at start: commands are sampled and
+            /joint_states stamped at ``anchor + sim time``, so that a thread delayed by
+            a busy machine catches up by stepping back to back, with commands and
+            states consistent, instead of jumping.  Only when more than
+            ``_MAX_LAG`` behind does it let the lost time go (and says so).
+            """
+            dt = self.sim.timestep
+            state_every = max(1, round(1.0 / (self.p['joint_state_rate'] * dt)))
+            report_every = max(1, round(1.0 / (self.p['contact_report_rate'] * dt)))
+            step = 0
+            next_time = time.monotonic()
+            with self.lock:
+                anchor = self._now() - self.sim.time
+            while not self._stop.is_set():
+                with self.lock:
+                    now = anchor + self.sim.time
+                    self._control(now)
+                    self.sim.step(1)
+                    state = report = None
+                    if step % state_every == 0:
+                        state = (self.sim.positions(), self.sim.velocities(), now + dt)
+                    if step % report_every == 0:
+                        report = self._contact_status()
+                try:
+                    if state is not None:
+                        self._publish_state(*state)
+                    if report is not None:
+                        self.contact_pub.publish(report)
+                except Exception:  # noqa: B902 - the context is shutting down
+                    if self._stop.is_set():
+                        return
+                    raise
+                step += 1
+                next_time += dt
+                delay = next_time - time.monotonic()
+                if delay > 0:
+                    self._stop.wait(delay)
+                elif delay < -_MAX_LAG:
+                    anchor -= delay
+                    next_time -= delay
+                    self.get_logger().warning(
+                        f'physics {-delay:.2f} s behind real time: skipped that time')
+
+        def _publish_state(self, q, qd, stamp):
+            JointState = self._msg_types[0]
+            msg = JointState(name=list(self.sim.joint_names), position=q.tolist(),
+                             velocity=qd.tolist())
+            sec = int(math.floor(stamp))
+            msg.header.stamp.sec = sec
+            msg.header.stamp.nanosec = min(int((stamp - sec) * 1e9), 999_999_999)
+            self.state_pub.publish(msg)
+
+        def _contact_status(self):
+            _, DiagnosticArray, DiagnosticStatus, KeyValue = self._msg_types
+            contacts = self.sim.contacts()
+            pairs = sorted({f'{c.geom1}-{c.geom2}' for c in contacts})
+            counted = self.sim.contact_events > 0
+            level = DiagnosticStatus.WARN if contacts or counted else DiagnosticStatus.OK
+            text = (f'{len(pairs)} in contact now, {self.sim.contact_events} since reset'
+                    if contacts or counted else 'no self-contact')
+            values = {'contact_events': self.sim.contact_events,
+                      'contact_steps': self.sim.contact_steps,
+                      'max_depth_mm': f'{self.sim.max_depth * 1e3:.3f}',
+                      'current_pairs': ','.join(pairs),
+                      'stuck': ','.join(f'{n}:{math.degrees(a):.3f}'
+                                        for n, a in self.sim.stuck.items()),
+                      'sim_time': f'{self.sim.time:.3f}'}
+            status = DiagnosticStatus(level=level, name=f'{NODE_NAME}: self-contacts',
+                                      message=text, hardware_id=self.robot.name,
+                                      values=[KeyValue(key=k, value=str(v))
+                                              for k, v in values.items()])
+            msg = DiagnosticArray(status=[status])
+            msg.header.stamp = self.get_clock().now().to_msg()
+            return msg
+
+        def stop(self):
+            """Stop the physics thread."""
+            self._stop.set()
+            self._thread.join(timeout=2.0)
+
+    return SimNode
+
+
+def main(args=None):
+    """Run the simulator until Ctrl-C or SIGTERM; return the exit code."""
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+
+    rclpy.init(args=args)
+    node = None
+    executor = None
+    code = 0
+    try:
+        node = _make_node()()
+        executor = MultiThreadedExecutor(num_threads=2)
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ValueError, KeyError, OSError) as exc:
+        sys.stderr.write(f'{NODE_NAME}: error: {" ".join(str(exc).split())}\n')
+        code = EXIT_CONFIG
+    finally:
+        if node is not None:
+            node.stop()
+        if executor is not None:
+            executor.shutdown(timeout_sec=2.0)
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,310 @@
+"""
+The simulated Namo (``namo_sim``) as a real process over DDS.
+
+One simulator serves the module (its own ROS domain).  A trajectory controller client
+sends trajectories as a gesture player would, and reads ``/joint_states`` and
+``~/contacts`` back: the arm follows, bad messages are rejected with a reason, a stuck
+joint stays put, and the reference Wai makes no self-contact.
+"""
+
+import math
+from pathlib import Path
+import sys
+import threading
+import time
+
+from builtin_interfaces.msg import Duration, Time
+from diagnostic_msgs.msg import DiagnosticArray
+from namo_fault_recovery import load_library, load_robot
+from namo_fault_recovery.sim.trajectory import ActiveTrajectory, Command, Point
+from node_harness import NodeProcess, session_domain
+import numpy as np
+import pytest
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+pytestmark = pytest.mark.slow
+
+DOMAIN = session_domain(0) + 120      # beside the recovery_node modules' domains
+ROBOT = load_robot()
+RIGHT = list(ROBOT.arms['right'].joint_names)
+LEFT = list(ROBOT.arms['left'].joint_names)
+ALL = RIGHT + LEFT
+TIMEOUT = 20.0
+
+
+def sim_command():
+    beside = Path(sys.executable).parent / 'namo_sim'
+    if beside.is_file():
+        return [str(beside)]
+    return [sys.executable, '-m', 'namo_fault_recovery.ros.sim_node']
+
+
+def seconds(msg):
+    return msg.sec + msg.nanosec * 1e-9
+
+
+def time_msg(t):
+    sec = int(math.floor(t))
+    return Time(sec=sec, nanosec=int((t - sec) * 1e9))
+
+
+def trajectory(names, points, stamp=0.0):
+    """Return a JointTrajectory from [(t, positions)] (rad)."""
+    msg = JointTrajectory(joint_names=list(names))
+    msg.header.stamp = time_msg(stamp) if stamp else Time()
+    for t, q in points:
+        sec = int(math.floor(t))
+        msg.points.append(JointTrajectoryPoint(
+            positions=[float(v) for v in q],
+            time_from_start=Duration(sec=sec, nanosec=int(round((t - sec) * 1e9)))))
+    return msg
+
+
+class SimClient:
+    """Publishers to the two controllers; recorders of /joint_states and ~/contacts."""
+
+    def __init__(self):
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=DOMAIN)
+        self.node = rclpy.create_node('namo_sim_test_client', context=self.context)
+        self.lock = threading.RLock()
+        self.states = []          # (stamp s, positions by name)
+        self.reports = []
+        self.pubs = {c: self.node.create_publisher(JointTrajectory,
+                                                   f'/{c}/joint_trajectory', 10)
+                     for c in ('right_arm_controller', 'left_arm_controller')}
+        self.stick_pub = self.node.create_publisher(JointState, '/namo_sim/stick', 10)
+        self.release_pub = self.node.create_publisher(JointState, '/namo_sim/release', 10)
+        self.node.create_subscription(JointState, '/joint_states', self._on_state, 100)
+        self.node.create_subscription(DiagnosticArray, '/namo_sim/contacts',
+                                      self._on_report, 10)
+        self.reset_client = self.node.create_client(Trigger, '/namo_sim/reset_contacts')
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _spin(self):
+        try:
+            self.executor.spin()
+        except Exception:  # noqa: B902 - the context is shut down at the end
+            pass
+
+    def close(self):
+        self.executor.shutdown(timeout_sec=2.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self.thread.join(timeout=5.0)
+
+    def _on_state(self, msg):
+        with self.lock:
+            self.states.append((seconds(msg.header.stamp),
+                                dict(zip(msg.name, msg.position)),
+                                dict(zip(msg.name, msg.velocity))))
+
+    def _on_report(self, msg):
+        values = {kv.key: kv.value for kv in msg.status[0].values}
+        with self.lock:
+            self.reports.append((time.monotonic(), values))
+
+    def now(self):
+        return self.node.get_clock().now().nanoseconds * 1e-9
+
+    def wait(self, predicate, what, timeout=TIMEOUT):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            with self.lock:
+                value = predicate()
+            if value:
+                return value
+            time.sleep(0.02)
+        raise AssertionError(f'timed out waiting for {what}')
+
+    def latest(self):
+        with self.lock:
+            return self.states[-1][1] if self.states else None
+
+    def states_between(self, t0, t1):
+        with self.lock:
+            return [s for s in self.states if t0 <= s[0] <= t1]
+
+    def send(self, controller, msg):
+        pub = self.pubs[controller]
+        self.wait(lambda: pub.get_subscription_count() > 0, f'{controller} subscriber')
+        pub.publish(msg)
+
+    def report_after(self, moment):
+        """Return the first ~/contacts values received after ``moment`` (monotonic)."""
+        def find():
+            for t, values in self.reports:
+                if t > moment:
+                    return values
+            return None
+        return self.wait(find, 'a ~/contacts report')
+
+    def reset_contacts(self):
+        assert self.reset_client.wait_for_service(timeout_sec=TIMEOUT)
+        done = threading.Event()
+        future = self.reset_client.call_async(Trigger.Request())
+        future.add_done_callback(lambda _: done.set())
+        assert done.wait(TIMEOUT)
+        assert future.result().success
+
+
+@pytest.fixture(scope='module')
+def sim():
+    process = NodeProcess(DOMAIN, command=sim_command())
+    client = SimClient()
+    try:
+        client.wait(lambda: client.states, 'the first /joint_states')
+        yield process, client
+    finally:
+        client.close()
+        code = process.stop()
+        assert code == 0, process.describe()
+        assert 'Traceback' not in process.stderr + process.stdout
+
+
+@pytest.fixture
+def client(sim):
+    process, client = sim
+    assert process.alive(), process.describe()
+    yield client
+    assert process.alive(), process.describe()
+
+
+def move_to(client, q_right, q_left=None, duration=1.0):
+    """Send both arms to a pose (zero stamp) and wait until they are there."""
+    client.send('right_arm_controller', trajectory(RIGHT, [(duration, q_right)]))
+    if q_left is not None:
+        client.send('left_arm_controller', trajectory(LEFT, [(duration, q_left)]))
+    target = dict(zip(RIGHT, q_right))
+    if q_left is not None:
+        target.update(zip(LEFT, q_left))
+
+    def there():
+        state = client.states[-1][1] if client.states else {}
+        return all(abs(state.get(n, 1e9) - v) < math.radians(0.5) for n, v in target.items())
+    client.wait(there, 'the arms to reach the pose', timeout=duration + 10.0)
+
+
+def test_joint_states_name_all_14_joints_with_velocities(client):
+    client.wait(lambda: len(client.states) > 20, 'joint states')
+    with client.lock:
+        stamps = [s[0] for s in client.states[-21:]]
+        last = client.states[-1]
+    assert list(last[1]) == ALL and list(last[2]) == ALL
+    rate = 20 / (stamps[-1] - stamps[0])
+    assert 60.0 < rate < 140.0, f'/joint_states at {rate:.1f} Hz'
+
+
+def test_right_arm_follows_a_trajectory(client):
+    move_to(client, [0.0] * 7)
+    a = np.radians([30, -20, -20, 60, 10, -20, 30])   # clear of the torso
+    b = np.radians([50, -10, 20, 90, -30, 10, 0])
+    start = client.now() + 0.5            # a stamp in the future: the start is known
+    points = [(1.0, a), (2.0, b)]
+    client.send('right_arm_controller', trajectory(RIGHT, points, stamp=start))
+    client.wait(lambda: client.states and client.states[-1][0] > start + 2.6,
+                'the trajectory to end')
+    expected = ActiveTrajectory(
+        Command(tuple(RIGHT), start, tuple(Point(t, tuple(q)) for t, q in points)),
+        RIGHT, start, (np.zeros(7), np.zeros(7)))
+    errors = []
+    for stamp, q, _ in client.states_between(start, start + 2.6):
+        measured = np.array([q[n] for n in RIGHT])
+        errors.append(np.abs(measured - expected.sample(stamp)[0]).max())
+    assert len(errors) > 150
+    worst = math.degrees(max(errors))
+    final = np.array([client.latest()[n] for n in RIGHT])
+    print(f'tracking error over the trajectory: max {worst:.3f} deg, '
+          f'mean {math.degrees(np.mean(errors)):.3f} deg; final '
+          f'{math.degrees(np.abs(final - b).max()):.4f} deg')
+    assert worst < 1.5
+    assert np.abs(final - b).max() < math.radians(0.2)
+    # The left arm was not commanded and stays at rest.
+    assert max(abs(client.latest()[n]) for n in LEFT) < math.radians(0.2)
+
+
+@pytest.mark.parametrize('case, names, points, stamp, reason', [
+    ('unknown joint', RIGHT[:6] + ['right_arm_joint8'], [(1.0, [0.5] * 7)], None,
+     "incoming joint right_arm_joint8 doesn't match"),
+    ("the other arm's joint", RIGHT[:6] + ['left_arm_joint7'], [(1.0, [0.5] * 7)], None,
+     "incoming joint left_arm_joint7 doesn't match"),
+    ('past stamp', RIGHT, [(1.0, [0.5] * 7)], -100.0, 'ends in the past'),
+    ('times not increasing', RIGHT, [(1.0, [0.5] * 7), (1.0, [0.6] * 7)], None,
+     'not strictly increasing'),
+])
+def test_bad_trajectory_is_rejected_with_its_reason(sim, case, names, points, stamp, reason):
+    process, client = sim
+    move_to(client, [0.0] * 7)
+    before = len(process.stderr + process.stdout)
+    stamp_value = client.now() + stamp if stamp is not None else 0.0
+    client.send('right_arm_controller', trajectory(names, points, stamp=stamp_value))
+    client.wait(lambda: 'rejected trajectory' in (process.stderr + process.stdout)[before:],
+                f'the rejection of the {case}')
+    assert reason in (process.stderr + process.stdout)[before:]
+    time.sleep(1.2)      # the trajectory's length: had it run, the arm would have moved
+    assert max(abs(client.latest()[n]) for n in RIGHT) < math.radians(0.2), case
+
+
+def test_stuck_joint_stays_while_commanded_elsewhere(sim):
+    _, client = sim
+    move_to(client, [0.0] * 7)
+    stuck = math.radians(-20.0)
+    msg = JointState(name=['right_arm_joint2'], position=[stuck])
+    client.wait(lambda: client.stick_pub.get_subscription_count() > 0, 'the ~/stick topic')
+    client.stick_pub.publish(msg)
+    client.wait(lambda: abs(client.latest()['right_arm_joint2'] - stuck) < math.radians(1),
+                'the joint to reach its stuck angle')
+    t0 = client.now()
+    target = np.radians([40, 30, 20, 70, 10, 10, 10])
+    client.send('right_arm_controller', trajectory(RIGHT, [(1.5, target)]))
+    client.wait(lambda: client.states[-1][0] > t0 + 2.5, 'the trajectory to end')
+    held = [q['right_arm_joint2'] for _, q, _ in client.states_between(t0, t0 + 2.5)]
+    assert len(held) > 150
+    worst = math.degrees(max(abs(a - stuck) for a in held))
+    print(f'stuck joint: max deviation {worst:.4f} deg from -20 deg')
+    assert worst < 1.0
+    others = [n for n in RIGHT if n != 'right_arm_joint2']
+    final = client.latest()
+    assert all(abs(final[n] - t) < math.radians(0.5)
+               for n, t in zip(RIGHT, target) if n in others)
+    client.release_pub.publish(JointState(name=['right_arm_joint2']))
+    move_to(client, [0.0] * 7)
+
+
+def test_reference_wai_makes_no_self_contact_and_the_torso_does(sim):
+    _, client = sim
+    wai = load_library(ROBOT)['wai']
+    move_to(client, [0.0] * 7, [0.0] * 7)
+    client.reset_contacts()
+    # The reference Wai as a player sends it: each arm to its own controller.
+    times = wai.times
+    right = [(float(t), kf.right) for t, kf in zip(times, wai.keyframes)]
+    left = [(float(t), kf.left) for t, kf in zip(times, wai.keyframes)]
+    client.send('right_arm_controller', trajectory(RIGHT, right))
+    client.send('left_arm_controller', trajectory(LEFT, left))
+    t_end = time.monotonic() + float(times[-1]) + 0.5
+    client.wait(lambda: time.monotonic() > t_end, 'the Wai to end', timeout=times[-1] + 5)
+    report = client.report_after(time.monotonic())
+    assert report['contact_events'] == '0', report
+    assert report['contact_steps'] == '0', report
+    final = client.latest()
+    q_wai = np.concatenate((wai.keyframes[-1].right, wai.keyframes[-1].left))
+    assert max(abs(final[n] - v) for n, v in zip(ALL, q_wai)) < math.radians(0.5)
+    # The counter can count: the right arm swung in against the torso.
+    move_to(client, [0.0] * 7, [0.0] * 7)
+    client.reset_contacts()
+    client.send('right_arm_controller',
+                trajectory(RIGHT, [(1.0, np.radians([0, 40, 0, 0, 0, 0, 0]))]))
+    time.sleep(1.5)
+    report = client.report_after(time.monotonic())
+    assert int(report['contact_events']) >= 1, report
+    assert float(report['max_depth_mm']) > 1.0, report
+    move_to(client, [0.0] * 7, [0.0] * 7)
