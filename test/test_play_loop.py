@@ -37,8 +37,8 @@ def loop(tmp_path_factory):
         yield arms
     finally:
         arms.close()
-        for proc in (player, recovery):
-            code = proc.stop()
+        codes = [proc.stop() for proc in (player, recovery)]    # all stopped, then checked
+        for proc, code in zip((player, recovery), codes):
             assert code == 0, proc.describe()
             assert 'Traceback' not in proc.stderr + proc.stdout, proc.describe()
 

@@ -75,8 +75,8 @@ def loop(tmp_path_factory):
         yield arms
     finally:
         arms.close()
-        for proc in (player, recovery, sim):
-            code = proc.stop()
+        codes = [proc.stop() for proc in (player, recovery, sim)]    # all stopped, then checked
+        for proc, code in zip((player, recovery, sim), codes):
             assert code == 0, proc.describe()
             assert 'Traceback' not in proc.stderr + proc.stdout, proc.describe()
 

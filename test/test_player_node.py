@@ -143,7 +143,7 @@ def test_demo_play_runs_the_loop_step_by_step(tmp_path, monkeypatch):
     fake = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'fake_sim_node.py')
     monkeypatch.setattr(player_commands, 'sim_command', lambda: [sys.executable, fake])
     out = io.StringIO()
-    code = main(['demo-play', '--domain-id', str(DOMAIN + 3), '--plot', str(tmp_path)], out)
+    code = main(['demo-play', '--domain-id', str(DOMAIN + 4), '--plot', str(tmp_path)], out)
     text = out.getvalue()
     assert code == 0, text
     assert 'FAILURE' in text.split('4. play:')[1].split('\n')[0]
@@ -152,3 +152,27 @@ def test_demo_play_runs_the_loop_step_by_step(tmp_path, monkeypatch):
     assert 'success' in text.split('7. play again:')[1].split('\n')[0]
     assert '0 away from -20.00 deg' in text
     assert (tmp_path / 'wai_2_replay.png').is_file()
+
+
+@pytest.mark.parametrize('during_play', [False, True])
+def test_sigterm_exits_cleanly(player, during_play):
+    """SIGTERM to a running player (idle, or in the middle of a play): exit code 0."""
+    import signal
+
+    from std_srvs.srv import Trigger
+    node, arms = player
+    other = NodeProcess(DOMAIN + 3, command=player_command(), env=ros_env(DOMAIN + 3))
+    fake = FakeArms(DOMAIN + 3)
+    try:
+        fake.publish_library(300)
+        client = fake.node.create_client(Trigger, '/gesture_player/play/bye')
+        assert client.wait_for_service(timeout_sec=20.0), other.describe()
+        if during_play:
+            client.call_async(Trigger.Request())
+            fake.wait(lambda: fake.commands or None, 20.0, 'the play to start')
+        code = other.stop(signal.SIGTERM)
+    finally:
+        fake.close()
+        other.stop()
+    assert code == 0, other.describe()
+    assert 'Traceback' not in other.stderr, other.describe()

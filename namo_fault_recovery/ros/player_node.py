@@ -18,7 +18,6 @@ next play waits (``library_wait_sec``) for that new version.
 
 import functools
 import math
-import signal
 import sys
 import threading
 import time
@@ -284,20 +283,26 @@ class GesturePlayer(Node):
 
 def main(args=None):
     """Run the player until Ctrl-C or SIGTERM; return the exit code."""
-    rclpy.init(args=args)
-    signal.signal(signal.SIGTERM, lambda *_: rclpy.try_shutdown())
-    node = None
+    rclpy.init(args=args)      # rclpy's handlers turn SIGINT and SIGTERM into a shutdown
+    node = executor = None
     try:
-        node = GesturePlayer()
         executor = MultiThreadedExecutor(num_threads=3)
+        try:
+            node = GesturePlayer()
+        except ValueError as exc:       # a bad parameter or robot file
+            sys.stderr.write(f'{NODE_NAME}: error: {exc}\n')
+            return 1
         executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except ValueError as exc:
-        sys.stderr.write(f'{NODE_NAME}: error: {exc}\n')
-        return 1
+    except Exception:  # noqa: B902
+        if rclpy.ok():
+            raise          # a genuine error: let it be seen
+        # Otherwise a signal shut ROS down during start-up or while a thread waited.
     finally:
+        if executor is not None:
+            executor.shutdown(timeout_sec=2.0)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
