@@ -33,6 +33,8 @@ _EXPORTS = {
     'COMPONENTS': '.objective.score', 'gesture_targets': '.objective.score',
     'ScoreWeights': '.objective.score', 'SimilarityScore': '.objective.score',
     'Target': '.objective.score',
+    'recover': '.recovery.engine', 'RecoverySettings': '.recovery.engine',
+    'GestureResult': '.recovery.result', 'LibraryResult': '.recovery.result',
 }
 
 __all__ = sorted(_EXPORTS)

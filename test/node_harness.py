@@ -13,6 +13,7 @@ from pathlib import Path
 import shutil
 import signal
 import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -45,6 +46,27 @@ def session_domain(offset):
     """Return this test session's ROS domain id for a module (offset 0..4)."""
     base = int(os.environ.get('NAMO_TEST_DOMAIN_BASE', 1 + (os.getpid() % 20) * 5))
     return base + offset
+
+
+def stress_domain(index):
+    """
+    Return a ROS domain id (index 0..4) for one stress test, apart from the modules' ones.
+
+    The stress tests start a node per test and flood it; a range of their own (102 and
+    up, still below the ids whose ports reach past the ephemeral range) keeps that
+    traffic away from the other modules of this and of parallel sessions.
+    """
+    base = int(os.environ.get('NAMO_TEST_STRESS_DOMAIN_BASE',
+                              102 + (os.getpid() % 20) * 5))
+    return base + index
+
+
+def proc_status_kb(pid, field='VmRSS'):
+    """Return one ``kB`` figure of /proc/<pid>/status (e.g. VmRSS, VmHWM)."""
+    for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+        if line.startswith(field + ':'):
+            return int(line.split()[1])
+    raise KeyError(f'{field} not in /proc/{pid}/status')
 
 
 def ros_env(domain, extra=None):
@@ -108,6 +130,37 @@ class NodeProcess:
         """Return the exit code and output, for assertion messages."""
         return (f'exit code {self.proc.returncode}\n--- stdout\n{self.stdout}'
                 f'\n--- stderr\n{self.stderr}')
+
+    def wait_output(self, text, timeout=TIMEOUT, poll=0.0005):
+        """
+        Return as soon as ``text`` appears in the node's stdout or stderr.
+
+        Reads only what was appended since the last poll, so the caller can act (e.g.
+        SIGKILL) within about a millisecond of the node writing the line.  Raises
+        AssertionError (with the output) on timeout or if the node exits first.
+        """
+        end = time.monotonic() + timeout
+        tails = {}
+        with open(self._out.name, 'rb') as out, open(self._err.name, 'rb') as err:
+            while True:
+                for stream in (out, err):
+                    chunk = stream.read()
+                    if chunk:
+                        tail = tails.get(stream.name, b'') + chunk
+                        if text.encode() in tail:
+                            return
+                        tails[stream.name] = tail[-len(text) - 4096:]
+                if not self.alive():
+                    raise AssertionError(f'the node exited before writing {text!r}\n'
+                                         + self.describe())
+                if time.monotonic() > end:
+                    raise AssertionError(f'the node did not write {text!r} within '
+                                         f'{timeout:.0f} s\n' + self.describe())
+                time.sleep(poll)
+
+    def memory_kb(self, field='VmRSS'):
+        """Return a memory figure of the node process in kB (``VmRSS``, ``VmHWM``...)."""
+        return proc_status_kb(self.proc.pid, field)
 
     def stop(self, sig=signal.SIGTERM, timeout=TIMEOUT):
         """Stop the process with ``sig`` (SIGKILL if it does not exit); return the code."""
@@ -362,3 +415,166 @@ def statuses_values(status):
 def close_to(a, b, tol=1e-12):
     """Return True if two angles agree to ``tol``."""
     return math.isclose(a, b, rel_tol=0.0, abs_tol=tol)
+
+
+class DiagnosticsProbe:
+    """
+    A lean client for flooding tests: raw ``/diagnostics`` sizes, faults, Trigger calls.
+
+    It takes ``/diagnostics`` as serialized bytes (``raw=True``) and keeps only each
+    message's size and its node statuses with every value cut to ``value_chars``, so a
+    node that publishes huge diagnostics is measured without the probe holding them.
+    Its fault publisher is reliable with KEEP_ALL history, so it never drops its own
+    samples however fast they are published.
+    """
+
+    def __init__(self, domain, name='namo_test_probe', value_chars=1000):
+        from rclpy.serialization import deserialize_message
+        self._deserialize = deserialize_message
+        self.value_chars = value_chars
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node(name, context=self.context)
+        self._lock = threading.Condition()
+        self.sizes = []           # byte size of every /diagnostics message, in arrival order
+        self.statuses = []        # (index, {name: {key: value cut at value_chars}})
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 50,
+                                      raw=True)
+        keep_all = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
+                              reliability=ReliabilityPolicy.RELIABLE,
+                              durability=DurabilityPolicy.VOLATILE)
+        self.fault_pub = self.node.create_publisher(JointState, '/actuator_fault', keep_all)
+        self._trigger_clients = {}
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _spin(self):
+        try:
+            self.executor.spin()
+        except Exception:  # noqa: B902 - the context is shut down at the end of a test
+            pass
+
+    def close(self):
+        """Shut the probe down."""
+        self.executor.shutdown(timeout_sec=2.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self._thread.join(timeout=5.0)
+
+    def _on_diag(self, data):
+        msg = self._deserialize(data, DiagnosticArray)
+        cut = self.value_chars
+        decoded = {s.name[len(NODE_PREFIX):]: {kv.key[:cut]: kv.value[:cut] for kv in s.values}
+                   for s in msg.status if s.name.startswith(NODE_PREFIX)}
+        del msg
+        with self._lock:
+            self.sizes.append(len(data))
+            if decoded:
+                self.statuses.append((len(self.sizes) - 1, decoded))
+            self._lock.notify_all()
+
+    def wait_statuses(self, predicate, timeout=TIMEOUT, since=0, what='diagnostics'):
+        """Wait for a node diagnostics message (index >= since) matching ``predicate``."""
+        end = time.monotonic() + timeout
+        with self._lock:
+            while True:
+                for index, statuses in reversed(self.statuses):
+                    if index >= since and predicate(statuses):
+                        return statuses
+                remaining = end - time.monotonic()
+                if remaining <= 0:
+                    raise AssertionError(f'timed out after {timeout:.0f} s waiting for {what}')
+                self._lock.wait(min(remaining, 0.1))
+
+    def count(self):
+        """Return how many /diagnostics messages arrived so far."""
+        with self._lock:
+            return len(self.sizes)
+
+    def wait_count(self, count, timeout=TIMEOUT):
+        """Wait until at least ``count`` /diagnostics messages arrived; return the count."""
+        end = time.monotonic() + timeout
+        with self._lock:
+            while len(self.sizes) < count:
+                remaining = end - time.monotonic()
+                if remaining <= 0:
+                    break
+                self._lock.wait(min(remaining, 0.1))
+            return len(self.sizes)
+
+    def latest(self):
+        """Return the (cut) statuses of the newest node diagnostics message, or {}."""
+        with self._lock:
+            return self.statuses[-1][1] if self.statuses else {}
+
+    def trigger(self, name, timeout=TIMEOUT):
+        """Call a std_srvs/Trigger service; return the response, or None without answer."""
+        client = self._trigger_clients.get(name)
+        if client is None:
+            client = self._trigger_clients[name] = self.node.create_client(Trigger, name)
+        if not client.wait_for_service(timeout_sec=timeout):
+            raise AssertionError(f'service {name} is not available')
+        done = threading.Event()
+        future = client.call_async(Trigger.Request())
+        future.add_done_callback(lambda _: done.set())
+        return future.result() if done.wait(timeout) else None
+
+
+_BARE_SUBSCRIBER = """
+import signal, sys, threading
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+rclpy.init()
+node = rclpy.create_node('namo_test_bare_subscriber')
+count = [0]
+qos = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
+                 reliability=ReliabilityPolicy.RELIABLE)
+node.create_subscription(JointState, sys.argv[1], lambda msg: count.__setitem__(0, count[0] + 1),
+                         qos)
+stop = threading.Event()
+signal.signal(signal.SIGTERM, lambda *_: stop.set())
+executor = SingleThreadedExecutor()
+executor.add_node(node)
+print('ready', flush=True)
+while not stop.is_set():
+    executor.spin_once(timeout_sec=0.05)
+print(count[0], flush=True)
+"""
+
+
+class BareSubscriber:
+    """
+    A control process: a plain rclpy subscription (reliable, KEEP_ALL) that does nothing.
+
+    Its resident memory shows what DDS and rclpy themselves keep after receiving some
+    traffic (receive buffers, payload pools), so a test can tell the node's own growth
+    from the transport's.  ``count()`` stops it and returns how many messages it took.
+    """
+
+    def __init__(self, domain, topic='/actuator_fault'):
+        self.proc = subprocess.Popen([sys.executable, '-c', _BARE_SUBSCRIBER, topic],
+                                     stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                                     env=ros_env(domain))
+        line = self.proc.stdout.readline()
+        if line.strip() != b'ready':
+            self.proc.kill()
+            raise AssertionError('the bare subscriber did not start')
+
+    def memory_kb(self, field='VmRSS'):
+        """Return a memory figure of the control process in kB."""
+        return proc_status_kb(self.proc.pid, field)
+
+    def count(self):
+        """Stop the process; return how many messages it received."""
+        self.proc.send_signal(signal.SIGTERM)
+        try:
+            out, _ = self.proc.communicate(timeout=TIMEOUT)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.communicate()
+            return None
+        return int(out.split()[-1])

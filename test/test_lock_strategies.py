@@ -1,7 +1,10 @@
 """Lock strategies, left/right symmetry and staged bimanual expansion."""
 
+from namo_fault_recovery.optimize.base import Clock
+from namo_fault_recovery.recovery.engine import recover, RecoverySettings
 from namo_fault_recovery.recovery.keyframes import reconfigure_library
-from namo_fault_recovery.recovery.locks import resolve_locks
+from namo_fault_recovery.recovery.locks import clamp_lock, resolve_locks
+from namo_fault_recovery.recovery.motion import adapt_library
 import numpy as np
 import pytest
 
@@ -88,3 +91,83 @@ def test_stage_two_never_worse_than_stage_one(robot, library, joint):
 def test_bimanual_mode_is_checked(robot, library):
     with pytest.raises(ValueError, match="unknown bimanual mode 'both'"):
         reconfigure_library(robot, library, {'right_arm_joint1': None}, bimanual='both')
+
+
+def test_lock_within_the_tolerance_beyond_a_limit_is_clamped_exactly(robot, library):
+    upper = float(robot.arms['right'].upper[0])
+    lower = float(robot.arms['right'].lower[0])
+    locks, _ = resolve_locks(robot, library, {'right_arm_joint1': upper + 5e-10})
+    assert locks['right_arm_joint1'] == upper
+    assert clamp_lock(robot, 'left_arm_joint1', lower - 5e-10) == lower
+    assert clamp_lock(robot, 'left_arm_joint1', 0.25) == 0.25
+    measured, _ = resolve_locks(robot, library, {'right_arm_joint2': None}, 'measured',
+                                {'right_arm_joint2': lower - 5e-10})
+    assert measured['right_arm_joint2'] == float(robot.arms['right'].lower[1])
+
+
+@pytest.mark.parametrize('method', ['kriging', 'per_point', 'auto'])
+def test_every_published_angle_is_within_its_limits_bit_for_bit(
+        robot, product_library, method):
+    # A lock at pi + 5e-10 is accepted (within robot.within_limits' 1e-9 tolerance);
+    # nothing the engine outputs may lie beyond +-pi, Kriging-interpolated points included.
+    side, j = 'right', 3
+    joint = robot.arms[side].joint_names[j]
+    upper = float(robot.arms[side].upper[j])
+    settings = RecoverySettings(trajectory_method=method)
+    res = recover(robot, product_library, {joint: upper + 5e-10}, settings, seed=0,
+                  clock=Clock(None))
+    assert res.locks[joint] == upper
+    lower = np.concatenate([robot.arms[s].lower for s in ('right', 'left')])
+    high = np.concatenate([robot.arms[s].upper for s in ('right', 'left')])
+    count = 0
+    for g in res.gestures:
+        q = np.array(g.positions)
+        assert np.all(q >= lower) and np.all(q <= high), g.name
+        assert np.all(q[:, j] == upper), g.name
+        count += q.size
+    assert count > 14 * 100   # the circle's 100 points are among them
+
+
+def test_optimal_is_never_worse_than_average_on_the_final_library(robot, library):
+    # The node's settings (collision on, bimanual auto, trajectory auto), no deadline.
+    for joint in ('right_arm_joint3', 'left_arm_joint2'):
+        totals = {}
+        for strategy in ('average', 'optimal'):
+            res = recover(robot, library, {joint: None},
+                          RecoverySettings(lock_strategy=strategy), seed=0,
+                          clock=Clock(None))
+            totals[strategy] = sum(g.score_after for g in res.gestures)
+            assert any('optimal lock' in n for n in res.notes) == (
+                strategy == 'optimal')
+        assert totals['optimal'] <= totals['average'] + 1e-9, joint
+
+
+def test_optimal_engine_includes_the_start_and_solves_it_as_the_fixed_run(robot, library):
+    # On the engine's own problem (collision term, stage 2, stay_close), the start lock
+    # is solved exactly as the fixed-lock run solves it, so optimal ties or wins.
+    joint = 'right_arm_joint2'
+    kw = {'seed': 3, 'bimanual': 'auto', 'collision': True, 'stay_close': 1e-3,
+          'deadline': None}
+    start = {joint: 0.3}
+    fixed = reconfigure_library(robot, library, start, **kw)
+    optimal = reconfigure_library(robot, library, {joint: None}, lock_strategy='optimal',
+                                  lock_start=start, **kw)
+    assert optimal.total_score <= fixed.total_score
+    assert any('at the start 17.19 deg' in n for n in optimal.notes)
+    if optimal.locks[joint] == 0.3:
+        assert optimal.total_score == fixed.total_score
+
+
+def test_optimal_in_adapt_library_keeps_the_better_of_average_and_its_choice(
+        robot, product_library):
+    faults = {'right_arm_joint3': None}
+    kw = {'method': 'kriging', 'deadline': None, 'seed': 0, 'collision': True,
+          'bimanual': 'auto'}
+    average = adapt_library(robot, product_library, faults, **kw)
+    optimal = adapt_library(robot, product_library, faults, lock_strategy='optimal', **kw)
+
+    def total(res):
+        return sum(g.score_max for g in res.gestures)
+    assert total(optimal) <= total(average)
+    note = [n for n in optimal.notes if n.startswith('optimal lock')]
+    assert len(note) == 1 and 'average lock' in note[0]

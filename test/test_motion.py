@@ -7,6 +7,7 @@ from namo_fault_recovery.model.kinematics import forward_kinematics
 from namo_fault_recovery.model.trajectory_csv import load_trajectory_csv
 from namo_fault_recovery.objective.collision import CollisionModel
 from namo_fault_recovery.objective.score import gesture_targets
+from namo_fault_recovery.optimize.base import Clock
 from namo_fault_recovery.recovery import motion as motion_module
 from namo_fault_recovery.recovery.kriging import fit_spherical, OrdinaryKriging
 from namo_fault_recovery.recovery.kriging import SphericalVariogram, variogram_cloud
@@ -148,6 +149,51 @@ def test_vq_needs_more_points_for_a_tighter_threshold(robot, product_library):
     tips = forward_kinematics(robot, g.joint_matrix()[:, :7]).tip
     ks = [quantise(np.degrees(g.joint_matrix()), t, tips, seed=0).k for t in (120, 60, 20)]
     assert ks[0] < ks[1] < ks[2]
+
+
+def test_vq_out_of_time_explores_every_point_and_says_so(robot, product_library):
+    g = product_library['circle']
+    tips = forward_kinematics(robot, g.joint_matrix()[:, :7]).tip
+    x = np.degrees(g.joint_matrix())
+    # An expired clock: the search stops after K = 1 (never before a first try).
+    q = quantise(x, 1.0, tips, seed=0, clock=Clock(0.0))
+    assert 'stopped at K = 1' in q.note and 'deadline' in q.note
+    assert q.k == len(np.unique(x, axis=0)) and q.distortion == 0.0 <= q.threshold
+    np.testing.assert_array_equal(q.typical[q.labels], np.arange(len(x)))
+    # With time enough (no clock), the search ends on its own and says nothing.
+    assert quantise(x, 60.0, tips, seed=0).note == ''
+
+
+def test_typical_points_within_a_tiny_budget_still_give_a_library(robot, product_library):
+    # vq_distortion_mm 1.0 with two faults took 2.5 s against a 1 s deadline: the
+    # typical-point search now stops when its share of the clock is spent.
+    typ = typical_points(robot, product_library, 1.0, clock=Clock(0.0))
+    assert typ['circle'].note.startswith('circle: the search for typical points stopped')
+    assert typ['circle'].k == 100 and typ['wai'] is None
+    faults = {'right_arm_joint2': None, 'left_arm_joint4': None}
+    res = adapt_library(robot, product_library, faults, method='kriging', distortion_mm=1.0,
+                        clock=Clock(0.0), seed=0)
+    assert res.notes[0] == typ['circle'].note
+    assert [g.name for g in res.gestures] == [g.name for g in product_library]
+    for g, ref in zip(res.gestures, product_library):
+        q = np.array([kf.positions() for kf in g.keyframes])
+        assert q.shape == (len(ref.keyframes), 14) and np.isfinite(q).all()
+    assert res['circle'].typical == tuple(range(100))
+    assert not res.deadline_met     # the search had no time: it says so per motion
+    assert res.locks['right_arm_joint2'] == pytest.approx(
+        product_library.lock_averages('right')[1], abs=1e-12)
+
+
+def test_the_caller_clock_owns_deadline_and_cancel(robot, circle):
+    with pytest.raises(ValueError, match='cancel flag in the clock'):
+        adapt_library(robot, circle, {ELBOW: 0.0}, clock=Clock(None), cancel=lambda: False)
+    res = adapt_library(robot, circle, {ELBOW: 0.0}, method='kriging', seed=0,
+                        clock=Clock(None, cancel=lambda: True))
+    assert res.cancelled and res['circle'].status == 'cancelled'
+    assert res.deadline is None
+    timed = adapt_library(robot, circle, {ELBOW: 0.0}, method='kriging', seed=0,
+                          clock=Clock(30.0))
+    assert timed.deadline == pytest.approx(30.0)
 
 
 def test_vq_rejects_bad_input():

@@ -103,6 +103,37 @@ def test_cancel_stops_the_run():
     assert res.status == STATUS_CANCELLED and np.isfinite(res.fun)
 
 
+def test_clock_child_never_ends_after_its_parent():
+    flag = []
+    parent = Clock(50.0, cancel=lambda: bool(flag))
+    child = parent.child(reserve=0.03)
+    assert child.end == pytest.approx(parent.end - 0.03, abs=1e-9) and child.end < parent.end
+    half = parent.child(share=0.5, reserve=0.03)
+    assert half.end < child.end
+    assert child.child(share=1.0).end <= child.end
+    # A reserve never takes more than half of what is left.
+    short = Clock(10.0)
+    kept = short.child(reserve=100.0)
+    assert short.end - kept.end == pytest.approx(kept.end - kept.start, abs=1e-3)
+    # The cancel flag is shared; a clock without a deadline has children without one.
+    flag.append(1)
+    assert child.expired() and child.reason == STATUS_CANCELLED
+    assert Clock(None).child(share=0.1, reserve=1.0).end is None
+    with pytest.raises(ValueError, match='share'):
+        parent.child(share=1.5)
+
+
+def test_minimize_runs_on_the_callers_clock():
+    res = minimize(sphere_problem(), ABC(max_cycles=10 ** 6), clock=Clock(0.0), seed=0)
+    assert res.status == STATUS_DEADLINE and np.isfinite(res.fun)
+    clock = Clock(None, cancel=lambda: True)
+    res = minimize(sphere_problem(), ABC(max_cycles=10 ** 6), clock=clock, seed=0)
+    assert res.status == STATUS_CANCELLED
+    assert clock.reason == STATUS_DONE     # the caller's clock is left untouched
+    with pytest.raises(ValueError, match='either clock or deadline'):
+        minimize(sphere_problem(), ABC(), deadline=1.0, clock=Clock(None))
+
+
 def test_polish_walks_to_the_floor():
     problem = sphere_problem(batch=2)
     start = problem.random(np.random.default_rng(0), 3)

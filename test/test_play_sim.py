@@ -14,8 +14,9 @@ import math
 import os
 
 from diagnostic_msgs.msg import DiagnosticArray
-from namo_fault_recovery.cli.player_commands import player_command, sim_command
+from namo_fault_recovery.cli.player_commands import player_command
 from namo_fault_recovery.objective.score import ScoreWeights, SimilarityScore
+from namo_fault_recovery.ros.sim_node import sim_command
 from node_harness import NodeProcess, ros_env, TIMEOUT
 import numpy as np
 from player_harness import LIBRARY, NAMES, Recorder, ROBOT

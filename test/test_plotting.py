@@ -3,9 +3,8 @@
 import io
 import sys
 
-from namo_fault_recovery.benchmarks import plotting
+from namo_fault_recovery.benchmarks import common, plotting
 from namo_fault_recovery.cli.main import main
-from namo_fault_recovery.recovery.keyframes import reconfigure_library
 from namo_fault_recovery.resources import config_path, PAPER_GESTURE_FILE
 import numpy as np
 import pytest
@@ -32,8 +31,10 @@ def test_plot_command_writes_png(tmp_path):
 
 
 def test_plot_function_one_arm_explicit_lock(robot, library, tmp_path):
-    report = reconfigure_library(robot, library, {'right_arm_joint4': np.radians(60.0)},
-                                 seed=0, gestures=['salute'])
+    report = common.run_recover(robot, library, {'right_arm_joint4': np.radians(60.0)},
+                                seed=0, gestures=['salute'])
+    assert report.names == ('salute',)
+    assert report['salute'].positions[0][3] == pytest.approx(np.radians(60.0))
     path = plotting.plot_reconfiguration(robot, library, report, 'salute',
                                          tmp_path / 'sub' / 'salute.png')
     assert _is_png(path)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from namo_fault_recovery.cli.main import main
 from namo_fault_recovery.objective.score import gesture_targets, SimilarityScore
+from namo_fault_recovery.optimize.base import Clock
 from namo_fault_recovery.recovery.keyframes import reconfigure_library
 from namo_fault_recovery.resources import config_path, PAPER_GESTURE_FILE
 import numpy as np
@@ -119,6 +120,23 @@ def test_deadline_status_and_finite_result(robot, library):
     _check_locks(robot, report)
 
 
+def test_the_callers_clock_owns_the_deadline_and_the_cancel_flag(robot, library):
+    faults = {'right_arm_joint2': 0.1}
+    free = reconfigure_library(robot, library, faults, deadline=None, seed=5)
+    same = reconfigure_library(robot, library, faults, clock=Clock(None), seed=5)
+    assert [g.keyframes[0].positions().tolist() for g in same.gestures] == \
+        [g.keyframes[0].positions().tolist() for g in free.gestures]
+    assert same.deadline is None
+    cut = reconfigure_library(robot, library, faults, clock=Clock(0.0), seed=5)
+    assert all(g.status == 'deadline' for g in cut.gestures) and cut.deadline == 0.0
+    _check_locks(robot, cut)
+    stopped = reconfigure_library(robot, library, faults, seed=5,
+                                  clock=Clock(None, cancel=lambda: True))
+    assert stopped.cancelled
+    with pytest.raises(ValueError, match='cancel flag in the clock'):
+        reconfigure_library(robot, library, faults, clock=Clock(None), cancel=lambda: True)
+
+
 def test_gradient_matches_finite_differences(robot, library):
     scorer = SimilarityScore(robot, [t for g in library for t in gesture_targets(g)])
     rng = np.random.default_rng(4)
@@ -142,14 +160,24 @@ def test_cli_solve_json_schema(robot):
                  '--fault', 'right_arm_joint2', '--fault', 'left_arm_joint1=20',
                  '--seed', '3', '--json'], out)
     doc = json.loads(out.getvalue())
-    assert code == 0 and doc['schema'] == 'namo_fault_recovery.solve/1'
-    assert doc['faults']['left_arm_joint1'] == pytest.approx(20.0)
-    assert doc['faults']['right_arm_joint2'] == pytest.approx(-14.25)
+    assert code == 0 and doc['schema'] == 'namo_fault_recovery.solve/2'
+    assert doc['faults'] == {'right_arm_joint2': None,
+                             'left_arm_joint1': pytest.approx(np.radians(20.0))}
+    assert doc['locks_deg']['left_arm_joint1'] == pytest.approx(20.0)
+    assert doc['locks_deg']['right_arm_joint2'] == pytest.approx(-14.25)
+    assert doc['seed'] == 3
+    # The node's defaults, named as its parameters.
+    assert doc['settings']['optimizer'] == 'abc' and doc['settings']['collision_check']
+    assert doc['settings']['deadline_sec'] == 1.0 and doc['deadline'] == 1.0
     assert [g['name'] for g in doc['gestures']] == ['wai', 'bye', 'salute', 'side_invite']
+    assert doc['total_score'] == pytest.approx(sum(g['score_after'] for g in doc['gestures']))
     for g in doc['gestures']:
-        assert {'name', 'right_deg', 'left_deg', 'score_before', 'score_after', 'wall_time_s',
-                'status', 'lock_deg', 'stage', 'collides'} <= set(g)
-        assert g['right_deg'][1] == pytest.approx(-14.25)
+        assert {'name', 'times', 'positions', 'score_before', 'score_after', 'wall_time',
+                'status', 'stage', 'stage1_score', 'free_joints', 'nfev', 'collides',
+                'breakdown'} <= set(g)
+        assert all(len(p) == 14 for p in g['positions'])
+        assert g['positions'][0][1] == pytest.approx(np.radians(-14.25))
+        assert g['positions'][0][7] == pytest.approx(np.radians(20.0))
         assert g['score_after'] <= g['score_before']
 
 
@@ -166,8 +194,10 @@ def test_cli_solve_text_and_errors(capsys):
                            "unknown gesture 'hug'"),
                           (['solve', '--fault', 'right_arm_joint1', '--algorithm', 'pso'],
                            'invalid choice'),
-                          (['solve', '--fault', 'right_arm_joint1', '--deadline', '0'],
-                           '--deadline')):
+                          (['solve', '--fault', 'right_arm_joint1', '--deadline', '-1'],
+                           '--deadline-sec'),
+                          (['solve', '--fault', 'right_arm_joint1', '--vq-distortion-mm',
+                            '0'], '--vq-distortion-mm: expected a finite number > 0, got 0.0')):
         assert main(argv, io.StringIO()) == 2
         err = capsys.readouterr().err
         assert message in err and err.count('\n') == 1

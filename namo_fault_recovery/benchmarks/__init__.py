@@ -9,7 +9,14 @@ These are commands, not timed tests (``namo-recovery bench ...``).  Each module 
 - :mod:`.optimum`: the best-known optimum of every case by dense multistart local
   search, stored in ``config/best_known_optima.yaml``, and every algorithm's gap to it;
 - :mod:`.speed`: whole-library time and quality of our default against the paper ABC;
-- :mod:`.deadline`: the worst deadline overrun, idle and with a CPU burner.
+- :mod:`.deadline`: the worst deadline overrun, idle and with a CPU burner;
+- :mod:`.beyond`, :mod:`.motion`: the extensions beyond the paper, whole motions.
+
+Every library they need comes from the engine's entry point, ``recover()``, through
+:func:`.common.run_recover` with explicit settings (:data:`.common.PAPER_SETTINGS` for
+the paper's problem), and they read its ``LibraryResult``.  Only the paper's per-case
+runs (:func:`.common.run_gesture`) and the optimum search solve the keyframe problem
+directly, as the paper reports the optimiser's own best.
 """
 
 from .optimum import BEST_KNOWN_FILE, load_best_known

@@ -3,8 +3,10 @@ Benchmarks of what goes beyond the paper: lock strategies, double faults, stage 
 
 Each prints its figures and writes a JSON document of them.
 
-All of them run the real ``reconfigure_library`` code path on the packaged Namo model,
-with fixed seeds, and the default ABC unless told otherwise.
+All of them run the real engine, ``recover()``, on the paper's problem
+(:data:`~.common.PAPER_SETTINGS`: the packaged Namo model, the Table 2 poses, no collision
+term, the faulted arm alone) with a 1 s deadline, fixed seeds and the default ABC,
+changing only the setting each benchmark is about.
 """
 
 from itertools import combinations
@@ -13,9 +15,15 @@ import time
 import numpy as np
 
 from . import common
-from ..recovery.keyframes import reconfigure_library
 
 GESTURES = ('wai', 'bye', 'salute', 'side_invite')
+DEADLINE = 1.0
+
+
+def _recover(robot, library, faults, seed, gestures=None, deadline=DEADLINE, **changes):
+    return common.run_recover(robot, library, faults,
+                              common.PAPER_SETTINGS.with_changes(**changes), seed=seed,
+                              deadline=deadline, gestures=gestures)
 
 
 def _right_joints(robot):
@@ -29,8 +37,8 @@ def bench_lock(out, out_dir, seeds=3, robot=None, library=None, joints=None):
     for joint in joints or _right_joints(robot):
         entry = {'joint': joint}
         for strategy in ('average', 'optimal'):
-            runs = [reconfigure_library(robot, library, {joint: None}, seed=s,
-                                        lock_strategy=strategy) for s in range(seeds)]
+            runs = [_recover(robot, library, {joint: None}, s, lock_strategy=strategy)
+                    for s in range(seeds)]
             best = min(runs, key=lambda r: r.total_score)
             entry[strategy] = {
                 'lock_deg': float(np.degrees(best.locks[joint])),
@@ -64,8 +72,7 @@ def bench_pairs(out, out_dir, seed=0, robot=None, library=None, deadline=1.0):
     robot, library = robot or common.models()[0], library or common.models()[1]
     rows, doc = [], []
     for a, b in combinations(_right_joints(robot), 2):
-        rep = reconfigure_library(robot, library, {a: None, b: None}, seed=seed,
-                                  deadline=deadline)
+        rep = _recover(robot, library, {a: None, b: None}, seed, deadline=deadline)
         scores = {g.name: g.score_after for g in rep.gestures}
         doc.append({'faults': [a, b], 'scores': scores,
                     'before': {g.name: g.score_before for g in rep.gestures},
@@ -95,8 +102,7 @@ def bench_bimanual(out, out_dir, seeds=3, robot=None, library=None):
     for joint in _right_joints(robot):
         s1, s2 = [], []
         for s in range(seeds):
-            rep = reconfigure_library(robot, library, {joint: None}, seed=s, gestures=['wai'],
-                                      bimanual='on')
+            rep = _recover(robot, library, {joint: None}, s, gestures=['wai'], bimanual='on')
             s1.append(rep['wai'].stage1_score)
             s2.append(rep['wai'].score_after)
         b1, b2 = min(s1), min(s2)
@@ -120,9 +126,8 @@ def bench_collision(out, out_dir, seed=0, robot=None, library=None, png=True):
     cost, doc = [], []
     start = time.monotonic()
     for faults in fault_sets:
-        plain = reconfigure_library(robot, library, dict.fromkeys(faults), seed=seed)
-        aware = reconfigure_library(robot, library, dict.fromkeys(faults), seed=seed,
-                                    collision=True)
+        plain = _recover(robot, library, dict.fromkeys(faults), seed)
+        aware = _recover(robot, library, dict.fromkeys(faults), seed, collision_check=True)
         checked = _check(robot, library, plain)   # the plain result, same capsule model
         counts['plain'] += sum(checked)
         for g_plain, g_col, hit in zip(plain.gestures, aware.gestures, checked):
@@ -145,10 +150,9 @@ def bench_collision(out, out_dir, seed=0, robot=None, library=None, png=True):
         out.write(f'  score cost where the plain result collided: median {np.median(hit):.3f},'
                   f' max {hit.max():.3f}\n')
     out.write(f'  score cost over all results: mean {cost.mean():.4f}\n')
-    fig7g = reconfigure_library(robot, library, {'right_arm_joint6': None}, seed=seed,
-                                collision=True, gestures=['wai'])
-    plain7g = reconfigure_library(robot, library, {'right_arm_joint6': None}, seed=seed,
-                                  gestures=['wai'])
+    fig7g = _recover(robot, library, {'right_arm_joint6': None}, seed, gestures=['wai'],
+                     collision_check=True)
+    plain7g = _recover(robot, library, {'right_arm_joint6': None}, seed, gestures=['wai'])
     hands = _hand_gap(robot, fig7g['wai'].keyframes[0])
     out.write(f'  paper Fig. 7g case (Wai, joint 6): score {fig7g["wai"].score_after:.3f} '
               f'(plain {plain7g["wai"].score_after:.3f}), collides: '

@@ -17,15 +17,20 @@ import time
 
 import numpy as np
 
-from ..model.gestures import load_library
+from ..model.gestures import GestureLibrary, load_library
 from ..model.robot import ARMS, load_robot, N_JOINTS
 from ..objective.score import gesture_targets, SimilarityScore
+from ..optimize.base import Clock
+from ..recovery.engine import recover, RecoverySettings
 from ..recovery.keyframes import PoseProblem
 from ..recovery.locks import resolve_locks
 from ..resources import config_path, PAPER_GESTURE_FILE
 
 DEFAULT_OUT_ROOT = 'bench_out'
 WITHIN = 0.005   # "within 0.5% of the best-known optimum"
+# The paper's problem: the faulted arm alone, no collision term (the gesture file is the
+# paper's Table 2, see :func:`models`).  Everything else is the node's default.
+PAPER_SETTINGS = RecoverySettings(collision_check=False, bimanual='off')
 
 
 @dataclass(frozen=True)
@@ -115,13 +120,41 @@ def lookup_spec(key):
                          f'{", ".join(ALGORITHM_SPECS)}') from None
 
 
+def run_recover(robot, library, faults, settings=PAPER_SETTINGS, *, seed, deadline=None,
+                gestures=None, overrides=None):
+    """
+    Recover ``library`` with :func:`~namo_fault_recovery.recovery.engine.recover`.
+
+    This is how every benchmark asks for a library: ``settings`` (the paper's problem
+    unless told otherwise), ``deadline`` in s (None: no deadline; else it also becomes
+    ``settings.deadline_sec``), ``overrides`` of the optimiser's preset.  ``gestures``
+    names a subset: the library is cut down to it, with the lock angles the whole
+    library would get (the ``average`` is over the whole library).  Returns the
+    :class:`~namo_fault_recovery.recovery.result.LibraryResult`.
+    """
+    if deadline is not None:
+        settings = settings.with_changes(deadline_sec=float(deadline))
+    if gestures is not None:
+        if settings.lock_strategy != 'optimal':
+            faults, _ = resolve_locks(robot, library, faults, settings.lock_strategy)
+        library = GestureLibrary(tuple(library[g] for g in gestures), library.source)
+    return recover(robot, library, faults, settings, seed=int(seed),
+                   clock=Clock(None if deadline is None else float(deadline)),
+                   optimizer_overrides=overrides)
+
+
+def spec_settings(spec, settings=PAPER_SETTINGS):
+    """Return ``settings`` with the optimiser and preset of an :class:`AlgorithmSpec`."""
+    return settings.with_changes(optimizer=spec.algorithm, optimizer_preset=spec.preset)
+
+
 def case_problems(robot, library, gesture, faults, weights=None):
     """
     Build the bounded problem(s) of one gesture under a fault set.
 
     Returns ``(problem, locks)`` where ``problem`` is the :class:`PoseProblem` over the
     gesture's keyframes (targets) with the faulted arms' remaining joints free, built as
-    :func:`namo_fault_recovery.reconfigure.reconfigure_library` builds it.
+    the engine's keyframe stage builds it.
     """
     locks, _ = resolve_locks(robot, library, faults)
     targets = gesture_targets(library[gesture])
@@ -370,8 +403,8 @@ def run_gesture(spec, robot, library, gesture, joint, seed, deadline=None):
     """
     Run one algorithm on one case (one gesture, one failed joint) with one seed.
 
-    The run is the one ``reconfigure_library(..., gestures=[gesture], seed=seed)``
-    makes (same problem, same derived seed), but it keeps the optimiser's own best
+    The run is the one the engine's keyframe stage makes for that gesture alone (same
+    problem, same derived seed), but it keeps the optimiser's own best
     (``score``), as the paper reports it; the engine returns the better of that and the
     locked reference pose (``score_engine``, never above ``score_before``).  The wall
     time is measured around problem construction and search.

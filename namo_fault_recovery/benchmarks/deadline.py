@@ -20,7 +20,6 @@ import time
 import numpy as np
 
 from . import common
-from ..recovery.keyframes import reconfigure_library
 
 DEADLINES = (0.05, 0.1, 0.25, 1.0)
 TARGET_OVERRUN_S = 0.020
@@ -124,9 +123,10 @@ def run_deadline(out, out_dir, deadlines=DEADLINES, reps=10, keys=DEFAULT_KEYS, 
 def _run(robot, library, key, joint, seed, deadline):
     algorithm, preset, settings = UNBOUNDED[key]
     t0 = time.perf_counter()
-    report = reconfigure_library(robot, library, {joint: None}, algorithm=algorithm,
-                                 preset=preset, deadline=deadline, seed=seed,
-                                 settings=settings)
+    report = common.run_recover(robot, library, {joint: None},
+                                common.PAPER_SETTINGS.with_changes(
+                                    optimizer=algorithm, optimizer_preset=preset),
+                                seed=seed, deadline=deadline, overrides=settings)
     wall = time.perf_counter() - t0
     return {'algorithm': key, 'joint': joint, 'seed': seed, 'deadline': deadline,
             'wall': wall, 'engine_wall': float(report.wall_time), 'overrun': wall - deadline,

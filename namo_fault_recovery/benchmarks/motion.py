@@ -9,6 +9,7 @@ per-point one), the wall time, the fingertip error against the designed path (me
 max, mm), the similarity score and the largest joint jump between successive points.
 """
 
+from dataclasses import replace
 import json
 import math
 import os
@@ -17,13 +18,15 @@ import time
 from . import common
 from ..model.gestures import GestureLibrary, load_library
 from ..model.robot import load_robot
-from ..recovery.motion import adapt_library, DEFAULT_DISTORTION_MM
+from ..optimize.base import Clock
+from ..recovery.engine import recover
+from ..recovery.motion import DEFAULT_DISTORTION_MM, typical_points
 
 ELBOW = 'right_arm_joint4'
 SCENARIOS = (
     ('tool 50 mm', {'tool_mm': 50.0}),
     ('tool 100 mm', {'tool_mm': 100.0}),
-    ('elbow locked at 0, no expansion', {'faults': {ELBOW: 0.0}, 'expansion_threshold': 1e9}),
+    ('elbow locked at 0, no expansion', {'faults': {ELBOW: 0.0}, 'expand': False}),
     ('elbow locked at 0, with expansion', {'faults': {ELBOW: 0.0}}),
 )
 MOTIONS = ('circle', 'bye')
@@ -38,12 +41,26 @@ PAPER = {
 }
 
 
-def run_case(robot, gesture, method, seed, min_points, **kwargs):
-    """Adapt one motion alone; return its GestureAdaptation and the wall time (s)."""
+def run_case(robot, gesture, method, seed, min_points, distortion_mm=DEFAULT_DISTORTION_MM,
+             faults=None, tool_mm=0.0, expand=True):
+    """
+    Adapt one motion alone with ``recover()``, without a deadline.
+
+    The settings are the paper's problem (:data:`~.common.PAPER_SETTINGS`) with this
+    ``method``, tool and distortion threshold.  ``min_points`` is passed through the
+    typical points (:func:`~namo_fault_recovery.recovery.motion.typical_points`), and
+    ``expand=False`` drops the gesture's DOF expansion stages.  Returns its
+    :class:`~namo_fault_recovery.recovery.result.GestureResult` and the wall time (s).
+    """
+    if not expand:
+        gesture = replace(gesture, expand=())
     lib = GestureLibrary((gesture,), '<bench>')
+    settings = common.PAPER_SETTINGS.with_changes(trajectory_method=method,
+                                                  tool_length_mm=float(tool_mm),
+                                                  vq_distortion_mm=float(distortion_mm))
     start = time.monotonic()
-    res = adapt_library(robot, lib, method=method, deadline=None, seed=seed,
-                        min_points=min_points, **kwargs)
+    res = recover(robot, lib, faults, settings, seed=seed, clock=Clock(None),
+                  quantisations=typical_points(robot, lib, distortion_mm, min_points))
     return res[gesture.name], time.monotonic() - start
 
 
@@ -74,19 +91,22 @@ def bench_motion(out, out_dir, seed=0, motions=MOTIONS, robot_file=None, gesture
                 pair[method] = g
                 row = {'motion': name, 'scenario': label, 'method': method,
                        'points': len(gesture.keyframes),
-                       'typical': (len(g.typical) if method == 'kriging'
+                       'typical': (g.typical_points if method == 'kriging'
                                    else len(gesture.keyframes)),
                        'nfev': g.nfev, 'wall_ms': 1000 * wall,
                        'tip_error_before_mm': g.tip_error_before_mm,
-                       'tip_error_mean_mm': g.tip_error_mean_mm,
+                       'tip_error_mean_mm': g.tip_error_mm,
                        'tip_error_max_mm': g.tip_error_max_mm,
-                       'recovery_pct': 100 * (1 - g.tip_error_mean_mm
+                       'recovery_pct': 100 * (1 - g.tip_error_mm
                                               / max(g.tip_error_before_mm, 1e-9)),
-                       'score_before': g.score_before, 'score_mean': g.score_mean,
-                       'score_max': g.score_max, 'jump_designed_deg': g.jump_designed_deg,
-                       'jump_before_deg': g.jump_before_deg, 'jump_after_deg': g.jump_after_deg,
+                       'score_before': g.score_before_mean, 'score_mean': g.score_mean,
+                       'score_max': g.score_after,
+                       'jump_designed_deg': g.max_jump_designed_deg,
+                       'jump_before_deg': g.max_jump_before_deg,
+                       'jump_after_deg': g.max_jump_deg,
                        'kriging_sigma_max_deg': max(g.kriging_sigma_deg, default=0.0),
-                       'expansion_stage': g.expansion_stage, 'free_joints': g.free_joints,
+                       'expansion_stage': g.expansion_stage,
+                       'free_joints': list(g.free_joints),
                        'paper': PAPER[label]}
                 rows.append(row)
             base = pair['per_point'].nfev

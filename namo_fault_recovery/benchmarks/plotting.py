@@ -74,8 +74,8 @@ def plot_reconfiguration(robot, library, report, gesture, path, keyframe=0, titl
     """
     Draw the reference (blue) and reconfigured (orange) arms of one gesture to ``path``.
 
-    ``report`` is a :class:`~namo_fault_recovery.reconfigure.LibraryReconfiguration`
-    holding ``gesture``.  Every arm the gesture uses is drawn (both for Wai) as a stick
+    ``report`` is a :class:`~namo_fault_recovery.recovery.result.LibraryResult` holding
+    ``gesture``.  Every arm the gesture uses is drawn (both for Wai) as a stick
     figure shoulder-elbow-wrist-fingertip with its palm normal (a thin line or arrow
     from the middle of the hand), in 3D and in front (y-z) and side (x-z) views, in the
     style of the paper's Figs. 5 and 7.  Returns the path written.
@@ -122,7 +122,8 @@ def plot_reconfiguration(robot, library, report, gesture, path, keyframe=0, titl
     if title is None:
         locks = ', '.join(f'{j} = {math.degrees(a):.2f} deg' for j, a in report.locks.items())
         title = (f'{gesture}: {locks} locked; score {result.score_before:.3f} -> '
-                 f'{result.score_after:.3f} ({report.algorithm}, {result.status}, '
+                 f"{result.score_after:.3f} ({report.settings.get('optimizer', '?')}, "
+                 f'{result.status}, '
                  f'{1000 * result.wall_time:.0f} ms)')
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
@@ -139,7 +140,7 @@ def plot_motion(robot, gesture, adaptation, path, dpi=110):
     The colours follow the second source paper's Fig. 5-7: the desired path in green,
     the unadapted motion on the changed structure as red dots, the adapted motion in
     blue with its explored typical points as circles.  ``adaptation`` is the
-    MotionAdaptation of :func:`namo_fault_recovery.motion.adapt_library`.
+    :class:`~namo_fault_recovery.recovery.result.LibraryResult` holding the motion.
     """
     fig = _figure((7.5, 6.5))
     ax = fig.add_subplot(projection='3d')
@@ -161,11 +162,11 @@ def plot_motion(robot, gesture, adaptation, path, dpi=110):
     ax.plot(*before.T, 'o', color='tab:red', ms=2.5,
             label=f'unadapted (mean error {g.tip_error_before_mm:.0f} mm)')
     ax.plot(*after.T, color='tab:blue', lw=1.5,
-            label=f'adapted, {g.method} (mean error {g.tip_error_mean_mm:.1f} mm)')
+            label=f'adapted, {g.method} (mean error {g.tip_error_mm:.1f} mm)')
     if g.method == 'kriging':
-        typ = after[list(g.typical)]
+        typ = after[list(g.typical_indices)]
         ax.plot(*typ.T, 'o', mfc='none', color='tab:blue', ms=8,
-                label=f'{len(g.typical)} explored typical points')
+                label=f'{len(g.typical_indices)} explored typical points')
     ax.set_xlabel('x (mm)')
     ax.set_ylabel('y (mm)')
     ax.set_zlabel('z (mm)')

@@ -2,7 +2,8 @@
 Whole-library speed and quality of our default ABC against the paper-preset ABC.
 
 For every single right-arm joint failure (locked at the library average) and every
-seed ``seed_base + rep``, the whole 4-gesture library is reconfigured once by our
+seed ``seed_base + rep``, the whole 4-gesture library is recovered (``recover()`` on the
+paper's problem, :data:`~.common.PAPER_SETTINGS`) once by our
 default (with the product deadline) and once by the paper-preset ABC (no deadline, as
 in the paper), alternating which goes first.  The library wall time is measured around
 the call.  Each gesture's score is compared with the best-known optimum
@@ -22,7 +23,6 @@ import time
 import numpy as np
 
 from . import common
-from ..recovery.keyframes import reconfigure_library
 
 TARGET_MEDIAN_S = 0.100
 TARGET_P95_S = 0.200
@@ -33,9 +33,8 @@ KEYS = ('abc-default', 'abc-paper')
 
 def _run(spec, robot, library, joint, seed, deadline):
     t0 = time.perf_counter()
-    report = reconfigure_library(robot, library, {joint: None}, algorithm=spec.algorithm,
-                                 preset=spec.preset, deadline=deadline, seed=int(seed),
-                                 settings=spec.settings_dict() or None)
+    report = common.run_recover(robot, library, {joint: None}, common.spec_settings(spec),
+                                seed=seed, deadline=deadline, overrides=spec.settings_dict())
     outer = time.perf_counter() - t0
     return {'joint': joint, 'seed': int(seed), 'time': outer,
             'engine_time': float(report.wall_time),
@@ -47,9 +46,8 @@ def _run_sequential(spec, robot, library, joint, seed):
     total = 0.0
     for g in library.names:
         t0 = time.perf_counter()
-        reconfigure_library(robot, library, {joint: None}, algorithm=spec.algorithm,
-                            preset=spec.preset, deadline=None, seed=int(seed), gestures=[g],
-                            settings=spec.settings_dict() or None)
+        common.run_recover(robot, library, {joint: None}, common.spec_settings(spec),
+                           seed=seed, gestures=[g], overrides=spec.settings_dict())
         total += time.perf_counter() - t0
     return {'joint': joint, 'seed': int(seed), 'time': total}
 

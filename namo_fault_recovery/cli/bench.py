@@ -143,9 +143,9 @@ def cmd_plot(args, out):
     A single pose is drawn as arm skeletons; a motion (several keyframes) as fingertip
     paths: desired, unadapted and adapted, like the second source paper's Fig. 5-7.
     """
-    from ..benchmarks import plotting
+    from ..benchmarks import common, plotting
     from ..model.gestures import load_library
-    from ..recovery.keyframes import reconfigure_library
+    from ..recovery.engine import RecoverySettings
     robot = _models(args)[0]
     library = load_library(robot, getattr(args, 'gesture_file', None))
     gesture = gesture_and_keyframe(library, args.gesture, args.keyframe)
@@ -160,43 +160,34 @@ def cmd_plot(args, out):
     tag = '_'.join([j.replace('_arm_joint', '') for j in faults]
                    + ([f'tool{args.tool:g}'] if args.tool else []))
     path = Path(args.out) if args.out else Path(f'{gesture.name}_{tag}.png')
+    # The node's settings, with the options given; the gesture alone, locked as the
+    # whole library would be.
+    try:
+        settings = RecoverySettings(optimizer=args.algorithm, optimizer_preset=args.preset,
+                                    trajectory_method=args.method,
+                                    tool_length_mm=float(args.tool))
+        result = common.run_recover(robot, library, faults, settings, seed=args.seed,
+                                    deadline=args.deadline, gestures=[gesture.name])
+    except ValueError as exc:
+        raise _usage(str(exc)) from None
+    g = result[gesture.name]
+    for joint, angle in result.locks.items():
+        out.write(f'lock {joint} = {math.degrees(angle):.2f} deg\n')
     if len(gesture.keyframes) > 1:
-        from ..model.gestures import GestureLibrary
-        from ..recovery.motion import adapt_library
-        try:
-            res = adapt_library(robot, GestureLibrary((gesture,), library.source), faults,
-                                method=args.method, tool_mm=args.tool, seed=args.seed,
-                                deadline=args.deadline, algorithm=args.algorithm,
-                                preset=args.preset)
-        except ValueError as exc:
-            raise _usage(str(exc)) from None
-        g = res[gesture.name]
-        plotting.plot_motion(robot, gesture, res, path)
-        for joint, angle in res.locks.items():
-            out.write(f'lock {joint} = {math.degrees(angle):.2f} deg\n')
+        plotting.plot_motion(robot, gesture, result, path)
         out.write(f'{g.message}\n  fingertip error (mm): unadapted mean '
-                  f'{g.tip_error_before_mm:.1f}; adapted mean {g.tip_error_mean_mm:.1f}, max '
+                  f'{g.tip_error_before_mm:.1f}; adapted mean {g.tip_error_mm:.1f}, max '
                   f'{g.tip_error_max_mm:.1f}; {g.nfev} evaluations, '
-                  f'{1000 * res.wall_time:.0f} ms\n')
-        for note in res.notes:
+                  f'{1000 * result.wall_time:.0f} ms\n')
+        for note in result.notes:
             out.write(f'  note: {note}\n')
         out.write(f'written: {path}\n')
         return 0
-    try:
-        report = reconfigure_library(robot, library, faults, algorithm=args.algorithm,
-                                     preset=args.preset, deadline=args.deadline,
-                                     seed=args.seed, gestures=[gesture.name],
-                                     tool_mm=args.tool)
-    except ValueError as exc:
-        raise _usage(str(exc)) from None
-    plotting.plot_reconfiguration(robot, library, report, gesture.name, path,
+    plotting.plot_reconfiguration(robot, library, result, gesture.name, path,
                                   keyframe=args.keyframe)
-    g = report[gesture.name]
     kf = g.keyframes[args.keyframe]
-    for joint, angle in report.locks.items():
-        out.write(f'lock {joint} = {math.degrees(angle):.2f} deg\n')
     out.write(f'{gesture.name}: score {g.score_before:.4f} -> {g.score_after:.4f} '
-              f'({report.algorithm}, {g.status}, {1000 * g.wall_time:.1f} ms)\n')
+              f'({settings.optimizer}, {g.status}, {1000 * g.wall_time:.1f} ms)\n')
     for side in gesture.arms:
         out.write(f'  {side:5s} reference    (deg) '
                   f'{_deg(gesture.keyframes[args.keyframe].arm(side))}\n')

@@ -5,6 +5,7 @@ Bad arguments get a one-line error and exit code 2, never a traceback.
 """
 
 import json
+import math
 import sys
 
 import numpy as np
@@ -95,79 +96,127 @@ def cmd_score(args, out):
     return 0
 
 
-def solve_document(report, robot):
-    """Return the stable JSON document of a reconfiguration (schema in the README)."""
-    locks_deg = {j: float(np.degrees(a)) for j, a in report.locks.items()}
-    gestures = []
-    for g in report.gestures:
-        frames = [{'time_from_start': kf.time_from_start,
-                   'right_deg': np.degrees(kf.right).round(6).tolist(),
-                   'left_deg': np.degrees(kf.left).round(6).tolist()} for kf in g.keyframes]
-        gestures.append({
-            'name': g.name,
-            'right_deg': frames[0]['right_deg'],
-            'left_deg': frames[0]['left_deg'],
-            'keyframes': frames,
-            'lock_deg': locks_deg,
-            'free_joints': list(g.free_joints),
-            'score_before': g.score_before,
-            'score_after': g.score_after,
-            'breakdown': g.breakdown,
-            'wall_time_s': g.wall_time,
-            'status': g.status,
-            'stage': g.stage,
-            'stage1_score': g.stage1_score,
-            'collides': g.collides,
-            'colliding_pairs': list(g.colliding_pairs),
-        })
-    return {
-        'schema': 'namo_fault_recovery.solve/1',
-        'robot': robot.name,
-        'algorithm': report.algorithm,
-        'preset': report.preset,
-        'seed': report.seed,
-        'deadline_s': report.deadline,
-        'lock_strategy': report.lock_strategy,
-        'faults': locks_deg,
-        'frozen_arms': list(report.frozen_arms),
-        'notes': list(report.notes),
-        'wall_time_s': report.wall_time,
-        'success': report.success,
-        'gestures': gestures,
-    }
+SOLVE_SCHEMA = 'namo_fault_recovery.solve/2'
+
+
+def solve_document(result, robot, library):
+    """
+    Return the JSON document of ``solve``: one :class:`LibraryResult`, as the node has it.
+
+    Schema ``namo_fault_recovery.solve/2``.  Angles in radians, as the node publishes
+    them, unless a key ends in ``_deg``.  Top level:
+
+    - ``schema``; ``robot`` (model name); ``library`` (gesture file read);
+    - ``seed``: the seed of the run (rerun with ``--seed`` for the same library);
+    - ``settings``: the run's settings, named like the node's parameters
+      (``deadline_sec``, ``lock_strategy``, ``optimizer``, ``optimizer_preset``,
+      ``bimanual``, ``collision_check``, ``tool_length_mm``, ``tool_arm``,
+      ``trajectory_method``, ``vq_distortion_mm``, ``continuity_weight``, ``weights``);
+    - ``deadline``: the budget in s (null: no deadline); ``deadline_met``, ``cancelled``,
+      ``success``; ``wall_time`` (s); ``nfev`` (objective evaluations of the run);
+    - ``faults``: joint -> requested lock angle (rad; null: chosen by the strategy);
+      ``locks``: joint -> lock angle used (rad); ``locks_deg``: the same in degrees;
+      ``frozen_arms``; ``notes``; ``tool_mm``, ``tool_arm``;
+    - ``total_score``: the sum of the gestures' ``score_after``;
+    - ``gestures``: one entry per gesture, the fields of
+      :class:`~namo_fault_recovery.recovery.result.GestureResult`: ``name``, ``times``
+      (s) and ``positions`` (per keyframe 14 angles, right arm joints 1-7 then left),
+      ``score_before`` / ``score_after`` (worst keyframe: locks applied and nothing
+      re-optimised / as published), ``score_before_mean`` / ``score_mean``,
+      ``breakdown``, ``status``, ``message``, ``stage``, ``stage1_score``,
+      ``expansion_stage``, ``free_joints``, ``nfev``, ``wall_time``, ``collides``,
+      ``colliding_pairs``, ``method``, ``typical_points``, ``typical_indices``,
+      ``kriging_sigma_deg``, ``tip_error_before_mm``, ``tip_error_mm``,
+      ``tip_error_max_mm``, ``max_jump_designed_deg``, ``max_jump_before_deg`` and
+      ``max_jump_deg``.
+    """
+    doc = {'schema': SOLVE_SCHEMA, 'robot': robot.name, 'library': str(library.source)}
+    doc.update(result.to_dict())
+    doc['locks_deg'] = {j: float(np.degrees(a)) for j, a in result.locks.items()}
+    doc['total_score'] = result.total_score
+    return doc
+
+
+def solve_settings(args):
+    """
+    Return ``(RecoverySettings, clock)`` from the ``solve`` options.
+
+    Options are named like the node's parameters and default to the node's values.
+    ``--deadline-sec 0`` or ``--no-deadline`` runs without a deadline.
+    """
+    from ..optimize.base import Clock
+    from ..recovery.engine import RecoverySettings
+    deadline = args.deadline_sec
+    if not math.isfinite(deadline) or deadline < 0:
+        raise UsageError(f'--deadline-sec: expected a number of seconds >= 0 (0: none), '
+                         f'got {deadline}')
+    no_deadline = args.no_deadline or deadline == 0
+    values = {name: getattr(args, name) for name in SETTING_OPTIONS}
+    if no_deadline:
+        values.pop('deadline_sec')
+    try:
+        settings = RecoverySettings(**values)
+    except ValueError as exc:
+        raise UsageError(f'--{str(exc).replace("_", "-", str(exc).index(":"))}'
+                         if ':' in str(exc) else str(exc)) from None
+    return settings, Clock(None if no_deadline else settings.deadline_sec)
 
 
 def cmd_solve(args, out):
-    """Reconfigure gestures for a fault set and print the result."""
-    from ..recovery.keyframes import reconfigure_library
+    """Recover the library for a fault set with :func:`recover`; print the result."""
+    from dataclasses import replace
+    from ..model.gestures import GestureLibrary
+    from ..recovery.engine import recover
+    from ..recovery.locks import resolve_locks
     robot, library = _load_models(args)
-    faults = parse_faults(robot, args.fault)
-    for name in args.gesture or []:
-        if name not in library.names:
-            raise UsageError(f'--gesture: unknown gesture {name!r}; expected one of '
-                             f'{", ".join(library.names)}')
-    if args.deadline is not None and not (np.isfinite(args.deadline) and args.deadline > 0):
-        raise UsageError(f'--deadline: expected a positive number of seconds, '
-                         f'got {args.deadline}')
+    faults = parse_faults(robot, args.fault or [])
+    settings, clock = solve_settings(args)
+    whole, requested, notes = library, dict(faults), []
+    if args.gesture:
+        for name in args.gesture:
+            if name not in library.names:
+                raise UsageError(f'--gesture: unknown gesture {name!r}; expected one of '
+                                 f'{", ".join(library.names)}')
+        if settings.lock_strategy != 'optimal':
+            # Lock angles as the whole library gets them (the average is over it).
+            try:
+                faults, notes = resolve_locks(robot, whole, faults, settings.lock_strategy)
+            except ValueError as exc:
+                raise UsageError(f'--fault: {exc}') from None
+        library = GestureLibrary(tuple(library[n] for n in dict.fromkeys(args.gesture)),
+                                 library.source)
     try:
-        report = reconfigure_library(
-            robot, library, faults, algorithm=args.algorithm, preset=args.preset,
-            deadline=args.deadline, seed=args.seed, gestures=args.gesture,
-            lock_strategy=args.lock_strategy, bimanual=args.bimanual,
-            collision=not args.no_collision)
+        result = recover(robot, library, faults, settings, seed=args.seed, clock=clock)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    result = replace(result, faults=requested, notes=tuple(notes) + result.notes)
     if args.json:
-        out.write(json.dumps(solve_document(report, robot), indent=2) + '\n')
+        out.write(json.dumps(solve_document(result, robot, library), indent=2) + '\n')
         return 0
-    out.write(f'algorithm {report.algorithm} ({report.preset}), seed {report.seed}, '
-              f'deadline {report.deadline} s, library time {report.wall_time * 1000:.1f} ms\n')
-    out.write('locks (deg): ' + ', '.join(f'{j} = {np.degrees(a):.2f}'
-                                          for j, a in report.locks.items()) + '\n')
-    for note in report.notes:
+    write_solve_text(result, out)
+    return 0
+
+
+def write_solve_text(result, out):
+    """Print a LibraryResult for a person: settings, locks, and every gesture's keyframes."""
+    s = result.settings
+    deadline = 'none' if result.deadline is None else f'{result.deadline:g} s'
+    out.write(f"optimizer {s['optimizer']} ({s['optimizer_preset']}), lock strategy "
+              f"{s['lock_strategy']}, bimanual {s['bimanual']}, collision check "
+              f"{'on' if s['collision_check'] else 'off'}, trajectory method "
+              f"{s['trajectory_method']}, seed {result.seed}, deadline {deadline}, "
+              f'library time {result.wall_time * 1000:.1f} ms, total score '
+              f'{result.total_score:.4f}\n')
+    if result.tool_mm > 0:
+        out.write(f'tool: {result.tool_mm:g} mm in the {result.tool_arm} hand\n')
+    out.write('locks (deg): ' + (', '.join(f'{j} = {np.degrees(a):.2f}'
+                                           for j, a in result.locks.items()) or 'none') + '\n')
+    for note in result.notes:
         out.write(f'note: {note}\n')
-    for g in report.gestures:
+    for g in result.gestures:
         extra = ' stage 2 (both arms)' if g.stage == 2 else ''
+        if g.method != 'keyframes':
+            extra += f' {g.method}'
         if g.collides:
             extra += ' COLLIDES: ' + ', '.join(g.colliding_pairs)
         out.write(f'\n{g.name}: score {g.score_before:.4f} -> {g.score_after:.4f} '
@@ -175,9 +224,66 @@ def cmd_solve(args, out):
         for k, kf in enumerate(g.keyframes):
             out.write(f'  keyframe {k} right (deg) {_fmt_deg(kf.right)}\n')
             out.write(f'  keyframe {k} left  (deg) {_fmt_deg(kf.left)}\n')
-        out.write('  breakdown: ' + ', '.join(f'{c} {v:.3f}' for c, v in g.breakdown.items())
-                  + '\n')
-    return 0
+        if g.breakdown:
+            out.write('  breakdown: ' + ', '.join(f'{c} {v:.3f}'
+                                                  for c, v in g.breakdown.items()) + '\n')
+
+
+# The ``solve`` options that are RecoverySettings fields (and node parameters).
+SETTING_OPTIONS = ('deadline_sec', 'lock_strategy', 'optimizer', 'optimizer_preset',
+                   'bimanual', 'collision_check', 'tool_length_mm', 'tool_arm',
+                   'trajectory_method', 'vq_distortion_mm', 'continuity_weight')
+
+
+def add_solve_parser(sub):
+    """Add ``solve``: options named like the node's parameters, with its defaults."""
+    import argparse
+    from ..model.robot import ARMS
+    from ..optimize import ALGORITHMS, PRESETS
+    from ..recovery.engine import RecoverySettings
+    from ..recovery.keyframes import BIMANUAL_MODES
+    from ..recovery.locks import LOCK_STRATEGIES
+    from ..recovery.motion import METHODS
+    d = RecoverySettings()
+    p = sub.add_parser('solve', help='recover the library for a fault set (as the node does)')
+    p.add_argument('--fault', action='append', metavar='JOINT[=DEG]',
+                   help='a failed joint, optionally with the angle (deg) it is held at; '
+                        'repeat for several (none: the reference library, unless a tool)')
+    p.add_argument('--gesture', action='append', metavar='G',
+                   help='only this gesture (repeatable; default: the whole library); lock '
+                        'angles stay those of the whole library')
+    p.add_argument('--deadline-sec', '--deadline', type=float, default=d.deadline_sec,
+                   metavar='SEC', help=f'budget for the whole library in s (default '
+                                       f'{d.deadline_sec:g}; 0: no deadline)')
+    p.add_argument('--no-deadline', action='store_true', help='run without a deadline')
+    p.add_argument('--lock-strategy', choices=LOCK_STRATEGIES, default=d.lock_strategy)
+    p.add_argument('--optimizer', '--algorithm', choices=sorted(ALGORITHMS),
+                   default=d.optimizer)
+    p.add_argument('--optimizer-preset', '--preset', choices=PRESETS,
+                   default=d.optimizer_preset,
+                   help="'default' (our tuned ABC) or 'paper' (the paper's Table 3)")
+    p.add_argument('--bimanual', choices=BIMANUAL_MODES, default=d.bimanual,
+                   help='stage 2 for two-handed gestures: the healthy arm moves too '
+                        "('auto': when stage 1 scores above the threshold)")
+    p.add_argument('--collision-check', action=argparse.BooleanOptionalAction,
+                   default=d.collision_check,
+                   help='keep arms and torso apart and report what still collides')
+    p.add_argument('--no-collision', dest='collision_check', action='store_false',
+                   help='same as --no-collision-check')
+    p.add_argument('--tool-length-mm', type=float, default=d.tool_length_mm, metavar='MM',
+                   help='a tool lengthening the hand of --tool-arm (mm)')
+    p.add_argument('--tool-arm', choices=ARMS, default=d.tool_arm)
+    p.add_argument('--trajectory-method', choices=METHODS, default=d.trajectory_method)
+    p.add_argument('--vq-distortion-mm', type=float, default=d.vq_distortion_mm, metavar='MM',
+                   help='typical-point threshold (mm of fingertip)')
+    p.add_argument('--continuity-weight', type=float, default=d.continuity_weight,
+                   metavar='W', help='per-point jump penalty (per deg^2)')
+    p.add_argument('--seed', type=int, default=None,
+                   help='seed for a reproducible run (default: drawn, and printed)')
+    p.add_argument('--json', action='store_true',
+                   help=f'print one JSON document (schema {SOLVE_SCHEMA})')
+    p.set_defaults(func=cmd_solve)
+    return p
 
 
 def build_parser():
@@ -204,37 +310,15 @@ def build_parser():
     p.add_argument('--json', action='store_true', help='print one JSON document')
     p.set_defaults(func=cmd_score)
 
-    from ..recovery.locks import LOCK_STRATEGIES
-    from ..optimize import ALGORITHMS, PRESETS
-    from ..recovery.keyframes import BIMANUAL_MODES
-    p = sub.add_parser('solve', help='reconfigure the library for a fault set')
-    p.add_argument('--fault', action='append', required=True, metavar='JOINT[=DEG]',
-                   help='a failed joint, optionally with the angle (deg) it is held at; '
-                        'repeat for several')
-    p.add_argument('--gesture', action='append', metavar='G',
-                   help='only this gesture (repeatable; default: the whole library)')
-    p.add_argument('--algorithm', choices=sorted(ALGORITHMS), default='abc')
-    p.add_argument('--preset', choices=PRESETS, default='default',
-                   help="'default' (our tuned ABC) or 'paper' (the paper's Table 3)")
-    p.add_argument('--lock-strategy', choices=LOCK_STRATEGIES, default='average')
-    p.add_argument('--bimanual', choices=BIMANUAL_MODES, default='auto',
-                   help='stage 2 for two-handed gestures: the healthy arm moves too '
-                        "('auto': when stage 1 scores above the threshold)")
-    p.add_argument('--no-collision', action='store_true',
-                   help='ignore self-collision (for comparison with the paper)')
-    p.add_argument('--seed', type=int, default=None, help='seed for a reproducible run')
-    p.add_argument('--deadline', type=float, default=1.0,
-                   help='budget for the whole library in seconds (default 1.0)')
-    p.add_argument('--json', action='store_true',
-                   help='print one JSON document (schema in the README)')
-    p.set_defaults(func=cmd_solve)
-    from . import bench, beyond, export, player_commands, ros_commands
+    add_solve_parser(sub)
+    from . import bench, beyond, export, player_commands, ros_commands, stream_bench_command
     bench_sub = bench.register(sub)
     beyond.register(bench_sub)
     ros_commands.register(sub)               # fault, clear, reconfigure, library, demo
     ros_commands.register_bench(bench_sub)   # bench latency
+    stream_bench_command.register(bench_sub)   # bench stream
     export.register(sub)                     # export --format play_motion2
-    player_commands.register(sub, bench_sub)   # play, bench detection
+    player_commands.register(sub, bench_sub)   # play, demo-play, bench detection
     from . import urdf as urdf_cli
     urdf_cli.register(sub)                   # urdf
     return parser

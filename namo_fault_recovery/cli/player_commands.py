@@ -15,6 +15,7 @@ import time
 import numpy as np
 
 from .common import UsageError
+from ..ros.sim_node import sim_command
 
 EXIT_FAILURE = 1
 
@@ -178,17 +179,6 @@ def bench_detection(args, out):
 
 
 # --- demo-play: the whole loop with the simulator -------------------------------------
-
-
-def sim_command():
-    """Return the command that starts the simulator node ``namo_sim``."""
-    beside = Path(sys.executable).parent / 'namo_sim'
-    if beside.is_file():
-        return [str(beside)]
-    found = shutil.which('namo_sim')
-    if found:
-        return [found]
-    return [sys.executable, '-m', 'namo_fault_recovery.ros.sim_node']
 
 
 class _LoopWatcher:

@@ -427,7 +427,7 @@ def _stop_node(proc, log, out):
 
 
 class _ReceivedReport:
-    """The library received over ROS, shaped like the engine's report for plotting."""
+    """The library received over ROS, shaped like a LibraryResult for plotting."""
 
     def __init__(self, robot, library_msgs, statuses, locks):
         from types import SimpleNamespace
@@ -435,7 +435,7 @@ class _ReceivedReport:
         from ..model.gestures import Keyframe
         values = _values(statuses['reconfiguration'])
         self.locks = dict(locks)
-        self.algorithm = values.get('optimizer', '?')
+        self.settings = {'optimizer': values.get('optimizer', '?')}
         self._gestures = {}
         names = list(robot.joint_names)
         for name, msg in library_msgs.items():

@@ -9,7 +9,7 @@ an :class:`OptimizeResult`::
     res.x, res.fun, res.nfev, res.nit, res.status, res.message, res.wall_time
 """
 
-from .base import (Algorithm, minimize, OptimizeResult, Problem, STATUS_CANCELLED,
+from .base import (Algorithm, Clock, minimize, OptimizeResult, Problem, STATUS_CANCELLED,
                    STATUS_DEADLINE, STATUS_DONE)
 from .bee_colony import ABC
 from .bfoa import BFOA
@@ -19,7 +19,7 @@ from .polish import polish
 from .registry import ALGORITHMS, make_algorithm, PRESETS
 
 __all__ = [
-    'ABC', 'ALGORITHMS', 'Algorithm', 'BFOA', 'GA', 'GradientDescent', 'OptimizeResult',
+    'ABC', 'ALGORITHMS', 'Algorithm', 'BFOA', 'Clock', 'GA', 'GradientDescent', 'OptimizeResult',
     'PRESETS', 'Problem', 'STATUS_CANCELLED', 'STATUS_DEADLINE', 'STATUS_DONE',
     'make_algorithm', 'minimize', 'polish',
 ]

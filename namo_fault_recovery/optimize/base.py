@@ -162,6 +162,34 @@ class Clock:
         """Return the seconds since the start."""
         return time.monotonic() - self.start
 
+    @classmethod
+    def until(cls, end, cancel=None):
+        """Return a clock that starts now and ends at ``end`` (monotonic s; None: never)."""
+        clock = cls(None, cancel)
+        if end is not None:
+            clock.end = max(float(end), clock.start)
+        return clock
+
+    def child(self, share=1.0, reserve=0.0):
+        """
+        Return the clock of one stage of this run: same cancel, an earlier or equal end.
+
+        The stage ends ``reserve`` seconds before this clock (the time kept for the work
+        that follows it; at most half of what is left, so that a short deadline still
+        leaves the stage something), after ``share`` of the rest.  Every stage of a run
+        derives its budget this way from the one clock the caller owns, so that no
+        stage can end past the caller's deadline.
+        """
+        if not 0.0 <= share <= 1.0 or not reserve >= 0.0:
+            raise ValueError(f'Clock.child: expected 0 <= share <= 1 and reserve >= 0, '
+                             f'got share={share!r}, reserve={reserve!r}')
+        if self.end is None:
+            return Clock(None, self.cancel)
+        now = time.monotonic()
+        left = max(self.end - now, 0.0)
+        left -= min(reserve, 0.5 * left)
+        return Clock.until(now + share * left, self.cancel)
+
 
 class Algorithm:
     """
@@ -235,12 +263,14 @@ class StepTimer:
         return self.cost
 
 
-def minimize(problem, algorithm, deadline=None, seed=None, cancel=None):
+def minimize(problem, algorithm, deadline=None, seed=None, cancel=None, clock=None):
     """
     Minimise ``problem`` with ``algorithm`` within ``deadline`` seconds of wall time.
 
     ``seed`` makes the run reproducible (None draws one, reported in ``res.seed``);
     ``cancel`` is an optional callable that stops the run early when it returns True.
+    ``clock`` (a :class:`Clock`) replaces both: the run ends at its end and honours its
+    cancel (the caller's clock itself is left untouched).
     """
     if not isinstance(problem, Problem):
         raise TypeError(f'problem: expected a Problem, got {type(problem).__name__}')
@@ -249,7 +279,12 @@ def minimize(problem, algorithm, deadline=None, seed=None, cancel=None):
     if seed is None:
         seed = int(np.random.SeedSequence().entropy % (2 ** 63))
     rng = np.random.default_rng(seed)
-    clock = Clock(deadline, cancel)
+    if clock is None:
+        clock = Clock(deadline, cancel)
+    elif deadline is not None or cancel is not None:
+        raise ValueError('minimize: pass either clock or deadline/cancel, not both')
+    else:
+        clock = Clock.until(clock.end, clock.cancel)
     problem.nfev = 0
     x, f, nit, history = algorithm.run(problem, rng, clock)
     wall = clock.elapsed()

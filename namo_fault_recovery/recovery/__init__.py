@@ -1,11 +1,18 @@
 """
 From a fault set to an adapted gesture library, free of ROS.
 
+- :mod:`.engine`: the one entry point, ``recover(robot, library, faults, settings)``,
+  with :class:`~.engine.RecoverySettings` named as the node's parameters;
+- :mod:`.result`: the one result type, ``LibraryResult`` / ``GestureResult``, that the
+  node, the state file, the messages, ``solve`` and the benchmarks read;
 - :mod:`.locks`: lock strategies (``average``, ``measured``, ``optimal``) and lock angles;
 - :mod:`.keyframes`: the batched pose problems of every keyframe, solved within one
   deadline (the first paper's method, with stage 2 and the collision term);
 - :mod:`.motion`: whole-motion adaptation (the second paper: typical points and Kriging,
   or point by point);
 - :mod:`.vq`: vector quantisation that picks a motion's typical points;
-- :mod:`.kriging`: the variogram fit and ordinary Kriging.
+- :mod:`.kriging`: the variogram fit and ordinary Kriging;
+- :mod:`.budget`: how the caller's one deadline clock is shared out (reserves, shares).
+
+The stage records of :mod:`.keyframes` and :mod:`.motion` stay inside this package.
 """

@@ -10,7 +10,7 @@ the same seed and no deadline it returns the same library whoever asks.  Free of
 
     from namo_fault_recovery.recovery.engine import recover, RecoverySettings
     result = recover(robot, library, {'right_arm_joint2': None}, seed=0)
-    result.locks, result['wai'].score_after
+    result.locks, result['wai'].score_after, result.total_score
 """
 
 from dataclasses import asdict, dataclass, field, replace
@@ -20,12 +20,12 @@ import time
 import numpy as np
 
 from .keyframes import BIMANUAL_MODES
-from .locks import check_strategy, frozen_arms
-from .motion import adapt_library, DEFAULT_CONTINUITY, DEFAULT_DISTORTION_MM, METHODS
-from .motion import typical_points
+from .locks import frozen_arms, LOCK_STRATEGIES
+from .motion import adapt_library, DEFAULT_CONTINUITY, DEFAULT_DISTORTION_MM
+from .motion import DEFAULT_STAY_CLOSE, METHODS, typical_points
 from .result import GestureResult, LibraryResult, reference_result
-from ..model.robot import ARMS
-from ..objective.score import ScoreWeights
+from ..model.robot import ARMS, N_JOINTS
+from ..objective.score import gesture_targets, ScoreWeights, SimilarityScore
 from ..optimize import ALGORITHMS, PRESETS
 from ..optimize.base import Clock
 
@@ -53,8 +53,8 @@ class RecoverySettings:
     weights: ScoreWeights = field(default_factory=ScoreWeights)
 
     def __post_init__(self):
-        check_strategy(self.lock_strategy)
-        for name, value, choices in (('optimizer', self.optimizer, tuple(ALGORITHMS)),
+        for name, value, choices in (('lock_strategy', self.lock_strategy, LOCK_STRATEGIES),
+                                     ('optimizer', self.optimizer, tuple(ALGORITHMS)),
                                      ('optimizer_preset', self.optimizer_preset,
                                       tuple(PRESETS)),
                                      ('bimanual', self.bimanual, BIMANUAL_MODES),
@@ -67,9 +67,16 @@ class RecoverySettings:
                                  ('tool_length_mm', self.tool_length_mm, -1e-12),
                                  ('vq_distortion_mm', self.vq_distortion_mm, 0.0),
                                  ('continuity_weight', self.continuity_weight, -1e-12)):
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > low):
-                raise ValueError(f'{name}: expected a finite number > {max(low, 0.0):g}, '
-                                 f'got {str(value)[:80]!r}')
+            if (isinstance(value, bool) or not isinstance(value, (int, float))
+                    or not math.isfinite(value) or not value > low):
+                raise ValueError(f'{name}: expected a finite number '
+                                 f"{'>' if low >= 0 else '>='} 0, got {repr(value)[:80]}")
+        if not isinstance(self.collision_check, bool):
+            raise ValueError(f'collision_check: expected True or False, got '
+                             f'{repr(self.collision_check)[:80]}')
+        if self.weights is not None and not isinstance(self.weights, ScoreWeights):
+            raise ValueError(f'weights: expected a ScoreWeights or None, got '
+                             f'{repr(self.weights)[:80]}')
 
     def with_changes(self, **changes):
         """Return a copy with some settings changed (validated again)."""
@@ -86,7 +93,7 @@ def structure_changed(faults, settings):
 
 
 def recover(robot, library, faults=None, settings=None, *, seed=None, clock=None,
-            measured=None, quantisations=None):
+            measured=None, quantisations=None, optimizer_overrides=None):
     """
     Adapt ``library`` to a fault set (and a tool); return a :class:`LibraryResult`.
 
@@ -96,7 +103,14 @@ def recover(robot, library, faults=None, settings=None, *, seed=None, clock=None
     ``settings.deadline_sec`` from now, and ``Clock(None)`` runs without a deadline.
     ``quantisations`` are the library's typical points, if the caller keeps them (they
     depend on the library and ``vq_distortion_mm`` only).  ``seed`` None draws one; the
-    result records it.
+    result records it.  ``optimizer_overrides`` change settings of the optimiser's
+    preset (e.g. ``{'max_cycles': 10 ** 9}`` so that a deadline binds); they are for
+    benchmarks, not node parameters.
+
+    A library of single poses is the paper's problem and is solved as such; when the
+    library holds a motion (a gesture of several keyframes) the explored keyframes are
+    also drawn gently towards their designed poses (``DEFAULT_STAY_CLOSE`` per deg^2),
+    so that neighbouring keyframes stay on one redundant branch.
     """
     settings = settings or RecoverySettings()
     faults = dict(faults or {})
@@ -104,29 +118,30 @@ def recover(robot, library, faults=None, settings=None, *, seed=None, clock=None
         clock = Clock(settings.deadline_sec)
     if seed is None:
         seed = int(np.random.SeedSequence().entropy % (2 ** 63))
+    seed = int(seed)
     public = settings.public()
-    public['seed'] = seed
+    budget = None if clock.end is None else float(clock.end - clock.start)
     if not structure_changed(faults, settings):
-        return reference_result(library, settings.deadline_sec, public)
+        return reference_result(library, budget, public, seed)
     began = time.monotonic()
     if quantisations is None:
-        quantisations = typical_points(robot, library, settings.vq_distortion_mm)
-    remaining = clock.remaining()
-    deadline = None if not math.isfinite(remaining) else max(remaining, 1e-3)
+        quantisations = typical_points(robot, library, settings.vq_distortion_mm, clock=clock)
+    motion = any(len(g.keyframes) > 1 for g in library)
     report = adapt_library(
         robot, library, faults, method=settings.trajectory_method,
         tool_mm=settings.tool_length_mm, tool_arm=settings.tool_arm,
         distortion_mm=settings.vq_distortion_mm, continuity=settings.continuity_weight,
         quantisations=quantisations, algorithm=settings.optimizer,
-        preset=settings.optimizer_preset, deadline=deadline, seed=seed,
-        weights=settings.weights, lock_strategy=settings.lock_strategy,
-        measured=measured, cancel=clock.cancel, bimanual=settings.bimanual,
-        collision=settings.collision_check)
+        preset=settings.optimizer_preset, settings=optimizer_overrides or None,
+        clock=clock, seed=seed, weights=settings.weights,
+        lock_strategy=settings.lock_strategy, measured=measured,
+        bimanual=settings.bimanual, collision=settings.collision_check,
+        stay_close=DEFAULT_STAY_CLOSE if motion else 0.0)
     wall = time.monotonic() - began
-    public['notes'] = list(report.notes)
     engine = report.typical_result
+    breakdowns = worst_breakdowns(robot, library, report.gestures, settings)
     gestures = []
-    for g in report.gestures:
+    for g, breakdown in zip(report.gestures, breakdowns):
         e = engine[g.name] if engine is not None else None
         gestures.append(GestureResult(
             name=g.name,
@@ -137,12 +152,22 @@ def recover(robot, library, faults=None, settings=None, *, seed=None, clock=None
             wall_time=float(wall), status=str(g.status),
             message=str(e.message if e and g.method == 'keyframes' else g.message),
             collides=bool(g.collides),
-            breakdown={k: float(v) for k, v in dict(e.breakdown if e else {}).items()},
+            breakdown=breakdown,
             stage=int(e.stage if e else 1),
             colliding_pairs=tuple(str(p) for p in g.colliding_pairs),
             method=g.method, typical_points=len(g.typical),
             tip_error_mm=float(g.tip_error_mean_mm),
-            max_jump_deg=float(g.jump_after_deg)))
+            max_jump_deg=float(g.jump_after_deg),
+            score_before_mean=float(g.score_before), score_mean=float(g.score_mean),
+            stage1_score=None if e is None else float(e.stage1_score),
+            expansion_stage=int(g.expansion_stage),
+            free_joints=tuple(str(j) for j in g.free_joints), nfev=int(g.nfev),
+            typical_indices=tuple(int(i) for i in g.typical),
+            kriging_sigma_deg=tuple(float(v) for v in g.kriging_sigma_deg),
+            tip_error_before_mm=float(g.tip_error_before_mm),
+            tip_error_max_mm=float(g.tip_error_max_mm),
+            max_jump_designed_deg=float(g.jump_designed_deg),
+            max_jump_before_deg=float(g.jump_before_deg)))
     # ``per_point`` runs no typical-point engine: its statuses say it all.
     success = (report.deadline_met and (engine is None or engine.success)
                and all(math.isfinite(g.score_after) for g in gestures))
@@ -150,7 +175,29 @@ def recover(robot, library, faults=None, settings=None, *, seed=None, clock=None
         gestures=tuple(gestures), faults=faults,
         locks={j: float(a) for j, a in report.locks.items()},
         frozen_arms=frozen_arms(robot, report.locks),
-        wall_time=float(wall), deadline=settings.deadline_sec,
+        wall_time=float(wall), deadline=budget,
         deadline_met=bool(report.deadline_met), success=bool(success),
         cancelled=report.cancelled, settings=public,
-        tool_mm=settings.tool_length_mm, tool_arm=settings.tool_arm)
+        tool_mm=settings.tool_length_mm, tool_arm=settings.tool_arm,
+        seed=seed, notes=tuple(str(n) for n in report.notes), nfev=int(report.nfev))
+
+
+def worst_breakdowns(robot, library, adapted, settings):
+    """
+    Return per gesture the score's components at its worst published keyframe.
+
+    ``adapted`` are the adapted gestures (with ``keyframes``), in library order.  The
+    scorer is the engine's: the tool's hand, references on the original structure.
+    """
+    model = robot.with_tool(settings.tool_length_mm, settings.tool_arm)
+    targets = [t for g in library for t in gesture_targets(g)]
+    scorer = SimilarityScore(model, targets, settings.weights, reference_robot=robot)
+    q = np.array([kf.positions() for g in adapted for kf in g.keyframes])
+    total, parts = scorer.evaluate(q[:, :N_JOINTS], q[:, N_JOINTS:], np.arange(len(q)),
+                                   breakdown=True)
+    out, offset = [], 0
+    for g in adapted:
+        worst = offset + int(np.argmax(total[offset:offset + len(g.keyframes)]))
+        offset += len(g.keyframes)
+        out.append({c: float(v[worst]) for c, v in parts.items() if c not in ARMS})
+    return out

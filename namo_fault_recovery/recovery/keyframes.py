@@ -5,12 +5,15 @@ For every keyframe of every gesture the failed joints are set to their lock angl
 the remaining joints of the faulted arms that take part in the gesture become the free
 variables.  Keyframes with the same free-variable layout are solved together as one
 batched problem (one objective call per optimiser phase for all of them), within one
-wall-clock budget for the whole library.  On top of the paper's method:
+wall-clock budget for the whole library (the caller's clock; see :mod:`.budget`).  On
+top of the paper's method:
 
-- lock strategies (``average``, ``measured``, ``optimal``; see :mod:`.faults`);
+- lock strategies (``average``, ``measured``, ``optimal``; see :mod:`.locks`); the
+  ``optimal`` candidates are solved on the very problem of the final result, the
+  starting lock among them, so that ``optimal`` is never worse than its start;
 - stage 2 of a staged DOF expansion (the second source paper): when a two-handed
   gesture still scores above a threshold, the healthy arm moves too;
-- capsule self-collision (:mod:`.collision`) as a penalty inside the optimisation, with
+- capsule self-collision (:mod:`..objective.collision`) as a penalty inside the optimisation, with
   a final check reported per gesture.
 """
 
@@ -20,21 +23,20 @@ import time
 
 import numpy as np
 
-from .locks import resolve_locks
+from .budget import ENGINE_RESERVE, STAGE1_SHARE
+from .locks import clamp_lock, resolve_locks
 from ..model.gestures import Keyframe
 from ..model.kinematics import ArmLandmarks, batch_forward, batch_forward_jacobian, take_landmarks
 from ..model.robot import ARMS, N_JOINTS
 from ..objective.collision import CollisionModel
 from ..objective.score import gesture_targets, SimilarityScore
 from ..optimize import make_algorithm, minimize, Problem, STATUS_CANCELLED, STATUS_DEADLINE
+from ..optimize.base import Clock
 
 _STATUS_NAMES = {0: 'converged', STATUS_DEADLINE: 'deadline', STATUS_CANCELLED: 'cancelled'}
 BIMANUAL_MODES = ('auto', 'off', 'on')
 DEFAULT_BIMANUAL_THRESHOLD = 10.0
-_STAGE1_SHARE = 0.6        # of the budget, when stage 2 may follow
-_OPTIMAL_SHARE = 0.6       # of the budget spent choosing optimal lock angles
-_LOCK_CANDIDATES = 12      # coarse lock angles per optimal joint (plus the average)
-_MARGIN = 0.015            # s kept back from the deadline for the work after the search
+LOCK_CANDIDATES = 12       # coarse lock angles per optimal joint (plus the start)
 _DEG2 = (180.0 / np.pi) ** 2
 DEFAULT_EXPANSION_THRESHOLD = 5.0   # mm of fingertip error
 
@@ -220,17 +222,16 @@ class _Batch:
         self.stay_close = stay_close   # penalty per deg^2 away from the reference pose
 
 
-def _solve(robot, scorer, checker, batch, algo, clock_end, cancel, rng, stats=None):
+def _solve(robot, scorer, checker, batch, algo, clock, rng, stats=None):
     """
-    Solve every row of ``batch``; with a collision ``checker``, keep poses apart.
+    Solve every row of ``batch`` within ``clock``; with a collision ``checker``, keep apart.
 
     The collision constraint is lazy: the plain score is optimised first (fast, and
     most results do not collide), the results are checked, and only the rows that
     collide are solved again with the capsule penalty, from their collision-free
     starting pose.  Return (best right, best left, status names).
     """
-    best_r, best_l, status = _solve_once(robot, scorer, None, batch, algo, clock_end, cancel,
-                                         rng, stats)
+    best_r, best_l, status = _solve_once(robot, scorer, None, batch, algo, clock, rng, stats)
     if checker is None:
         return best_r, best_l, status
     ids = batch.target_ids
@@ -240,8 +241,8 @@ def _solve(robot, scorer, checker, batch, algo, clock_end, cancel, rng, stats=No
         return best_r, best_l, status
     sub = _Batch(batch.right[rows], batch.left[rows], ids[rows],
                  [batch.layouts[k] for k in rows], stay_close=batch.stay_close)
-    r2, l2, st2 = _solve_once(robot, scorer, checker, sub, _repair_algorithm(algo), clock_end,
-                              cancel, rng, stats)
+    r2, l2, st2 = _solve_once(robot, scorer, checker, sub, _repair_algorithm(algo), clock,
+                              rng, stats)
     # Candidates per row: the plain result, the penalised one, and the starting pose
     # (collision-free unless the locks themselves force a contact).  The best score
     # among those that do not collide wins; if all collide, the least penetration.
@@ -277,7 +278,7 @@ def _repair_algorithm(algo):
     return algo
 
 
-def _solve_once(robot, scorer, collision, batch, algo, clock_end, cancel, rng, stats=None):
+def _solve_once(robot, scorer, collision, batch, algo, clock, rng, stats=None):
     """
     Solve every row of ``batch`` (rows sharing a layout in one batched problem).
 
@@ -297,9 +298,6 @@ def _solve_once(robot, scorer, collision, batch, algo, clock_end, cancel, rng, s
     # groups first: the time they do not use rolls over to the bigger ones.
     order = sorted(groups.items(), key=lambda item: len(item[1]))
     for n_left, (free, members) in zip(range(len(order), 0, -1), order):
-        budget = None
-        if clock_end is not None:
-            budget = max((clock_end - time.monotonic()) / n_left, 0.0)
         x0 = None
         if batch.x0 is not None:
             x0 = np.array([batch.x0[k] for k in members])
@@ -311,7 +309,7 @@ def _solve_once(robot, scorer, collision, batch, algo, clock_end, cancel, rng, s
                               batch.left[members], free, collision=collision, x0=x0,
                               anchor=anchor, continuity=batch.stay_close)
         start = problem.evaluate(problem.x0[:, None, :])[:, 0]
-        res = minimize(problem, algo, deadline=budget, cancel=cancel,
+        res = minimize(problem, algo, clock=clock.child(share=1.0 / n_left),
                        seed=int(rng.integers(2 ** 63)))
         if stats is not None:
             stats['nfev'] = stats.get('nfev', 0) + res.nfev * len(members)
@@ -342,12 +340,15 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
                         measured=None, cancel=None, gestures=None, settings=None,
                         bimanual='off', bimanual_threshold=DEFAULT_BIMANUAL_THRESHOLD,
                         collision=False, capsules=None, tool_mm=0.0, tool_arm='right',
-                        expansion_threshold=DEFAULT_EXPANSION_THRESHOLD, stay_close=0.0):
+                        expansion_threshold=DEFAULT_EXPANSION_THRESHOLD, stay_close=0.0,
+                        clock=None, lock_start=None):
     """
     Reconfigure every gesture (or those named in ``gestures``) for a fault set.
 
     ``faults`` maps joint names to lock angles (rad) or None (chosen by
-    ``lock_strategy``).  ``deadline`` (s) is the budget for the whole library.
+    ``lock_strategy``).  ``deadline`` (s) is the budget for the whole library; a
+    ``clock`` (:class:`~namo_fault_recovery.optimize.base.Clock`) replaces ``deadline``
+    and ``cancel`` when the caller owns the deadline.
     ``bimanual`` ('auto', 'on', 'off') controls stage 2 for two-handed gestures: with
     'auto' it runs when stage 1 scores above ``bimanual_threshold``.  ``collision``
     keeps the arms and torso apart (``capsules`` or the robot's capsule model) and
@@ -363,6 +364,13 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
     its target (staged DOF expansion).  ``stay_close`` (per deg^2) penalises moving the
     free joints away from the reference pose: the smallest correction wins among
     equally good ones, so that neighbouring keyframes stay on one redundant branch.
+
+    With ``lock_strategy='optimal'`` the joints without an angle start at the library
+    average (or at ``lock_start[joint]``, e.g. the average over whole motions when
+    ``library`` holds only their typical points); that start is solved exactly as the
+    ``average`` strategy solves it, other angles are then tried on the very same
+    problem, and the lock set with the lowest library total (sum over gestures of
+    ``score_after``) wins, the start on ties: never worse than the start.
     The result is a pure function of the inputs and ``seed`` (None draws one, reported
     in the result), up to where a deadline cuts the search.
     """
@@ -371,114 +379,197 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
     if bimanual not in BIMANUAL_MODES:
         raise ValueError(f'unknown bimanual mode {bimanual!r}; expected one of '
                          f'{", ".join(BIMANUAL_MODES)}')
-    if deadline is not None and not (np.isfinite(deadline) and deadline > 0):
-        raise ValueError(f'deadline: expected a positive number of seconds or None, '
-                         f'got {deadline!r}')
+    if clock is None:
+        if deadline is not None and not (np.isfinite(deadline) and deadline > 0):
+            raise ValueError(f'deadline: expected a positive number of seconds or None, '
+                             f'got {deadline!r}')
+        clock = Clock(deadline, cancel)
+    elif cancel is not None:
+        raise ValueError('reconfigure_library: pass the cancel flag in the clock')
+    budget = None if clock.end is None else clock.end - clock.start
     if seed is None:
         seed = int(np.random.SeedSequence().entropy % (2 ** 63))
     rng = np.random.default_rng(seed)
     algo = make_algorithm(algorithm, preset, **(settings or {}))
     locks, notes = resolve_locks(robot, library, faults, lock_strategy, measured)
-    selected = list(library) if gestures is None else [library[g] for g in gestures]
-    # The optimisers stop early enough to leave time for what follows them (scoring the
-    # result, the collision check): a margin of 10% of the deadline, at most 15 ms.
-    end = None if deadline is None else start + deadline - min(0.1 * deadline, _MARGIN)
-
-    targets, owners = [], []
-    for gi, gesture in enumerate(selected):
-        for t in gesture_targets(gesture):
-            targets.append(t)
-            owners.append(gi)
-    scorer = SimilarityScore(robot, targets, weights, reference_robot=reference)
-    checker = None
-    if collision:
-        checker = CollisionModel(robot, targets, capsules or robot.capsules)
-    ids = np.arange(len(targets))
-    ref_r = np.array([t.q_right for t in targets])
-    ref_l = np.array([t.q_left for t in targets])
-
-    # The arms whose structure changed: a failed joint or a tool.
-    faulted = {side for side in ARMS
-               if any(robot.locate_joint(j)[0] == side for j in locks)
-               or robot.tool_length(side) > 0}
-    start_poses = None
+    optimal = []
     if lock_strategy == 'optimal':
         optimal = [j for j, a in faults.items() if a is None]
-        if optimal:
-            budget_end = None if end is None else start + _OPTIMAL_SHARE * deadline
-            locks, chosen_note, start_poses = _optimise_locks(
-                robot, scorer, checker, targets, ref_r, ref_l, locks, optimal, algo,
-                budget_end, cancel, rng)
-            notes.append(chosen_note)
-
-    locked = locked_sets(robot, locks)
-    base_r, base_l = apply_locks(robot, ref_r, ref_l, locks)
-    start_r, start_l = base_r, base_l
-    if start_poses is not None:   # the optimal sweep's solution at the chosen locks
-        start_r, start_l = apply_locks(robot, *start_poses, locks)
-    frozen = tuple(side for side in ARMS if len(locked[side]) == N_JOINTS)
-    for side in frozen:
-        notes.append(f'all joints of the {side} arm failed: it is frozen at its lock angles')
-
-    designed = [joint_set(robot, selected[g].joints) if selected[g].joints else None
-                for g in owners]
-    layouts = [free_layout(robot, t.arms, locked, faulted, a) for t, a in zip(targets, designed)]
-    status0 = ['frozen' if any(s in faulted for s in t.arms) and not lay else 'unchanged'
-               for t, lay in zip(targets, layouts)]
-    two_stage = [k for k, t in enumerate(targets)
-                 if bimanual != 'off' and t.two_handed and len(faulted) == 1]
-    if bimanual == 'auto' and two_stage and all(
-            scorer.target_weights(k).wrist >= scorer.target_weights(k).wrist_lr
-            and scorer.target_weights(k).tip >= scorer.target_weights(k).tip_lr
-            for k in two_stage):
-        # The healthy arm starts at its reference, where its own terms are 0.  Moving its
-        # wrist (tip) by d adds d to its wrist (tip) term and can shorten the left-right
-        # gap by at most d, so with these weights stage 2 can never lower the score.
-        two_stage = []
-        notes.append('stage 2 skipped: with wrist >= wrist_lr and tip >= tip_lr weights, '
-                     'moving the healthy arm cannot lower the score')
-    expandable = any(selected[owners[k]].expand for k in range(len(targets))
-                     if layouts[k] or status0[k] == 'frozen')
+        for joint in optimal:
+            if lock_start and lock_start.get(joint) is not None:
+                locks[joint] = clamp_lock(robot, joint, lock_start[joint])
+    selected = list(library) if gestures is None else [library[g] for g in gestures]
+    # The optimisers stop early enough to leave time for what follows them (scoring the
+    # result, the collision check).
+    search = clock.child(reserve=ENGINE_RESERVE)
+    setup = _Setup(robot, reference, selected, locks, weights, collision, capsules, algo,
+                   bimanual, bimanual_threshold, expansion_threshold, stay_close)
+    notes += setup.notes
     stats = {'nfev': 0}
-    stage1_end = end
-    if end is not None and (two_stage or expandable):
-        stage1_end = time.monotonic() + _STAGE1_SHARE * (end - time.monotonic())
+    out = _run(setup, [locks], rng, search, stats)
+    if optimal:
+        locks, out, note = _optimise_locks(setup, locks, out, optimal, rng, search, stats)
+        notes.append(note)
+    return _library_result(setup, locks, out, notes, time.monotonic() - start, budget, seed,
+                           preset, lock_strategy, stats, tool_mm, tool_arm)
+
+
+class _Setup:
+    """What every run on one library shares: targets, scorer, layouts and stage plans."""
+
+    def __init__(self, robot, reference, selected, locks, weights, collision, capsules,
+                 algo, bimanual, bimanual_threshold, expansion_threshold, stay_close):
+        self.robot = robot
+        self.selected = selected
+        self.algo = algo
+        self.bimanual = bimanual
+        self.bimanual_threshold = bimanual_threshold
+        self.expansion_threshold = expansion_threshold
+        self.stay_close = stay_close
+        self.notes = []
+        self.targets, self.owners = [], []
+        for gi, gesture in enumerate(selected):
+            for t in gesture_targets(gesture):
+                self.targets.append(t)
+                self.owners.append(gi)
+        targets = self.targets
+        self.scorer = SimilarityScore(robot, targets, weights, reference_robot=reference)
+        self.checker = None
+        if collision:
+            self.checker = CollisionModel(robot, targets, capsules or robot.capsules)
+        self.ref_r = np.array([t.q_right for t in targets])
+        self.ref_l = np.array([t.q_left for t in targets])
+        # The arms whose structure changed: a failed joint or a tool.  Every lock set
+        # tried for this library locks the same joints, so all of this is shared.
+        self.faulted = {side for side in ARMS
+                        if any(robot.locate_joint(j)[0] == side for j in locks)
+                        or robot.tool_length(side) > 0}
+        self.locked = locked_sets(robot, locks)
+        self.frozen = tuple(side for side in ARMS if len(self.locked[side]) == N_JOINTS)
+        for side in self.frozen:
+            self.notes.append(f'all joints of the {side} arm failed: it is frozen at its '
+                              f'lock angles')
+        owners = self.owners
+        self.designed = [joint_set(robot, selected[g].joints) if selected[g].joints else None
+                         for g in owners]
+        self.layouts = [free_layout(robot, t.arms, self.locked, self.faulted, a)
+                        for t, a in zip(targets, self.designed)]
+        self.status0 = ['frozen' if any(s in self.faulted for s in t.arms) and not lay
+                        else 'unchanged' for t, lay in zip(targets, self.layouts)]
+        scorer = self.scorer
+        self.two_stage = [k for k, t in enumerate(targets)
+                          if bimanual != 'off' and t.two_handed and len(self.faulted) == 1]
+        if bimanual == 'auto' and self.two_stage and all(
+                scorer.target_weights(k).wrist >= scorer.target_weights(k).wrist_lr
+                and scorer.target_weights(k).tip >= scorer.target_weights(k).tip_lr
+                for k in self.two_stage):
+            # The healthy arm starts at its reference, where its own terms are 0.  Moving
+            # its wrist (tip) by d adds d to its wrist (tip) term and can shorten the
+            # left-right gap by at most d, so with these weights stage 2 can never lower
+            # the score.
+            self.two_stage = []
+            self.notes.append('stage 2 skipped: with wrist >= wrist_lr and tip >= tip_lr '
+                              'weights, moving the healthy arm cannot lower the score')
+        self.expandable = any(selected[owners[k]].expand for k in range(len(targets))
+                              if self.layouts[k] or self.status0[k] == 'frozen')
+
+    def totals(self, after, n_sets):
+        """Return each lock set's library total: the sum of its gestures' worst scores."""
+        worst = np.full((n_sets, len(self.selected)), -np.inf)
+        owners = np.asarray(self.owners)
+        per_set = np.asarray(after).reshape(n_sets, len(self.targets))
+        for gi in range(len(self.selected)):
+            worst[:, gi] = per_set[:, owners == gi].max(axis=1)
+        return worst.sum(axis=1)
+
+
+def _run(setup, lock_sets, rng, clock, stats):
+    """
+    Solve the whole library once for each lock set of ``lock_sets``, in one batch.
+
+    Every lock set locks the same joints (only the angles differ), so the rows of all
+    of them share their layouts and stage plans: stage 1, the staged DOF expansion and
+    stage 2 run once over all rows.  Returns a dict of per-row arrays (lock sets one
+    after the other, each in target order).
+    """
+    robot, scorer, checker, algo = setup.robot, setup.scorer, setup.checker, setup.algo
+    n_t, n_g, n_c = len(setup.targets), len(setup.selected), len(lock_sets)
+    ids = np.tile(np.arange(n_t), n_c)
+    owners = [g + c * n_g for c in range(n_c) for g in setup.owners]
+    selected = setup.selected * n_c
+    targets = setup.targets * n_c
+    layouts = setup.layouts * n_c
+    designed = setup.designed * n_c
+    status0 = setup.status0 * n_c
+    two_stage = [k + c * n_t for c in range(n_c) for k in setup.two_stage]
+    bases = [apply_locks(robot, setup.ref_r, setup.ref_l, locks) for locks in lock_sets]
+    # Every angle published lies within its limits, bit for bit: a designed angle or a
+    # lock accepted within the limits' tolerance is clipped before anything uses it.
+    base_r = robot.arms['right'].clip(np.concatenate([b[0] for b in bases]))
+    base_l = robot.arms['left'].clip(np.concatenate([b[1] for b in bases]))
+    stage1_clock = clock
+    if two_stage or setup.expandable:
+        stage1_clock = clock.child(share=STAGE1_SHARE)
     best_r, best_l, status = _solve(robot, scorer, checker,
-                                    _Batch(start_r, start_l, ids, layouts,
-                                           stay_close=stay_close), algo,
-                                    stage1_end, cancel, rng, stats)
+                                    _Batch(base_r, base_l, ids, layouts,
+                                           stay_close=setup.stay_close),
+                                    algo, stage1_clock, rng, stats)
     status = [s0 if s0 == 'frozen' else s for s0, s in zip(status0, status)]
     after = scorer.evaluate(best_r, best_l, ids)
-    stage = np.ones(len(targets), dtype=int)
-    expansion = np.zeros(len(targets), dtype=int)
-    if expandable:
-        expansion = _expand(robot, scorer, checker, selected, owners, targets, ids, locked,
-                            faulted, designed, layouts, best_r, best_l, after, status,
-                            expansion_threshold, algo, end, two_stage, cancel, rng, stats,
-                            stay_close)
+    stage = np.ones(len(ids), dtype=int)
+    expansion = np.zeros(len(ids), dtype=int)
+    if setup.expandable:
+        expansion = _expand(robot, scorer, checker, selected, owners, targets, ids,
+                            setup.locked, setup.faulted, designed, layouts, best_r, best_l,
+                            after, status, setup.expansion_threshold, algo, clock,
+                            two_stage, rng, stats, setup.stay_close)
     stage1 = after.copy()
 
     # Stage 2: the healthy arm joins in for two-handed gestures that are still poor.
     if two_stage:
         rows = [k for k in two_stage
-                if bimanual == 'on' or after[k] > bimanual_threshold]
+                if setup.bimanual == 'on' or after[k] > setup.bimanual_threshold]
         if rows:
-            lay2 = [free_layout(robot, targets[k].arms, locked, set(ARMS)) for k in rows]
+            lay2 = [free_layout(robot, targets[k].arms, setup.locked, set(ARMS))
+                    for k in rows]
             x0 = {}
             for i, k in enumerate(rows):
                 x0[i] = [(best_r if s == 'right' else best_l)[k, j] for s, j in lay2[i]]
             batch = _Batch(best_r[rows], best_l[rows], ids[rows], lay2, x0)
-            r2, l2, st2 = _solve(robot, scorer, checker, batch, algo, end, cancel, rng)
+            r2, l2, st2 = _solve(robot, scorer, checker, batch, algo, clock, rng)
             f2 = scorer.evaluate(r2, l2, ids[rows])
             for i, k in enumerate(rows):
                 if f2[i] < after[k] and _no_worse_collision(checker, r2[i], l2[i],
-                                                            best_r[k], best_l[k], k):
+                                                            best_r[k], best_l[k], ids[k]):
                     best_r[k], best_l[k], after[k] = r2[i], l2[i], f2[i]
                     stage[k] = 2
                 if st2[i] in ('deadline', 'cancelled'):
                     status[k] = st2[i]
+    # The optimisers search within the limits; clipping again guards that promise.
+    clipped_r, clipped_l = robot.arms['right'].clip(best_r), robot.arms['left'].clip(best_l)
+    if not (np.array_equal(clipped_r, best_r) and np.array_equal(clipped_l, best_l)):
+        best_r, best_l = clipped_r, clipped_l
+        after = scorer.evaluate(best_r, best_l, ids)
+    return {'right': best_r, 'left': best_l, 'after': after, 'stage1': stage1,
+            'stage': stage, 'expansion': expansion, 'status': status, 'layouts': layouts,
+            'base_right': base_r, 'base_left': base_l}
 
-    before = scorer.evaluate(base_r, base_l, ids)
+
+def _take(out, c, n_t):
+    """Return lock set ``c``'s rows of a :func:`_run` output."""
+    rows = slice(c * n_t, (c + 1) * n_t)
+    return {key: value[rows] for key, value in out.items()}
+
+
+def _library_result(setup, locks, out, notes, wall, budget, seed, preset, lock_strategy,
+                    stats, tool_mm, tool_arm):
+    """Describe one lock set's solved rows as a :class:`LibraryReconfiguration`."""
+    robot, scorer, checker = setup.robot, setup.scorer, setup.checker
+    targets, owners, selected = setup.targets, setup.owners, setup.selected
+    ids = np.arange(len(targets))
+    best_r, best_l, after = out['right'], out['left'], out['after']
+    status, layouts = out['status'], out['layouts']
+    before = scorer.evaluate(out['base_right'], out['base_left'], ids)
     _, parts = scorer.evaluate(best_r, best_l, ids, breakdown=True)
     collides = [None] * len(targets)
     pairs = [()] * len(targets)
@@ -486,7 +577,6 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
         lm_r, lm_l = batch_forward(robot, best_r, 'right'), batch_forward(robot, best_l, 'left')
         collides = [bool(c) for c in checker.collides(lm_r, lm_l, ids)]
         pairs = [tuple(p) for p in checker.colliding_pairs(lm_r, lm_l, ids)]
-    wall = time.monotonic() - start
     results = []
     for gi, gesture in enumerate(selected):
         ks = [k for k in range(len(targets)) if owners[k] == gi]
@@ -494,10 +584,10 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
         frames = tuple(Keyframe(kf.time_from_start, best_r[k].copy(), best_l[k].copy())
                        for kf, k in zip(gesture.keyframes, ks))
         st = _worst_status([status[k] for k in ks])
-        stage_used = int(max(stage[k] for k in ks))
+        stage_used = int(max(out['stage'][k] for k in ks))
         free = (layouts[ks[0]] if stage_used == 1
-                else free_layout(robot, gesture.arms, locked, set(ARMS)))
-        expanded = int(max(expansion[k] for k in ks))
+                else free_layout(robot, gesture.arms, setup.locked, set(ARMS)))
+        expanded = int(max(out['expansion'][k] for k in ks))
         hit = None if checker is None else any(collides[k] for k in ks)
         results.append(GestureReconfiguration(
             name=gesture.name, keyframes=frames,
@@ -507,17 +597,18 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
                        if c not in ('right', 'left')},
             wall_time=wall, status=st, message=_message(gesture.name, st, stage_used, hit),
             free_joints=tuple(robot.arms[s].joint_names[j] for s, j in free),
-            stage=stage_used, stage1_score=float(max(stage1[k] for k in ks)),
+            stage=stage_used, stage1_score=float(max(out['stage1'][k] for k in ks)),
             collides=hit, colliding_pairs=tuple(p for k in ks for p in pairs[k]),
             expansion_stage=expanded))
-    return LibraryReconfiguration(results, locks, frozen, wall, deadline, seed, algo.name,
-                                  preset, notes, lock_strategy, nfev=int(stats['nfev']),
-                                  tool_mm=float(tool_mm), tool_arm=tool_arm)
+    return LibraryReconfiguration(results, dict(locks), setup.frozen, wall, budget, seed,
+                                  setup.algo.name, preset, notes, lock_strategy,
+                                  nfev=int(stats['nfev']), tool_mm=float(tool_mm),
+                                  tool_arm=tool_arm)
 
 
 def _expand(robot, scorer, checker, selected, owners, targets, ids, locked, faulted,
-            designed, layouts, best_r, best_l, after, status, threshold, algo, end,
-            two_stage, cancel, rng, stats, stay_close):
+            designed, layouts, best_r, best_l, after, status, threshold, algo, clock,
+            two_stage, rng, stats, stay_close):
     """
     Staged DOF expansion: redo a gesture's keyframes with its next ``expand`` stage.
 
@@ -545,14 +636,10 @@ def _expand(robot, scorer, checker, selected, owners, targets, ids, locked, faul
             lay.append(free_layout(robot, targets[k].arms, locked, faulted, allowed[k]))
         x0 = {i: [(best_r if s == 'right' else best_l)[k, j] for s, j in lay[i]]
               for i, k in enumerate(rows)}
-        stage_end = end
-        if end is not None:
-            later = sum(1 for g in owners if len(selected[g].expand) > level) or 0
-            share = _STAGE1_SHARE if (later or two_stage) else 1.0
-            stage_end = time.monotonic() + share * (end - time.monotonic())
+        later = any(len(selected[g].expand) > level for g in owners)
+        stage_clock = clock.child(share=STAGE1_SHARE if (later or two_stage) else 1.0)
         batch = _Batch(best_r[rows], best_l[rows], ids[rows], lay, x0, stay_close)
-        r2, l2, st2 = _solve(robot, scorer, checker, batch, algo, stage_end, cancel, rng,
-                             stats)
+        r2, l2, st2 = _solve(robot, scorer, checker, batch, algo, stage_clock, rng, stats)
         f2 = scorer.evaluate(r2, l2, ids[rows])
         for i, k in enumerate(rows):
             layouts[k] = lay[i]
@@ -590,61 +677,59 @@ def _no_worse_collision(checker, r_new, l_new, r_old, l_old, k):
     return pen[0] <= pen[1] + 1e-9
 
 
-def _optimise_locks(robot, scorer, checker, targets, ref_r, ref_l, locks, joints, algo,
-                    end, cancel, rng):
-    """
-    Choose lock angles for ``joints`` that minimise the library's total score.
+def lock_candidates(robot, joint, n=LOCK_CANDIDATES):
+    """Return ``n`` lock angles spread over a joint's range (its coarse sweep)."""
+    side, j = robot.locate_joint(joint)
+    lo, hi = robot.arms[side].lower[j], robot.arms[side].upper[j]
+    return np.linspace(lo, hi, n, endpoint=hi - lo < 2 * np.pi - 1e-9)
 
-    Each joint in turn: a coarse sweep of candidate angles over its range, then a finer
-    one around the best, every candidate's whole library reconfigured in one batched
-    run.  Returns the new locks, a note naming the chosen angles, and the (right, left)
-    poses found at the chosen locks (a start for the final run).
+
+def _optimise_locks(setup, locks, first, joints, rng, clock, stats):
     """
-    locks = dict(locks)
-    faulted = {robot.locate_joint(j)[0] for j in locks}
-    chosen = []
-    poses = None
-    n_t = len(targets)
-    for jn, joint in enumerate(joints):
+    Choose lock angles for ``joints`` that minimise the library total.
+
+    ``first`` is the solved library at ``locks`` (the start, e.g. the average): it is a
+    candidate, never solved again, and wins ties.  Each joint in turn: a coarse sweep
+    over its range, then a finer one around the best, the candidates of a sweep solved
+    in one batched :func:`_run` on the very problem of the final result (same layouts,
+    expansion, collision term, stage 2, ``stay_close``), each scored by the library
+    total (the sum of its gestures' ``score_after``).  The best solved candidate is the
+    result: no final run can undo the choice.  Returns (locks, its rows, a note).
+    """
+    robot = setup.robot
+    start_locks = dict(locks)
+    start_total = float(setup.totals(first['after'], 1)[0])
+    best_total, best_locks, best_out = start_total, dict(locks), first
+    cut = False
+    # Scores are distances: nothing does better than a start that scores 0.
+    for jn, joint in enumerate(joints if start_total > 0.0 else ()):
         side, j = robot.locate_joint(joint)
         lo, hi = robot.arms[side].lower[j], robot.arms[side].upper[j]
-        span = hi - lo
-        centre = locks[joint]
-        candidates = np.concatenate(([centre], np.linspace(lo, hi, _LOCK_CANDIDATES,
-                                                           endpoint=span < 2 * np.pi - 1e-9)))
-        totals = {}
+        candidates = lock_candidates(robot, joint)
         for sweep in range(2):
-            joint_end = None
-            if end is not None:   # the time left, shared evenly by the sweeps left
-                sweeps_left = 2 * len(joints) - (2 * jn + sweep)
-                joint_end = time.monotonic() + (end - time.monotonic()) / sweeps_left
-            base_r, base_l, layouts, tid = [], [], [], []
-            for a in candidates:
-                trial = dict(locks, **{joint: float(a)})
-                locked = locked_sets(robot, trial)
-                br, bl = apply_locks(robot, ref_r, ref_l, trial)
-                base_r.append(br)
-                base_l.append(bl)
-                layouts += [free_layout(robot, t.arms, locked, faulted) for t in targets]
-                tid.append(np.arange(n_t))
-            batch = _Batch(np.concatenate(base_r), np.concatenate(base_l),
-                           np.concatenate(tid), layouts)
-            r, left, _ = _solve(robot, scorer, checker, batch, algo, joint_end, cancel, rng)
-            f = scorer.evaluate(r, left, batch.target_ids).reshape(len(candidates), n_t)
-            r = r.reshape(len(candidates), n_t, N_JOINTS)
-            left = left.reshape(len(candidates), n_t, N_JOINTS)
-            for c, (a, total) in enumerate(zip(candidates, f.sum(axis=1))):
-                if float(total) < totals.get(float(a), (np.inf,))[0]:
-                    totals[float(a)] = (float(total), r[c], left[c])
-            best = min(totals, key=lambda a: totals[a][0])
-            step = span / _LOCK_CANDIDATES
-            candidates = np.clip(best + np.linspace(-step, step, 7), lo, hi)
-        best = min(totals, key=lambda a: totals[a][0])
-        locks[joint] = best
-        poses = totals[best][1:]
-        chosen.append(f'{joint} = {np.degrees(best):.2f} deg (library total '
-                      f'{totals[best][0]:.3f})')
-    return locks, 'optimal lock: ' + ', '.join(chosen), poses
+            if clock.expired():
+                cut = True
+                break
+            # The time left, shared evenly by the sweeps left.
+            sweep_clock = clock.child(share=1.0 / (2 * len(joints) - (2 * jn + sweep)))
+            tried = [float(a) for a in np.unique(candidates) if a != best_locks[joint]]
+            if tried:
+                sets = [dict(best_locks, **{joint: a}) for a in tried]
+                out = _run(setup, sets, rng, sweep_clock, stats)
+                totals = setup.totals(out['after'], len(sets))
+                c = int(np.argmin(totals))
+                if totals[c] < best_total:
+                    best_total, best_locks = float(totals[c]), sets[c]
+                    best_out = _take(out, c, len(setup.targets))
+            step = (hi - lo) / LOCK_CANDIDATES
+            candidates = np.clip(best_locks[joint] + np.linspace(-step, step, 7), lo, hi)
+    chosen = ', '.join(f'{j} = {np.degrees(best_locks[j]):.2f} deg' for j in joints)
+    start = ', '.join(f'{np.degrees(start_locks[j]):.2f} deg' for j in joints)
+    note = (f'optimal lock: {chosen} (library total {best_total:.3f}; at the start '
+            f'{start}: {start_total:.3f})')
+    if cut:
+        note += '; the deadline cut the search for other angles short'
+    return best_locks, best_out, note
 
 
 _STATUS_ORDER = ('cancelled', 'deadline', 'frozen', 'converged', 'unchanged')

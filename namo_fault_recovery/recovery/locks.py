@@ -5,7 +5,7 @@ A fault set maps joint names to a lock angle in radians, or to None when the loc
 strategy chooses the angle.  Strategies: ``average`` (the paper's: the mean over the
 gestures the arm takes part in), ``measured`` (where the joint stopped, from the fault
 report or the latest joint state, else the average), ``optimal`` (chosen to be best for
-the whole library; see :mod:`namo_fault_recovery.lock_optimal`).
+the whole library; see :func:`.keyframes.reconfigure_library`).
 """
 
 import math
@@ -45,14 +45,28 @@ def validate_angle(robot, joint, angle, what='lock angle'):
     return side, index
 
 
+def clamp_lock(robot, joint, angle):
+    """
+    Return ``angle`` (rad) clamped into the limits of ``joint``, exactly.
+
+    :func:`validate_angle` accepts an angle within ``robot.within_limits``'s tolerance
+    of a limit (1e-9 rad); a lock must still never be published beyond the limit, so
+    every accepted lock passes through here.
+    """
+    side, index = robot.locate_joint(joint)
+    arm = robot.arms[side]
+    return float(min(max(float(angle), float(arm.lower[index])), float(arm.upper[index])))
+
+
 def resolve_locks(robot, library, faults, strategy='average', measured=None):
     """
     Return ``{joint: lock angle (rad)}`` for a fault set, and a list of notes.
 
+    Every angle is clamped into its joint's limits (:func:`clamp_lock`).
     Explicit angles in ``faults`` always win.  Otherwise ``measured`` takes the angle
     from ``measured`` (joint -> rad) when present and falls back to ``average`` with a
     note; ``optimal`` joints get their average here, as the starting point that
-    :func:`namo_fault_recovery.lock_optimal.optimise_locks` improves on.
+    :func:`.keyframes.reconfigure_library` improves on.
     """
     check_strategy(strategy)
     measured = measured or {}
@@ -68,7 +82,7 @@ def resolve_locks(robot, library, faults, strategy='average', measured=None):
                 notes.append(f'{joint}: no measured angle; locked at the library average')
         if angle is None:
             angle = float(library.lock_averages(side)[index])
-        locks[joint] = float(angle)
+        locks[joint] = clamp_lock(robot, joint, angle)
     return locks, notes
 
 

@@ -17,15 +17,16 @@ gesture with ``per_point`` while the deadline allows; a gesture whose per-point 
 cannot finish keeps its Kriging result, and the notes say so.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import time
 
 import numpy as np
 
+from .budget import FINISH_RESERVE, PUBLISH_RESERVE, TYPICAL_SHARE, VQ_SHARE
 from .keyframes import (apply_locks, DEFAULT_EXPANSION_THRESHOLD, free_layout, joint_set,
                         locked_sets, PoseProblem, reconfigure_library)
 from .kriging import OrdinaryKriging
-from .locks import resolve_locks
+from .locks import check_strategy, resolve_locks
 from .vq import quantise
 from ..model.gestures import GestureLibrary, Keyframe
 from ..model.kinematics import batch_forward
@@ -41,8 +42,6 @@ DEFAULT_DISTORTION_MM = 60.0   # the paper's quantisation distortion threshold
 DEFAULT_MIN_POINTS = 12        # shorter motions are explored at every keyframe
 DEFAULT_CONTINUITY = 0.01      # penalty per deg^2 of joint-space jump
 DEFAULT_STAY_CLOSE = 1e-3      # per deg^2 away from the design, at the typical points
-_TYPICAL_SHARE = 0.9           # of the deadline for the typical points in ``auto``
-_FINISH_MARGIN = 0.03          # s of the deadline kept for Kriging and the figures
 _SETTLED_DEG = 0.5             # a consistency sweep that moves no point more has settled
 _MAX_SWEEPS = 6                # consistency sweeps at most (5 fixed the elbow-lock circle)
 
@@ -114,7 +113,7 @@ class MotionAdaptation:
 
 
 def typical_points(robot, library, distortion_mm=DEFAULT_DISTORTION_MM,
-                   min_points=DEFAULT_MIN_POINTS, seed=0):
+                   min_points=DEFAULT_MIN_POINTS, seed=0, clock=None):
     """
     Return ``{gesture: Quantisation or None}``: the typical points of each motion.
 
@@ -123,18 +122,51 @@ def typical_points(robot, library, distortion_mm=DEFAULT_DISTORTION_MM,
     two-arm motion) between a point and its typical point on the original structure,
     as in the paper.
     It depends on the designed motions only, so a caller may compute it once per
-    library and pass it to :func:`adapt_library`.
+    library and pass it to :func:`adapt_library`.  With a ``clock`` (the run's
+    :class:`~namo_fault_recovery.optimize.base.Clock`) the search for the fewest typical
+    points gets ``VQ_SHARE`` of the time left; a motion whose search it cuts short has
+    every point as a typical point (the threshold holds; only the saving is lost) and a
+    ``note`` that says so; such a result is not worth caching.
     """
-    out = {}
-    for gesture in library:
-        if len(gesture.keyframes) < min_points:
-            out[gesture.name] = None
-            continue
+    clock = Clock(None) if clock is None else clock.child(share=VQ_SHARE)
+    todo = [g for g in library if len(g.keyframes) >= min_points]
+    out = {g.name: None for g in library}
+    for n_left, gesture in zip(range(len(todo), 0, -1), todo):
         q = gesture.joint_matrix()
         tips = np.concatenate([batch_forward(robot, q[:, _cols(side)], side).tip
                                for side in gesture.arms], axis=1)
-        out[gesture.name] = quantise(np.degrees(q), distortion_mm, features=tips, seed=seed)
+        # Each motion gets an equal share of what is left; unused time rolls over.
+        found = quantise(np.degrees(q), distortion_mm, features=tips, seed=seed,
+                         clock=clock.child(share=1.0 / n_left))
+        if found.note:
+            found = replace(found, note=f'{gesture.name}: {found.note}')
+        out[gesture.name] = found
     return out
+
+
+class _Job:
+    """What every adaptation run of one call shares (everything but the locks)."""
+
+    def __init__(self, robot, library, **options):
+        self.robot = robot
+        self.library = library
+        self.__dict__.update(options)
+        self.model = robot.with_tool(self.tool_mm, self.tool_arm)
+        quantisations = self.quantisations
+        self.picks = {g.name: (tuple(range(len(g.keyframes)))
+                               if quantisations.get(g.name) is None
+                               else tuple(int(i) for i in quantisations[g.name].typical))
+                      for g in library}
+        self.sub = GestureLibrary(tuple(g.with_keyframes([g.keyframes[i]
+                                                          for i in self.picks[g.name]])
+                                        for g in library), library.source)
+
+    def engine_options(self):
+        """Return the keyword arguments of the typical points' keyframe engine."""
+        return dict(algorithm=self.algorithm, preset=self.preset, settings=self.settings,
+                    weights=self.weights, expansion_threshold=self.expansion_threshold,
+                    tool_mm=self.tool_mm, tool_arm=self.tool_arm,
+                    stay_close=self.stay_close, **self.engine)
 
 
 def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
@@ -143,13 +175,20 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
                   deadline=1.0, seed=None, algorithm='abc', preset='default',
                   settings=None, lock_strategy='average', measured=None, weights=None,
                   expansion_threshold=DEFAULT_EXPANSION_THRESHOLD, cancel=None,
-                  quantisations=None, stay_close=DEFAULT_STAY_CLOSE, **engine):
+                  quantisations=None, stay_close=DEFAULT_STAY_CLOSE, clock=None, **engine):
     """
     Adapt every motion of ``library`` to a changed structure (faults and/or a tool).
 
     ``faults`` maps joint names to lock angles (rad) or None, as for
-    :func:`.reconfigure.reconfigure_library`; extra keyword arguments (``bimanual``,
-    ``collision``...) go to that engine.  ``deadline`` (s) bounds the whole run.
+    :func:`.keyframes.reconfigure_library`; extra keyword arguments (``bimanual``,
+    ``collision``...) go to that engine.  ``clock`` (a
+    :class:`~namo_fault_recovery.optimize.base.Clock`) owns the deadline and the cancel
+    flag of the whole run; without one, ``deadline`` (s) and ``cancel`` make it.  Every
+    stage's budget comes from that clock, less the reserves of :mod:`.budget`.
+    ``lock_strategy='optimal'`` runs the ``average`` adaptation first (the very same
+    run), then tries the lock angles that do best at the typical points, and keeps
+    whichever adapted library has the lower total (the sum over motions of their worst
+    point's score): never worse than ``average``.
     Returns a :class:`MotionAdaptation`; a pure function of the inputs and ``seed`` up
     to where the deadline cuts the search.
     """
@@ -159,55 +198,132 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
                          f'{", ".join(METHODS)}')
     if not (np.isfinite(continuity) and continuity >= 0):
         raise ValueError(f'continuity: expected a finite number >= 0, got {continuity!r}')
+    check_strategy(lock_strategy)
+    if clock is None:
+        clock = Clock(deadline, cancel)
+    elif cancel is not None:
+        raise ValueError('adapt_library: pass the cancel flag in the clock')
     faults = dict(faults or {})
     if seed is None:
         seed = int(np.random.SeedSequence().entropy % (2 ** 63))
-    rng = np.random.default_rng(seed)
-    # Kriging and the figures run after the search: keep a little time for them.
-    end = None if deadline is None else start + max(deadline - _FINISH_MARGIN, 0.5 * deadline)
     if quantisations is None:
-        quantisations = typical_points(robot, library, distortion_mm, min_points)
-    model = robot.with_tool(tool_mm, tool_arm)
-    common = dict(algorithm=algorithm, preset=preset, settings=settings,
-                  lock_strategy=lock_strategy, measured=measured, weights=weights,
-                  expansion_threshold=expansion_threshold, cancel=cancel,
-                  tool_mm=tool_mm, tool_arm=tool_arm, **engine)
-    notes = []
-    if lock_strategy != 'optimal':
+        quantisations = typical_points(robot, library, distortion_mm, min_points,
+                                       clock=clock)
+    notes = [q.note for q in quantisations.values() if q is not None and q.note]
+    # Kriging, the figures and the caller's publishing run after the search.
+    search = clock.child(reserve=FINISH_RESERVE + PUBLISH_RESERVE)
+    job = _Job(robot, library, method=method, tool_mm=tool_mm, tool_arm=tool_arm,
+               continuity=continuity, algorithm=algorithm, preset=preset,
+               settings=settings, weights=weights, expansion_threshold=expansion_threshold,
+               quantisations=quantisations, stay_close=stay_close, engine=engine,
+               lock_strategy=lock_strategy)
+    if lock_strategy == 'optimal':
+        out = _adapt_optimal(job, faults, measured, seed, search)
+    else:
         # Lock angles come from the whole motions, not from their typical points.
-        faults, notes = resolve_locks(robot, library, faults, lock_strategy, measured)
-    # ``optimal`` lock angles are chosen at the typical points, even for ``per_point``.
-    per_point_only = method == 'per_point' and lock_strategy != 'optimal'
+        locks, lock_notes = resolve_locks(robot, library, faults, lock_strategy, measured)
+        out = _adapt(job, locks, seed, search)
+        out.notes[:0] = lock_notes
+    out.notes[:0] = notes
+    out.wall_time = time.monotonic() - start
+    out.deadline = None if clock.end is None else clock.end - clock.start
+    return out
 
+
+def library_total(adaptation):
+    """Return an adapted library's total: the sum over motions of the worst point's score."""
+    return float(sum(g.score_max for g in adaptation.gestures))
+
+
+def _adapt_optimal(job, faults, measured, seed, search):
+    """
+    Adapt with ``optimal`` locks: the average run, then the best other angles, if better.
+
+    The lock angles are searched at the typical points by the keyframe engine (on the
+    problem its final result solves, starting from the whole-motion averages); the
+    angles it finds are then adapted exactly as the averages were, and the adapted
+    library with the lower total is returned, the average one on ties.
+    """
+    robot = job.robot
+    averages, notes = resolve_locks(robot, job.library, faults, 'average', measured)
+    first = _adapt(job, averages, seed, search)
+    first.notes[:0] = notes
+    joints = [j for j, a in faults.items() if a is None]
+    if not joints:
+        return first
+    first_total = library_total(first)
+    at_average = ', '.join(f'{j} = {np.degrees(averages[j]):.2f} deg' for j in joints)
+    if first_total <= 0.0:   # scores are distances: nothing can do better than 0
+        first.notes.append(f'optimal lock: the average lock {at_average} already scores '
+                           f'0 on every motion')
+        return first
+    if search.expired():
+        first.notes.append(f'optimal lock: no time left to try other angles; the average '
+                           f'lock {at_average} is kept (library total {first_total:.3f})')
+        return first
+    # The engine starts from the same averages, over the whole motions.
+    screen = reconfigure_library(
+        robot, job.sub, {j: (None if a is None else averages[j]) for j, a in faults.items()},
+        lock_strategy='optimal', lock_start=averages, clock=search.child(share=0.5),
+        seed=int(np.random.default_rng([seed, 1]).integers(2 ** 63)),
+        **job.engine_options())
+    chosen = screen.locks
+    if all(chosen[j] == averages[j] for j in joints):
+        cut = any(n.startswith('optimal lock') and 'deadline' in n for n in screen.notes)
+        first.notes.append(f'optimal lock: the average lock {at_average} is best '
+                           f'(library total {first_total:.3f})'
+                           + ('; the deadline cut the search for other angles short'
+                              if cut else ''))
+        return first
+    at_chosen = ', '.join(f'{j} = {np.degrees(chosen[j]):.2f} deg' for j in joints)
+    if search.expired():
+        first.notes.append(f'optimal lock: no time left to adapt the motions at '
+                           f'{at_chosen}; the average lock {at_average} is kept (library '
+                           f'total {first_total:.3f})')
+        return first
+    second = _adapt(job, chosen, seed, search)
+    second_total = library_total(second)
+    if second_total < first_total:
+        second.notes[:0] = notes
+        second.notes.append(f'optimal lock: {at_chosen} (library total {second_total:.3f}; '
+                            f'at the average lock {at_average}: {first_total:.3f})')
+        return second
+    first.notes.append(f'optimal lock: the average lock {at_average} is kept (library '
+                       f'total {first_total:.3f}; at {at_chosen}: {second_total:.3f})')
+    return first
+
+
+def _adapt(job, locks, seed, search):
+    """
+    Adapt every motion with the lock angles ``locks``, within the ``search`` clock.
+
+    Returns a :class:`MotionAdaptation` (its wall time and deadline are the caller's).
+    """
+    robot, library, model, method = job.robot, job.library, job.model, job.method
+    quantisations, picks = job.quantisations, job.picks
+    rng = np.random.default_rng(seed)
+    notes = []
     typical_res = None
-    locks = faults
-    picks = {g.name: (tuple(range(len(g.keyframes))) if quantisations.get(g.name) is None
-                      else tuple(int(i) for i in quantisations[g.name].typical))
-             for g in library}
-    if not per_point_only:
-        sub = GestureLibrary(tuple(g.with_keyframes([g.keyframes[i] for i in picks[g.name]])
-                                   for g in library), library.source)
-        budget = None
-        if end is not None:
-            share = 1.0 if method == 'kriging' else _TYPICAL_SHARE
-            budget = max(share * (end - time.monotonic()), 1e-3)
+    if method != 'per_point':
+        share = 1.0 if method == 'kriging' else TYPICAL_SHARE
         # The smallest corrections keep the typical points on one redundant branch, so
         # that Kriging interpolates between neighbours of the same kind.
-        typical_res = reconfigure_library(robot, sub, faults, deadline=budget,
+        typical_res = reconfigure_library(robot, job.sub, locks, lock_strategy=job.lock_strategy,
+                                          clock=search.child(share=share),
                                           seed=int(rng.integers(2 ** 63)),
-                                          stay_close=stay_close, **common)
+                                          **job.engine_options())
         locks = typical_res.locks
         notes += typical_res.notes
 
     locked = locked_sets(robot, locks)
     faulted = {s for s in ARMS if locked[s] or model.tool_length(s) > 0}
     targets = [t for g in library for t in gesture_targets(g)]
-    scorer = SimilarityScore(model, targets, weights, reference_robot=robot)
+    scorer = SimilarityScore(model, targets, job.weights, reference_robot=robot)
     # Every point of the final motions is checked, Kriging-interpolated ones included.
     checker = None
-    if engine.get('collision'):
-        checker = CollisionModel(model, targets, engine.get('capsules') or robot.capsules)
-    algo = make_algorithm(algorithm, preset, **(settings or {}))
+    if job.engine.get('collision'):
+        checker = CollisionModel(model, targets, job.engine.get('capsules') or robot.capsules)
+    algo = make_algorithm(job.algorithm, job.preset, **(job.settings or {}))
     results = []
     offset = 0
     for gesture in library:
@@ -216,6 +332,7 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
         offset += n
         design = gesture.joint_matrix()
         base_r, base_l = apply_locks(robot, design[:, :N_JOINTS], design[:, N_JOINTS:], locks)
+        base_r, base_l = model.arms['right'].clip(base_r), model.arms['left'].clip(base_l)
         affected = any(s in faulted for s in gesture.arms)
         status, nfev, sigma, stage, how = 'unchanged', 0, (), 0, 'keyframes'
         free = ()
@@ -232,7 +349,7 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
             if how == 'kriging' and affected and free:
                 solved, used = _consistent(model, scorer, ids[list(picks[gesture.name])],
                                            design[list(picks[gesture.name])], solved, layout,
-                                           continuity, end, cancel)
+                                           job.continuity, search)
                 nfev += used
             q_r, q_l, sigma = _spread(robot, gesture, picks[gesture.name], solved, locks)
         chain = affected and (method == 'per_point'
@@ -248,7 +365,7 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
                     allowed |= joint_set(robot, extra)
                     layouts.append(free_layout(robot, gesture.arms, locked, faulted, allowed))
             out = _chain_with_expansion(model, scorer, ids, base_r, base_l, design, layouts,
-                                        algo, continuity, expansion_threshold, end, cancel,
+                                        algo, job.continuity, job.expansion_threshold, search,
                                         rng, q_r, q_l, typical_res is None)
             if out is None:
                 kept = ('the typical-point result with Kriging is used' if typical_res
@@ -265,19 +382,22 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
                     stage = chain_stage
                     free = tuple(robot.arms[s].joint_names[j] for s, j in chain_free)
                 status = chain_status     # the published motion is the chain's
+        # Every angle published lies within its limits, bit for bit (the locks are
+        # clamped into theirs, so clipping leaves them as they are).
+        q_r, q_l = model.arms['right'].clip(q_r), model.arms['left'].clip(q_l)
         results.append(_describe(robot, model, scorer, gesture, ids, design, base_r, base_l,
                                  q_r, q_l, how, picks[gesture.name], status, nfev, sigma,
                                  stage, free, checker))
     total = sum(g.nfev for g in results)
-    return MotionAdaptation(results, locks, method, time.monotonic() - start, int(total),
-                            seed, deadline, float(tool_mm), tool_arm, typical_res, notes)
+    return MotionAdaptation(results, locks, method, 0.0, int(total), seed, None,
+                            float(job.tool_mm), job.tool_arm, typical_res, notes)
 
 
 def _cols(side):
     return slice(0, N_JOINTS) if side == 'right' else slice(N_JOINTS, 2 * N_JOINTS)
 
 
-def _consistent(model, scorer, ids, design, solved, layout, continuity, end, cancel):
+def _consistent(model, scorer, ids, design, solved, layout, continuity, clock):
     """
     Put the typical points on one redundant branch before Kriging interpolates them.
 
@@ -295,7 +415,6 @@ def _consistent(model, scorer, ids, design, solved, layout, continuity, end, can
         return solved, 0
     col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in layout])
     nfev = 0
-    clock = Clock(None if end is None else max(end - time.monotonic(), 0.0), cancel)
     rest = slice(1, None)
     for _ in range(min(len(ids) - 1, _MAX_SWEEPS)):
         if clock.expired():
@@ -335,8 +454,7 @@ def _spread(robot, gesture, picks, solved, locks):
 
 
 def _chain_with_expansion(model, scorer, ids, base_r, base_l, design, layouts, algo,
-                          continuity, threshold, end, cancel, rng, start_r, start_l,
-                          expand):
+                          continuity, threshold, clock, rng, start_r, start_l, expand):
     """
     Run the per-point chain, then its staged expansion while the worst point is poor.
 
@@ -349,7 +467,7 @@ def _chain_with_expansion(model, scorer, ids, base_r, base_l, design, layouts, a
         if not layout:
             continue
         out = _chain(model, scorer, ids, base_r, base_l, design, layout, algo, continuity,
-                     end, cancel, rng, start_r, start_l)
+                     clock, rng, start_r, start_l)
         if out is None:
             # A later stage was cut short: keep the best completed stage, say so.
             return None if best is None else best[:2] + (nfev,) + best[3:5] + ('deadline',)
@@ -366,8 +484,8 @@ def _chain_with_expansion(model, scorer, ids, base_r, base_l, design, layouts, a
     return best[:2] + (nfev,) + best[3:6]
 
 
-def _chain(model, scorer, ids, base_r, base_l, design, layout, algo, continuity, end,
-           cancel, rng, start_r, start_l):
+def _chain(model, scorer, ids, base_r, base_l, design, layout, algo, continuity, clock,
+           rng, start_r, start_l):
     """
     Explore every point in order, warm-started from the previous point's solution.
 
@@ -383,10 +501,10 @@ def _chain(model, scorer, ids, base_r, base_l, design, layout, algo, continuity,
     scores = np.empty(len(ids))
     began = time.monotonic()
     for t in range(len(ids)):
-        if end is not None and t >= 1:
+        if clock.end is not None and t >= 1:
             # Give up early when the pace so far says the chain cannot finish in time.
             pace = (time.monotonic() - began) / t
-            if time.monotonic() + pace * (len(ids) - t) > end:
+            if time.monotonic() + pace * (len(ids) - t) > clock.end:
                 return None
         if t == 0:
             anchor = None
@@ -398,11 +516,9 @@ def _chain(model, scorer, ids, base_r, base_l, design, layout, algo, continuity,
         problem = PoseProblem(model, scorer, ids[t:t + 1], base_r[t:t + 1], base_l[t:t + 1],
                               layout, x0=[x0], anchor=None if anchor is None else [anchor],
                               continuity=continuity)
-        budget = None if end is None else end - time.monotonic()
-        if budget is not None and budget <= 0:
+        if clock.remaining() <= 0:
             return None
-        res = minimize(problem, algo, deadline=budget, cancel=cancel,
-                       seed=int(rng.integers(2 ** 63)))
+        res = minimize(problem, algo, clock=clock, seed=int(rng.integers(2 ** 63)))
         if res.status != 0:
             return None
         nfev += res.nfev

@@ -3,21 +3,29 @@ The one result type of a recovery: what the engine returns and the node publishe
 
 :class:`LibraryResult` is one version of the gesture library, :class:`GestureResult` one
 gesture of it.  The engine (:func:`.engine.recover`), the node, the persisted state, the
-ROS messages, ``/diagnostics`` and ``namo-recovery solve`` all read these two types, and
-each field means one thing everywhere:
+ROS messages, ``/diagnostics``, ``namo-recovery solve`` and the benchmarks all read
+these two types, and each field means one thing everywhere (the class docstrings list
+them all).  The main ones:
 
 - ``score_before``: the worst (largest) keyframe score of the gesture as designed, with
   the failed joints moved to their lock angles and nothing re-optimised;
 - ``score_after``: the worst keyframe score of the published gesture;
 - ``wall_time``: seconds from the start of the run to the end of the engine's work (the
   same value for every gesture of one library);
-- ``status``: ``converged``, ``deadline``, ``cancelled`` or ``unchanged``.
+- ``status``: ``converged``, ``deadline``, ``cancelled``, ``frozen`` or ``unchanged``.
 
-Free of ROS; JSON round trip with :meth:`LibraryResult.to_dict` / ``from_dict``.
+The engine's internal stage records (the keyframe engine's and the motion adaptation's)
+stay inside :mod:`namo_fault_recovery.recovery`; everything outside reads these types.
+Free of ROS; JSON round trip with :meth:`LibraryResult.to_dict` / ``from_dict``, where
+every field added later has a default so that older state files still load.
 """
 
 from dataclasses import dataclass, field
 import math
+
+import numpy as np
+
+from ..model.robot import N_JOINTS
 
 
 class MalformedResult(ValueError):
@@ -39,13 +47,55 @@ def finite_number(value, what):
     return value
 
 
+def optional_number(value):
+    """Return ``value`` as a float, None as None; raise MalformedResult otherwise."""
+    return None if value is None else number(value)
+
+
 @dataclass(frozen=True)
 class GestureResult:
-    """One gesture of a published library version, with its reconfiguration figures."""
+    """
+    One gesture of a published library version, with its reconfiguration figures.
+
+    Scores are the similarity score (lower is better, 0 = the reference).  Over the
+    gesture's keyframes (every point of a motion, Kriging-interpolated ones included):
+
+    - ``times``: time_from_start (s) per keyframe; ``positions``: per keyframe the 14
+      joint angles (rad), right arm joints 1-7 then left arm joints 1-7, as published;
+    - ``score_before`` / ``score_before_mean``: worst / mean keyframe score as designed
+      with the locks applied and nothing re-optimised;
+    - ``score_after`` / ``score_mean``: worst / mean keyframe score as published;
+    - ``breakdown``: the score's components (unweighted: mm, palm in deg) at the worst
+      published keyframe, the one ``score_after`` is the score of (empty for the
+      reference library);
+    - ``stage``: 2 if the healthy arm moved too (two-handed gestures), else 1;
+      ``stage1_score``: worst explored keyframe score at the end of stage 1, before
+      the healthy arm joined (None when no keyframe search ran for this gesture);
+    - ``expansion_stage``: staged DOF expansion stages used (0: the designed joints);
+      ``free_joints``: the joint names searched (after any expansion or stage 2);
+    - ``nfev``: objective evaluations spent on this gesture;
+    - ``wall_time``: seconds of the whole run (the same for every gesture);
+    - ``status``: ``converged``, ``deadline``, ``cancelled``, ``frozen`` or
+      ``unchanged``; ``message``: one line for a person;
+    - ``collides`` / ``colliding_pairs``: with the collision check on, whether any
+      keyframe's capsules touch and which pairs (False / () when the check is off);
+    - ``method``: ``kriging`` (typical points + Kriging), ``per_point`` (every point
+      explored in order) or ``keyframes`` (every keyframe explored in one batch);
+      ``typical_indices``: the keyframes explored by the keyframe search (all of them
+      unless ``kriging``); ``typical_points``: how many;
+      ``kriging_sigma_deg``: the Kriging standard deviation per keyframe (deg), empty
+      when nothing was interpolated;
+    - fingertip distance to the designed path (mm; the larger of the two hands for a
+      two-handed gesture): ``tip_error_before_mm`` mean with the locks applied,
+      ``tip_error_mm`` mean and ``tip_error_max_mm`` largest as published;
+    - largest joint step between successive keyframes (deg): ``max_jump_designed_deg``
+      as designed, ``max_jump_before_deg`` with the locks applied, ``max_jump_deg`` as
+      published.
+    """
 
     name: str
-    times: tuple            # time_from_start (s) per keyframe
-    positions: tuple        # per keyframe: 14 angles (rad), right arm first
+    times: tuple
+    positions: tuple
     score_before: float = 0.0
     score_after: float = 0.0
     wall_time: float = 0.0
@@ -55,10 +105,29 @@ class GestureResult:
     breakdown: dict = field(default_factory=dict)
     stage: int = 1
     colliding_pairs: tuple = ()
-    method: str = 'keyframes'    # kriging, per_point or keyframes (every one explored)
+    method: str = 'keyframes'
     typical_points: int = 0
-    tip_error_mm: float = 0.0    # mean fingertip distance to the designed path
-    max_jump_deg: float = 0.0    # largest joint step between successive keyframes
+    tip_error_mm: float = 0.0
+    max_jump_deg: float = 0.0
+    score_before_mean: float = 0.0
+    score_mean: float = 0.0
+    stage1_score: float = None
+    expansion_stage: int = 0
+    free_joints: tuple = ()
+    nfev: int = 0
+    typical_indices: tuple = ()
+    kriging_sigma_deg: tuple = ()
+    tip_error_before_mm: float = 0.0
+    tip_error_max_mm: float = 0.0
+    max_jump_designed_deg: float = 0.0
+    max_jump_before_deg: float = 0.0
+
+    @property
+    def keyframes(self):
+        """Return the published keyframes as :class:`~..model.gestures.Keyframe` objects."""
+        from ..model.gestures import Keyframe
+        return tuple(Keyframe(t, np.array(p[:N_JOINTS]), np.array(p[N_JOINTS:]))
+                     for t, p in zip(self.times, self.positions))
 
     def to_dict(self):
         """Return a JSON-ready dict."""
@@ -71,6 +140,15 @@ class GestureResult:
             'stage': self.stage, 'colliding_pairs': list(self.colliding_pairs),
             'method': self.method, 'typical_points': self.typical_points,
             'tip_error_mm': self.tip_error_mm, 'max_jump_deg': self.max_jump_deg,
+            'score_before_mean': self.score_before_mean, 'score_mean': self.score_mean,
+            'stage1_score': self.stage1_score, 'expansion_stage': self.expansion_stage,
+            'free_joints': list(self.free_joints), 'nfev': self.nfev,
+            'typical_indices': list(self.typical_indices),
+            'kriging_sigma_deg': list(self.kriging_sigma_deg),
+            'tip_error_before_mm': self.tip_error_before_mm,
+            'tip_error_max_mm': self.tip_error_max_mm,
+            'max_jump_designed_deg': self.max_jump_designed_deg,
+            'max_jump_before_deg': self.max_jump_before_deg,
         }
 
     @classmethod
@@ -97,6 +175,18 @@ class GestureResult:
                 typical_points=int(doc.get('typical_points', 0)),
                 tip_error_mm=number(doc.get('tip_error_mm', 0.0)),
                 max_jump_deg=number(doc.get('max_jump_deg', 0.0)),
+                score_before_mean=number(doc.get('score_before_mean', 0.0)),
+                score_mean=number(doc.get('score_mean', 0.0)),
+                stage1_score=optional_number(doc.get('stage1_score')),
+                expansion_stage=int(doc.get('expansion_stage', 0)),
+                free_joints=tuple(str(j) for j in doc.get('free_joints', ())),
+                nfev=int(doc.get('nfev', 0)),
+                typical_indices=tuple(int(i) for i in doc.get('typical_indices', ())),
+                kriging_sigma_deg=tuple(number(v) for v in doc.get('kriging_sigma_deg', ())),
+                tip_error_before_mm=number(doc.get('tip_error_before_mm', 0.0)),
+                tip_error_max_mm=number(doc.get('tip_error_max_mm', 0.0)),
+                max_jump_designed_deg=number(doc.get('max_jump_designed_deg', 0.0)),
+                max_jump_before_deg=number(doc.get('max_jump_before_deg', 0.0)),
             )
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             if isinstance(exc, MalformedResult):
@@ -109,8 +199,20 @@ class LibraryResult:
     """
     One version of the gesture library, as published on ``/gesture_library``.
 
-    ``faults`` is the fault set it was computed for (joint -> requested lock angle or
-    None), ``locks`` the lock angles actually used (rad).
+    - ``gestures``: a :class:`GestureResult` per gesture, in library order (also
+      ``result[name]``);
+    - ``faults``: the fault set it was computed for (joint -> requested lock angle in
+      rad, or None when the lock strategy chose it); ``locks``: the lock angles actually
+      used (rad); ``frozen_arms``: arms all of whose joints are locked;
+    - ``wall_time``: seconds of the run; ``deadline``: the run's budget in seconds (None:
+      no deadline); ``deadline_met``: no gesture was cut short by it or by a cancel;
+      ``cancelled``: a cancel request cut the run short; ``success``: the deadline was
+      met and every gesture has a finite score;
+    - ``settings``: the :class:`~.engine.RecoverySettings` of the run, as a dict named
+      like the node's parameters; ``seed``: the seed the run used (None: not recorded);
+      ``notes``: what a person should know about the run (lock choice, skipped stages);
+    - ``tool_mm`` / ``tool_arm``: a tool lengthening that hand (mm, 0: none);
+    - ``nfev``: objective evaluations of the whole run.
     """
 
     gestures: tuple
@@ -125,11 +227,26 @@ class LibraryResult:
     settings: dict = field(default_factory=dict)
     tool_mm: float = 0.0
     tool_arm: str = 'right'
+    seed: int = None
+    notes: tuple = ()
+    nfev: int = 0
 
     @property
     def names(self):
         """Gesture names in library order."""
         return tuple(g.name for g in self.gestures)
+
+    @property
+    def total_score(self):
+        """Return the sum over the gestures of ``score_after`` (the library total)."""
+        return float(sum(g.score_after for g in self.gestures))
+
+    def __getitem__(self, name):
+        """Return the :class:`GestureResult` named ``name`` (KeyError naming the choices)."""
+        for g in self.gestures:
+            if g.name == name:
+                return g
+        raise KeyError(f'unknown gesture {name!r}; expected one of {", ".join(self.names)}')
 
     def to_dict(self):
         """Return a JSON-ready dict."""
@@ -141,11 +258,17 @@ class LibraryResult:
             'success': self.success, 'cancelled': self.cancelled,
             'settings': dict(self.settings),
             'tool_mm': self.tool_mm, 'tool_arm': self.tool_arm,
+            'seed': self.seed, 'notes': list(self.notes), 'nfev': self.nfev,
         }
 
     @classmethod
     def from_dict(cls, doc):
-        """Rebuild from :meth:`to_dict` output; raise MalformedResult if malformed."""
+        """
+        Rebuild from :meth:`to_dict` output; raise MalformedResult if malformed.
+
+        Files written before ``seed`` and ``notes`` were fields kept them in
+        ``settings``; they are read from there.
+        """
         try:
             gestures = tuple(GestureResult.from_dict(g) for g in doc['gestures'])
             if not gestures:
@@ -153,17 +276,24 @@ class LibraryResult:
             faults = {str(k): (None if v is None else finite_number(v, 'fault angle'))
                       for k, v in dict(doc.get('faults', {})).items()}
             locks = {str(k): finite_number(v, 'lock angle') for k, v in dict(doc['locks']).items()}
+            settings = dict(doc.get('settings', {}))
+            # Older files kept the seed and the notes in ``settings``.
+            seed = doc['seed'] if 'seed' in doc else settings.pop('seed', None)
+            notes = doc['notes'] if 'notes' in doc else settings.pop('notes', ())
             return cls(
                 gestures=gestures, faults=faults, locks=locks,
                 frozen_arms=tuple(str(a) for a in doc.get('frozen_arms', ())),
                 wall_time=number(doc.get('wall_time', 0.0)),
-                deadline=number(doc.get('deadline', 0.0)),
+                deadline=optional_number(doc.get('deadline', 0.0)),
                 deadline_met=bool(doc.get('deadline_met', True)),
                 success=bool(doc.get('success', True)),
                 cancelled=bool(doc.get('cancelled', False)),
-                settings=dict(doc.get('settings', {})),
+                settings=settings,
                 tool_mm=number(doc.get('tool_mm', 0.0)),
                 tool_arm=str(doc.get('tool_arm', 'right')),
+                seed=None if seed is None else int(seed),
+                notes=tuple(str(n) for n in notes),
+                nfev=int(doc.get('nfev', 0)),
             )
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             if isinstance(exc, MalformedResult):
@@ -171,7 +301,7 @@ class LibraryResult:
             raise MalformedResult(f'malformed library: {exc!r}') from None
 
 
-def reference_result(library, deadline=0.0, settings=None):
+def reference_result(library, deadline=0.0, settings=None, seed=None):
     """Return the reference library as a LibraryResult (no faults, every score 0)."""
     gestures = tuple(
         GestureResult(name=g.name,
@@ -180,7 +310,8 @@ def reference_result(library, deadline=0.0, settings=None):
                                       for kf in g.keyframes),
                       status='unchanged', message='reference gesture')
         for g in library)
-    return LibraryResult(gestures=gestures, deadline=deadline, settings=dict(settings or {}))
+    return LibraryResult(gestures=gestures, deadline=deadline, settings=dict(settings or {}),
+                         seed=seed)
 
 
 def summary(result):
@@ -194,8 +325,11 @@ def summary(result):
         changes.append(f'a {result.tool_mm:g} mm tool in the {result.tool_arm} hand')
     locks = ', '.join(changes)
     finite = sum(1 for g in result.gestures if math.isfinite(g.score_after))
-    timing = (f'deadline {result.deadline:.3f} s '
-              f"{'met' if result.deadline_met else 'MISSED, best found so far used'}")
+    if result.deadline is None:
+        timing = 'no deadline'
+    else:
+        timing = (f'deadline {result.deadline:.3f} s '
+                  f"{'met' if result.deadline_met else 'MISSED, best found so far used'}")
     parts = [f'{g.name} {g.score_before:.2f} -> {g.score_after:.2f} in {g.wall_time:.3f} s'
              + ('' if g.status in ('converged', 'unchanged') else f' ({g.status})')
              + (' (both arms)' if g.stage == 2 else '')

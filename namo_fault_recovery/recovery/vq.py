@@ -9,7 +9,7 @@ of codewords whose quantisation distortion stays within a threshold, as in the p
 on a circle of radius 150 mm).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import warnings
 
 import numpy as np
@@ -24,6 +24,7 @@ class Quantisation:
     labels: np.ndarray     # (T,) index into ``typical`` of each point's typical point
     distortion: float      # the largest distance of a point from its typical point
     threshold: float
+    note: str = ''         # why the search for the fewest typical points stopped early
 
     @property
     def k(self):
@@ -31,7 +32,7 @@ class Quantisation:
         return len(self.typical)
 
 
-def quantise(vectors, threshold, features=None, seed=0, restarts=3):
+def quantise(vectors, threshold, features=None, seed=0, restarts=3, clock=None):
     """
     Return the Quantisation of ``vectors`` (T, D) with distortion <= ``threshold``.
 
@@ -39,6 +40,12 @@ def quantise(vectors, threshold, features=None, seed=0, restarts=3):
     ``features`` (T, F), by default the vectors themselves, e.g. fingertip positions in
     mm for the paper's world-coordinate threshold.  K grows from 1 until the threshold
     holds (at K = T it always does); ``restarts`` k-means runs per K, seeded.
+
+    With a ``clock`` (:class:`~namo_fault_recovery.optimize.base.Clock`) that expires
+    before the threshold holds (a tight threshold on a long motion tries nearly every
+    K), the search stops and every distinct point becomes a typical point: the
+    threshold still holds (the distortion is 0), only the saving of exploring fewer
+    points is lost, and ``note`` says so.
     """
     x = np.asarray(vectors, dtype=float)
     if x.ndim != 2 or len(x) == 0 or not np.isfinite(x).all():
@@ -53,7 +60,14 @@ def quantise(vectors, threshold, features=None, seed=0, restarts=3):
                          f'got {threshold!r}')
     rng = np.random.default_rng(seed)
     unique = len(np.unique(x, axis=0))
+    best = None
     for k in range(1, len(x) + 1):
+        if best is not None and clock is not None and clock.expired():
+            every = _codebook(x, feats, unique, unique, rng, threshold)
+            return replace(every, note=(
+                f'the search for typical points stopped at K = {k - 1} (distortion '
+                f'{best.distortion:.3g} > {threshold:.3g} mm) to stay within the deadline; '
+                f'all {every.k} distinct points are explored'))
         best = None
         for _ in range(restarts if 1 < k < unique else 1):
             q = _codebook(x, feats, k, unique, rng, threshold)

@@ -149,7 +149,7 @@ def reconfiguration_status(snap, up_to_date, hw, prefix):
               ('deadline_met', str(current.deadline_met).lower()),
               ('success', str(current.success).lower()),
               ('frozen_arms', ' '.join(current.frozen_arms)),
-              ('seed', current.settings.get('seed', '')),
+              ('seed', '' if current.seed is None else current.seed),
               ('tool_length_mm', f'{current.tool_mm:g}'), ('tool_arm', current.tool_arm)]
     for g in current.gestures:
         pairs += [(f'{g.name}.score_before', f'{g.score_before:.6g}'),
@@ -165,7 +165,7 @@ def reconfiguration_status(snap, up_to_date, hw, prefix):
             pairs.append((f'{g.name}.collides', str(g.collides).lower()))
             if g.colliding_pairs:
                 pairs.append((f'{g.name}.colliding_pairs', ' '.join(g.colliding_pairs)))
-    for k, note in enumerate(current.settings.get('notes', ())):
+    for k, note in enumerate(current.notes):
         pairs.append((f'note[{k}]', note))
     level = 'OK'
     message = summary(current)

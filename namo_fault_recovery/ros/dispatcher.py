@@ -2,7 +2,8 @@
 The dispatcher: takes the newest request from the run book, runs it, publishes it.
 
 Free of ROS.  One plain thread (never an executor thread) waits for a request, sends it
-to the engine process with the deadline counted from the moment it was requested, checks
+to the engine process with the deadline counted from the moment it was requested (the
+engine keeps a margin of it for the work after the search, publishing included), checks
 the result, persists it, and publishes it, unless a newer request superseded it meanwhile.
 Publishing and persisting are callables given by the node.  A run with no structure
 change (no fault and no tool) needs no engine: the reference library is published at once.
@@ -13,12 +14,8 @@ import threading
 
 from .engine_process import EngineError
 from .restore import check_result
-from ..recovery.engine import structure_changed
-from ..recovery.result import reference_result, summary
-
-# Seconds of the deadline kept for what follows the engine: the answer crossing the pipe,
-# the checks, the state file and the messages.
-PUBLISH_MARGIN = 0.02
+from ..recovery.engine import recover, structure_changed
+from ..recovery.result import summary
 
 
 class Dispatcher:
@@ -65,13 +62,13 @@ class Dispatcher:
         engine = settings.engine
         faults = {j: f.angle for j, f in run.faults.items()}
         if not structure_changed(faults, engine):
-            result = reference_result(self._library, engine.deadline_sec, engine.public())
+            # No structure change: the engine returns the reference library at once.
+            result = recover(self._robot, self._library, faults, engine, seed=settings.seed)
         else:
             measured = {j: f.measured for j, f in run.faults.items() if f.measured is not None}
-            end = run.requested_at + engine.deadline_sec - PUBLISH_MARGIN
             try:
                 result, self.last_engine_time = self._engine.run(
-                    run.generation, faults, engine, settings.seed, end, measured)
+                    run.generation, faults, engine, settings.seed, run.requested_at, measured)
             except EngineError as exc:
                 self._fail(run, str(exc))
                 return

@@ -4,8 +4,8 @@ The engine in its own process, so that it never shares an interpreter lock with 
 Free of ROS.  :class:`EngineProcess` starts one child process (``spawn``: no DDS thread is
 forked) that loads the robot and the library once, keeps the typical points, and answers
 one request at a time over a pipe with :func:`~namo_fault_recovery.recovery.engine.recover`.
-The deadline travels as an absolute ``time.monotonic()`` instant (one system-wide clock
-on Linux), and a shared counter cancels a run as soon as a newer one is wanted.  A child
+The deadline's start travels as a ``time.monotonic()`` instant (one system-wide clock on
+Linux), and a shared counter cancels a run as soon as a newer one is wanted.  A child
 that dies or hangs is replaced, and the run is reported failed.
 """
 
@@ -35,11 +35,15 @@ def _serve(conn, robot_file, gesture_file, current):
     library = load_library(robot, gesture_file)
     cache = {}
 
-    def quantisations(distortion_mm):
-        if distortion_mm not in cache:
+    def quantisations(distortion_mm, clock=None):
+        """Typical points per threshold; computed within the run's clock, kept if whole."""
+        if distortion_mm in cache:
+            return cache[distortion_mm]
+        found = typical_points(robot, library, distortion_mm, clock=clock)
+        if not any(q is not None and q.note for q in found.values()):
             cache.clear()
-            cache[distortion_mm] = typical_points(robot, library, distortion_mm)
-        return cache[distortion_mm]
+            cache[distortion_mm] = found      # complete: reuse it in every later run
+        return found
 
     # Warm-up: pay the one-off costs (first allocations, caches) before any fault.
     try:
@@ -57,16 +61,15 @@ def _serve(conn, robot_file, gesture_file, current):
             return                                   # the node went away
         if request is _STOP:
             return
-        run_id, faults, settings, seed, end, measured = request
+        run_id, faults, settings, seed, start, measured = request
 
         def cancel(run_id=run_id):
             return current.value != run_id
 
         try:
-            clock = Clock(None, cancel)
-            clock.end = end
+            clock = Clock(settings.deadline_sec, cancel, start=start)
             began = time.monotonic()
-            quant = quantisations(settings.vq_distortion_mm)
+            quant = quantisations(settings.vq_distortion_mm, clock)
             result = recover(robot, library, faults, settings, seed=seed, clock=clock,
                              measured=measured, quantisations=quant)
             conn.send(('ok', run_id, result, time.monotonic() - began))
@@ -111,19 +114,21 @@ class EngineProcess:
         """Cancel the run under way (it returns soon with its best so far)."""
         self._current.value = -1
 
-    def run(self, run_id, faults, settings, seed, end, measured, hang_margin=5.0):
+    def run(self, run_id, faults, settings, seed, start, measured, hang_margin=5.0):
         """
         Run the engine for one request; return ``(LibraryResult, seconds in the child)``.
 
-        ``end`` is the absolute ``time.monotonic()`` deadline (None: no deadline).  Raises
+        ``start`` is the ``time.monotonic()`` instant the request was made: the deadline
+        ``settings.deadline_sec`` counts from there, across the processes.  Raises
         :class:`EngineError` if the run fails, or if the child dies or does not answer
         within the deadline plus ``hang_margin`` (the child is then replaced).
         """
         try:
             self._ensure_ready(time.monotonic() + self._start_timeout)
             self._current.value = run_id
-            self._conn.send((run_id, faults, settings, seed, end, measured))
-            limit = None if end is None else max(end - time.monotonic(), 0.0) + hang_margin
+            self._conn.send((run_id, faults, settings, seed, start, measured))
+            end = start + settings.deadline_sec
+            limit = max(end - time.monotonic(), 0.0) + hang_margin
             if not self._conn.poll(limit):
                 raise EngineError(f'the engine process did not answer within '
                                   f'{limit:.1f} s; it was restarted')

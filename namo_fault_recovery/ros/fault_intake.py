@@ -31,6 +31,13 @@ class Clear:
     done: object
 
 
+@dataclass(frozen=True)
+class After:
+    """Call ``then()`` once every item queued before it is persisted and applied."""
+
+    then: object
+
+
 class FaultIntake:
     """The queue of fault-set changes and the thread that persists and applies them."""
 
@@ -51,7 +58,7 @@ class FaultIntake:
         self._thread.start()
 
     def submit(self, item):
-        """Queue a :class:`Report` or :class:`Clear` (cheap; never blocks)."""
+        """Queue a :class:`Report`, :class:`Clear` or :class:`After` (cheap; never blocks)."""
         with self._cond:
             if len(self._queue) >= self._max_queue:
                 self.dropped += 1           # far beyond any real burst: bounded memory
@@ -72,10 +79,17 @@ class FaultIntake:
             self._apply(batch)
 
     def _apply(self, batch):
+        if all(isinstance(i, After) for i in batch):
+            for item in batch:
+                item.then()
+            return
         faults = dict(self._book.faults)
         measured = self._measured() if any(isinstance(i, Report) for i in batch) else {}
-        reports, clears = [], []
+        reports, clears, afters = [], [], []
         for item in batch:
+            if isinstance(item, After):
+                afters.append(item)
+                continue
             if isinstance(item, Clear):
                 clears.append((item, len(faults)))
                 faults = {}
@@ -91,6 +105,8 @@ class FaultIntake:
         self._on_accepted(reports, bool(clears), faults)
         for item, count in clears:
             item.done(count)
+        for item in afters:
+            item.then()
 
     def stop(self):
         """Stop the thread (queued items are dropped: they were never acknowledged)."""

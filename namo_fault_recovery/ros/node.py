@@ -29,14 +29,14 @@ from . import diagnostics
 from . import messages as conv
 from .dispatcher import Dispatcher
 from .engine_process import EngineProcess
-from .fault_intake import Clear, FaultIntake, Report
+from .fault_intake import After, Clear, FaultIntake, Report
 from .input_monitor import InputMonitor
 from .inputs import BadInput, parse_fault
 from .parameters import (check_parameter, declare_parameters, DEFAULT_STATE_DIR, MARKER_PARAMS,
                          node_settings, one_line, parameter_specs, RERUN_PARAMS, shorten,
                          StartupError)
 from .restore import plan_restart
-from .run_book import RunBook
+from .run_book import Outcome, RunBook
 from .state_store import fingerprint, StateStore
 from ..errors import ConfigError
 from ..model.gestures import load_library
@@ -207,7 +207,9 @@ class RecoveryNode(Node):
         return future
 
     async def _on_reconfigure(self, request, response):
-        outcome = await self._await_outcome(self._book.call)
+        # Ordered after every fault report already received: the answer includes them.
+        outcome = await self._await_outcome(
+            lambda done: self._after_intake(lambda: self._book.call(done)))
         response.success = bool(outcome.published and outcome.result.success)
         if outcome.published:
             response.message = f'{summary(outcome.result)} [{self._version_text(outcome)}]'
@@ -223,7 +225,8 @@ class RecoveryNode(Node):
             def persisted(count):
                 counted.append(count)
                 self._book.call(done)
-            self._intake.submit(Clear(persisted))
+            if not self._intake.submit(Clear(persisted)):
+                done(Outcome(False, reason='the fault queue is full; try again'))
 
         outcome = await self._await_outcome(register)
         count = counted[0] if counted else 0
@@ -237,6 +240,11 @@ class RecoveryNode(Node):
                                                       f'{outcome.reason}')
         self.get_logger().info(f'cleared {count} fault(s); {done}')
         return response
+
+    def _after_intake(self, then):
+        """Run ``then()`` after every queued fault report (at once if the queue is full)."""
+        if not self._intake.submit(After(then)):
+            then()
 
     @staticmethod
     def _version_text(outcome):

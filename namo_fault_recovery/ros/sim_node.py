@@ -24,6 +24,8 @@ in the executor, so no callback waits for it and it never waits for a callback.
 """
 
 import math
+from pathlib import Path
+import shutil
 import sys
 import threading
 import time
@@ -31,6 +33,17 @@ import time
 NODE_NAME = 'namo_sim'
 EXIT_CONFIG = 1
 _MAX_LAG = 1.0      # s behind real time before the physics lets time go
+
+
+def sim_command():
+    """Return the command that starts the ``namo_sim`` executable (for tests and tools)."""
+    beside = Path(sys.executable).parent / NODE_NAME
+    if beside.is_file():
+        return [str(beside)]
+    found = shutil.which(NODE_NAME)
+    if found:
+        return [found]
+    return [sys.executable, '-m', 'namo_fault_recovery.ros.sim_node']
 
 
 def _make_node():
@@ -340,7 +353,8 @@ def main(args=None):
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ValueError, KeyError, OSError) as exc:
-        sys.stderr.write(f'{NODE_NAME}: error: {" ".join(str(exc).split())}\n')
+        text = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
+        sys.stderr.write(f'{NODE_NAME}: error: {" ".join(str(text).split())}\n')
         code = EXIT_CONFIG
     finally:
         if node is not None:

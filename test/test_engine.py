@@ -1,0 +1,147 @@
+"""The one engine entry point, recover(), and the one result type it returns."""
+
+import io
+import json
+
+from namo_fault_recovery.cli.main import main
+from namo_fault_recovery.objective.score import ScoreWeights, SimilarityScore
+from namo_fault_recovery.optimize.base import Clock
+from namo_fault_recovery.recovery.engine import recover, RecoverySettings
+from namo_fault_recovery.recovery.locks import resolve_locks
+from namo_fault_recovery.recovery.result import LibraryResult
+import numpy as np
+import pytest
+
+FAULT = 'right_arm_joint2'
+
+
+@pytest.fixture(scope='module')
+def node_default(robot, product_library):
+    """Recover the product library with the node's defaults, seed 11, no deadline."""
+    return recover(robot, product_library, {FAULT: None}, RecoverySettings(), seed=11,
+                   clock=Clock(None))
+
+
+def test_same_seed_without_deadline_gives_the_same_library(
+        robot, product_library, node_default):
+    again = recover(robot, product_library, {FAULT: None}, RecoverySettings(), seed=11,
+                    clock=Clock(None))
+    assert again.names == node_default.names
+    for a, b in zip(again.gestures, node_default.gestures):
+        assert a.positions == b.positions and a.score_after == b.score_after
+    assert node_default.deadline is None and node_default.seed == 11
+    # The fault changed something: the run is not trivially the reference.
+    assert node_default['wai'].score_before > 0
+    assert node_default['wai'].score_after < node_default['wai'].score_before
+
+
+def test_solve_gives_the_library_recover_gives(node_default):
+    out = io.StringIO()
+    assert main(['solve', '--fault', FAULT, '--seed', '11', '--no-deadline', '--json'],
+                out) == 0
+    doc = json.loads(out.getvalue())
+    assert doc['settings'] == RecoverySettings().public()
+    assert doc['deadline'] is None and doc['seed'] == 11
+    assert [g['name'] for g in doc['gestures']] == list(node_default.names)
+    for g, want in zip(doc['gestures'], node_default.gestures):
+        assert np.array_equal(np.array(g['positions']), np.array(want.positions)), g['name']
+        assert g['score_after'] == want.score_after
+    assert doc['total_score'] == pytest.approx(node_default.total_score)
+    assert doc['locks'] == node_default.locks
+
+
+def test_deadline_sec_zero_is_no_deadline_too(robot, library):
+    runs = []
+    for flag in (['--deadline-sec', '0'], ['--no-deadline']):
+        out = io.StringIO()
+        assert main(['--gesture-file', str(library.source), 'solve', '--fault', FAULT,
+                     '--seed', '4', '--json'] + flag, out) == 0
+        runs.append(json.loads(out.getvalue()))
+    assert runs[0]['deadline'] is None and runs[1]['deadline'] is None
+    assert ([g['positions'] for g in runs[0]['gestures']]
+            == [g['positions'] for g in runs[1]['gestures']])
+
+
+def test_solve_one_gesture_keeps_the_whole_library_lock(robot, library):
+    out = io.StringIO()
+    assert main(['--gesture-file', str(library.source), 'solve', '--fault', FAULT,
+                 '--gesture', 'bye', '--seed', '1', '--json'], out) == 0
+    doc = json.loads(out.getvalue())
+    locks, _ = resolve_locks(robot, library, {FAULT: None})
+    assert [g['name'] for g in doc['gestures']] == ['bye']
+    assert doc['locks'][FAULT] == pytest.approx(locks[FAULT])
+    assert doc['faults'] == {FAULT: None}
+    assert doc['gestures'][0]['positions'][0][1] == pytest.approx(locks[FAULT])
+
+
+@pytest.mark.parametrize('name, value', [
+    ('deadline_sec', 0.0), ('deadline_sec', float('nan')), ('lock_strategy', 'best'),
+    ('optimizer', 'pso'), ('optimizer_preset', 'fast'), ('bimanual', 'both'),
+    ('tool_length_mm', -5.0), ('tool_arm', 'middle'), ('trajectory_method', 'spline'),
+    ('vq_distortion_mm', 0.0), ('continuity_weight', float('inf')),
+    ('collision_check', 'yes'), ('deadline_sec', True), ('weights', {'elbow': 1.0}),
+])
+def test_settings_reject_a_bad_value_naming_setting_and_value(name, value):
+    with pytest.raises(ValueError) as info:
+        RecoverySettings(**{name: value})
+    message = str(info.value)
+    assert message.startswith(f'{name}: ')
+    assert repr(value) in message or str(value) in message
+
+
+def test_no_faults_gives_the_reference_library(robot, product_library):
+    result = recover(robot, product_library, {}, RecoverySettings(), seed=2)
+    assert result.names == product_library.names
+    for g, ref in zip(result.gestures, product_library):
+        assert g.positions == tuple(tuple(float(a) for a in kf.positions())
+                                    for kf in ref.keyframes)
+        assert g.times == tuple(float(t) for t in ref.times) and g.status == 'unchanged'
+        assert g.score_before == 0.0 and g.score_after == 0.0
+    assert result.locks == {} and result.total_score == 0.0 and result.seed == 2
+
+
+def test_result_lookup_total_and_round_trip(node_default):
+    assert node_default['circle'].name == 'circle'
+    with pytest.raises(KeyError, match="unknown gesture 'hug'"):
+        node_default['hug']
+    assert node_default.total_score == pytest.approx(
+        sum(g.score_after for g in node_default.gestures))
+    circle = node_default['circle']
+    assert circle.nfev > 0 and circle.free_joints and circle.stage1_score is not None
+    assert len(circle.typical_indices) == circle.typical_points > 0
+    assert circle.tip_error_before_mm > circle.tip_error_mm
+    back = LibraryResult.from_dict(json.loads(json.dumps(node_default.to_dict())))
+    assert back == node_default
+
+
+def test_old_state_documents_still_load(node_default):
+    doc = node_default.to_dict()
+    for key in ('seed', 'notes', 'nfev'):
+        doc.pop(key)
+    doc['settings'] = dict(doc['settings'], seed=5, notes=['an old note'])
+    for g in doc['gestures']:
+        for key in ('nfev', 'free_joints', 'stage1_score', 'typical_indices',
+                    'kriging_sigma_deg', 'tip_error_max_mm'):
+            g.pop(key)
+    old = LibraryResult.from_dict(doc)
+    assert old.seed == 5 and old.notes == ('an old note',)
+    assert 'seed' not in old.settings and 'notes' not in old.settings
+    assert old['circle'].stage1_score is None and old['circle'].nfev == 0
+    assert old['circle'].positions == node_default['circle'].positions
+
+
+def test_scores_and_breakdown_are_those_of_the_published_keyframes(robot, product_library,
+                                                                   node_default):
+    for name in ('wai', 'circle'):
+        gesture, g = product_library[name], node_default[name]
+        scores, parts = [], []
+        for k, kf in enumerate(g.keyframes):
+            scorer = SimilarityScore.for_gesture(robot, gesture, k, ScoreWeights())
+            total, part = scorer(kf.right, kf.left, breakdown=True)
+            scores.append(float(total[0]))
+            parts.append({c: float(part[c][0]) for c in g.breakdown})
+        worst = int(np.argmax(scores))
+        assert g.score_after == pytest.approx(scores[worst], rel=1e-9)
+        assert g.score_mean == pytest.approx(np.mean(scores), rel=1e-9)
+        assert g.breakdown == pytest.approx(parts[worst], rel=1e-9, abs=1e-9)
+        assert set(g.breakdown) >= {'elbow', 'wrist', 'tip', 'palm'}
