@@ -103,6 +103,17 @@ class Recorder:
         with self.lock:
             return self.q.copy()
 
+    def settled(self, timeout=5.0, tol=1e-4):
+        """Wait until the measured pose stops moving (two reads 0.2 s apart); return it."""
+        end = time.monotonic() + timeout
+        q = self.measured()
+        while time.monotonic() < end:
+            time.sleep(0.2)
+            q, before = self.measured(), q
+            if np.max(np.abs(q - before)) < tol:
+                return q
+        raise AssertionError(f'the arms still move {timeout} s after the play')
+
     def wait(self, predicate, timeout, what):
         """Wait until ``predicate()`` is truthy; return it (assert on timeout)."""
         end = time.monotonic() + timeout

@@ -10,18 +10,17 @@ the other.
 """
 
 import math
-import os
 
 from namo_fault_recovery.cli.player_commands import player_command
 from namo_fault_recovery.objective.score import ScoreWeights, SimilarityScore
-from node_harness import NodeProcess, ros_env, TIMEOUT
+from node_harness import NodeProcess, ros_env, session_domain, TIMEOUT
 import numpy as np
 from player_harness import FakeArms, LIBRARY, NAMES, ROBOT
 import pytest
 
 pytestmark = pytest.mark.slow
 
-DOMAIN = 121 + int(os.environ.get('NAMO_TEST_DOMAIN_BASE', 1 + (os.getpid() % 20) * 5))
+DOMAIN = session_domain(0)       # modules run one after the other: the ids are reused
 SCORE_TOL = 0.05     # the fake arms track exactly: only the goal tolerance is left
 WAI = SimilarityScore.for_gesture(ROBOT, LIBRARY['wai'], 0, ScoreWeights())
 
@@ -77,7 +76,7 @@ def _stick_and_recover(arms, joint, angle, locked):
     for j, a in locked.items():
         commanded = arms.commanded(before, j)
         assert commanded.size > 10 and np.all(commanded == a), (j, commanded)
-    q = arms.measured()
+    q = arms.settled()      # the final pose, once the arm came to rest
     executed = float(WAI(q[:7], q[7:])[0])
     library = arms.wait(lambda: _library_score(arms, 'wai'), TIMEOUT, 'the diagnostics')
     planned = float(WAI(*np.split(arms.newest_library()['wai'][-1], 2))[0])

@@ -14,15 +14,14 @@ import threading
 import time
 
 from namo_fault_recovery.cli.player_commands import player_command
-from node_harness import NodeProcess, ros_env
+from node_harness import NodeProcess, ros_env, session_domain
 import numpy as np
 from player_harness import CONTROLLERS, FakeArms, LIBRARY, NAMES
 import pytest
 
 pytestmark = pytest.mark.slow
 
-# Domains apart from the recovery-node modules' (session_domain 1..105).
-DOMAIN = 120 + int(os.environ.get('NAMO_TEST_DOMAIN_BASE', 1 + (os.getpid() % 20) * 5))
+DOMAIN = session_domain(0)       # modules run one after the other: the ids are reused
 STUCK = math.radians(-20.0)
 
 
@@ -125,8 +124,9 @@ def test_cli_play_and_export_from_the_running_library(player, tmp_path):
 
 
 def test_bad_parameter_refused_in_one_line():
-    proc = NodeProcess(DOMAIN + 2, command=player_command(),
-                       args=['-p', 'fault_hold_sec:=0.0'], env=ros_env(DOMAIN + 2))
+    domain = session_domain(2)
+    proc = NodeProcess(domain, command=player_command(), args=['-p', 'fault_hold_sec:=0.0'],
+                       env=ros_env(domain))
     code = proc.wait()
     stderr = proc.stderr
     proc.stop()
@@ -143,7 +143,7 @@ def test_demo_play_runs_the_loop_step_by_step(tmp_path, monkeypatch):
     fake = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'fake_sim_node.py')
     monkeypatch.setattr(player_commands, 'sim_command', lambda: [sys.executable, fake])
     out = io.StringIO()
-    code = main(['demo-play', '--domain-id', str(DOMAIN + 4), '--plot', str(tmp_path)], out)
+    code = main(['demo-play', '--domain-id', str(session_domain(4)), '--plot', str(tmp_path)], out)
     text = out.getvalue()
     assert code == 0, text
     assert 'FAILURE' in text.split('4. play:')[1].split('\n')[0]
@@ -161,8 +161,9 @@ def test_sigterm_exits_cleanly(player, during_play):
 
     from std_srvs.srv import Trigger
     node, arms = player
-    other = NodeProcess(DOMAIN + 3, command=player_command(), env=ros_env(DOMAIN + 3))
-    fake = FakeArms(DOMAIN + 3)
+    domain = session_domain(3)
+    other = NodeProcess(domain, command=player_command(), env=ros_env(domain))
+    fake = FakeArms(domain)
     try:
         fake.publish_library(300)
         client = fake.node.create_client(Trigger, '/gesture_player/play/bye')
