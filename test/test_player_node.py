@@ -177,3 +177,25 @@ def test_sigterm_exits_cleanly(player, during_play):
         other.stop()
     assert code == 0, other.describe()
     assert 'Traceback' not in other.stderr, other.describe()
+
+
+def test_play_without_a_controller_fails_with_the_reason(player):
+    from std_srvs.srv import Trigger
+    domain = session_domain(3)
+    joints = "['right_arm_joint1', 'right_arm_joint2', 'right_arm_joint3', " \
+             "'right_arm_joint4', 'right_arm_joint5', 'right_arm_joint6', 'right_arm_joint7']"
+    other = NodeProcess(domain, command=player_command(), env=ros_env(domain), args=[
+        '-p', "controllers:=['ghost_controller']", '-p', f'ghost_controller.joints:={joints}',
+        '-p', 'joint_states_wait_sec:=1.0'])
+    fake = FakeArms(domain)
+    try:
+        fake.publish_library(400)
+        client = fake.node.create_client(Trigger, '/gesture_player/play/salute')
+        assert client.wait_for_service(timeout_sec=20.0), other.describe()
+        response = fake.play('salute')
+    finally:
+        fake.close()
+        other.stop()
+    assert not response.success
+    assert 'nobody subscribes to ghost_controller/joint_trajectory' in response.message
+    assert not fake.commands

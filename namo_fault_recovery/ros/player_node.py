@@ -26,8 +26,10 @@ from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
@@ -55,8 +57,8 @@ def _declare(node):
     defaults = {'right_arm_controller': robot.arms['right'].joint_names,
                 'left_arm_controller': robot.arms['left'].joint_names}
     for name in controllers:
-        joints = node.declare_parameter(f'{name}.joints',
-                                        list(defaults.get(name, ()))).value
+        default = list(defaults.get(name, ())) or Parameter.Type.STRING_ARRAY
+        joints = node.declare_parameter(f'{name}.joints', default).value or []
         unknown = [j for j in joints if j not in robot.joint_names]
         if not joints or unknown:
             raise ValueError(f'{name}.joints: expected joints of the robot, got {joints!r}')
@@ -223,6 +225,14 @@ class GesturePlayer(Node):
             plan = self._plan(track)
         except (KeyError, ValueError) as exc:
             return Outcome(False, f'cannot plan: {exc}')
+        end = time.monotonic() + self._waits['first_states']
+        while time.monotonic() < end and not all(
+                pub.get_subscription_count() for pub in self._command_pubs.values()):
+            await self._wait(end)   # a goal published before the match would be lost
+        idle = [c for c, pub in self._command_pubs.items() if not pub.get_subscription_count()]
+        if idle:
+            return Outcome(False, f'nobody subscribes to {idle[0]}/joint_trajectory; is the '
+                                  f'controller running?')
         future = Future()
         self._play = (gesture, Playback(plan, list(self._groups.values()), self._monitor),
                       time.monotonic(), future)
@@ -289,7 +299,7 @@ def main(args=None):
         executor = MultiThreadedExecutor(num_threads=3)
         try:
             node = GesturePlayer()
-        except ValueError as exc:       # a bad parameter or robot file
+        except (ValueError, ParameterException) as exc:   # a bad parameter or robot file
             sys.stderr.write(f'{NODE_NAME}: error: {exc}\n')
             return 1
         executor.add_node(node)
