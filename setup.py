@@ -51,6 +51,7 @@ setup(
     entry_points={
         'console_scripts': [
             'recovery_node = namo_fault_recovery.ros.recovery_node:main',
+            'gesture_player = namo_fault_recovery.ros.player_node:main',
             'namo-recovery = namo_fault_recovery.cli.main:main',
             'namo_sim = namo_fault_recovery.ros.sim_node:main',
         ],

@@ -14,6 +14,9 @@ from ..resources import config_path, DEFAULT_ROBOT_FILE
 ARMS = ('right', 'left')
 N_JOINTS = 7
 _LENGTH_SCALES = {'mm': 1.0, 'm': 1000.0}
+# Joint speed limits (deg/s, joints 1..7 of either arm) when the robot file has no
+# ``velocity_limits``: servo-class shoulders are the slowest, the wrist the fastest.
+DEFAULT_VELOCITY_LIMITS_DEG = (90.0, 90.0, 120.0, 120.0, 150.0, 150.0, 150.0)
 
 
 @dataclass(frozen=True)
@@ -51,6 +54,8 @@ class RobotModel:
     source: str = '<memory>'
     capsules: CapsuleModel = CapsuleModel()
     tools: tuple = ()   # ((arm, length mm), ...): tools that lengthen the hands
+    # Speed limit (rad/s) of joints 1..7, the same for both arms; used to time playback.
+    velocity_limits: tuple = tuple(math.radians(v) for v in DEFAULT_VELOCITY_LIMITS_DEG)
 
     def tool_length(self, side):
         """Return the length (mm) of the tool held by one arm's hand; 0 without one."""
@@ -95,6 +100,24 @@ class RobotModel:
         """Return True if ``angle`` (rad) lies within the limits of that joint."""
         arm = self.arms[side]
         return arm.lower[index] - tol <= angle <= arm.upper[index] + tol
+
+
+def parse_velocity_limits(data, path, angle_scale):
+    """
+    Return the optional ``velocity_limits`` key (units.angle per second) in rad/s.
+
+    Seven positive numbers, joints 1..7 of either arm; absent means
+    DEFAULT_VELOCITY_LIMITS_DEG.  The gesture player stretches a motion's timing so no
+    joint exceeds them.
+    """
+    if 'velocity_limits' not in data:
+        return tuple(math.radians(v) for v in DEFAULT_VELOCITY_LIMITS_DEG)
+    row = chk.as_row(data['velocity_limits'], N_JOINTS, path, 'velocity_limits')
+    for i, v in enumerate(row):
+        if v <= 0:
+            raise ConfigError(path, f'velocity_limits[{i}]',
+                              f'expected a speed above 0, got {v!r}')
+    return tuple(v * angle_scale for v in row)
 
 
 def load_robot(path=None):
@@ -215,4 +238,5 @@ def load_robot(path=None):
         arms=arms,
         source=str(path),
         capsules=capsules,
+        velocity_limits=parse_velocity_limits(data, path, angle_scale),
     )

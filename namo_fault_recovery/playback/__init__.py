@@ -1,0 +1,11 @@
+"""
+Playing the gesture library on the robot, free of ROS.
+
+- :mod:`.timing`: from the measured pose and a gesture's keyframes to a smooth,
+  speed-limited trajectory that holds every locked joint at its lock angle;
+- :mod:`.monitor`: tracking of the commands on the measured joint states: a stuck
+  joint is a fault, the last point reached within tolerance is the end of the motion;
+- :mod:`.export`: the library as a play_motion2 motions file.
+
+The ``gesture_player`` node (:mod:`..ros.player_node`) only moves messages in and out.
+"""

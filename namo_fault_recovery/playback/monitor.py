@@ -1,0 +1,159 @@
+"""
+Watching a played motion on the measured joint states (no ROS).
+
+:class:`StuckJointDetector` reports a joint that stays off its command: its tracking
+error is the distance from the measured angle to the range of angles commanded over
+the last ``lag`` seconds, so the normal lag of a controller behind a fast command is not
+an error, while a joint held still as its command moves away is.  A joint off by more
+than ``threshold`` for ``hold`` seconds is a fault when the other joints of its
+controller show that they track: at least one of them has been commanded away from its
+start by more than ``threshold`` and follows, and no fewer follow than are off (when a
+whole arm lags, the arm or its controller is at fault, not one actuator).  A joint that
+moves alone in a motion is judged alone.  :class:`Playback` adds the end of a play: finished when
+every joint is within ``goal_tolerance`` of the last point after the motion's duration,
+failed on a fault or when ``goal_time`` has passed with a joint still off its goal.
+"""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+_WINDOW_SAMPLES = 11
+
+
+@dataclass(frozen=True)
+class MonitorSettings:
+    """Detection and completion parameters (named as the node parameters)."""
+
+    fault_threshold: float = math.radians(5.0)   # rad off the command
+    fault_hold: float = 0.3                      # s continuously off
+    tracking_lag: float = 0.25                   # s of command history a joint may lag
+    goal_tolerance: float = math.radians(2.0)    # rad: the last point is reached
+    goal_time: float = 2.0                       # s allowed after the motion's duration
+
+    def __post_init__(self):
+        """Refuse values that would make detection meaningless."""
+        for name in ('fault_threshold', 'fault_hold', 'goal_tolerance', 'goal_time'):
+            if not getattr(self, name) > 0:
+                raise ValueError(f'{name} must be > 0, got {getattr(self, name)}')
+        if not self.tracking_lag >= 0:
+            raise ValueError(f'tracking_lag must be >= 0, got {self.tracking_lag}')
+
+
+class StuckJointDetector:
+    """Detect joints that do not follow their command, from measured samples."""
+
+    def __init__(self, joint_names, groups, command, duration,
+                 settings=MonitorSettings()):
+        """
+        Watch ``joint_names`` (the columns of the measured samples).
+
+        ``groups`` lists the joint names of each controller; ``command(t)`` returns the
+        commanded pose (J,) at time ``t`` or (n, J) at times (n,), for a motion of
+        ``duration`` seconds.
+        """
+        self.joint_names = tuple(joint_names)
+        self.settings = settings
+        self._command = command
+        index = {j: i for i, j in enumerate(self.joint_names)}
+        self._group_of = {}
+        for group in groups:
+            members = [index[j] for j in group if j in index]
+            for i in members:
+                self._group_of[i] = [m for m in members if m != i]
+        whole = np.atleast_2d(command(np.linspace(0.0, duration, 200)))
+        self._start = whole[0]
+        self._movers = np.ptp(whole, axis=0) > settings.fault_threshold
+        self._moved = np.zeros(len(self.joint_names), dtype=bool)
+        self._off_since = {}
+        self.reported = {}      # joint name -> (time, measured angle)
+
+    def errors(self, t, measured):
+        """Return each joint's distance (rad) to its commands over the last ``lag`` s."""
+        lag = self.settings.tracking_lag
+        window = np.linspace(max(0.0, t - lag), t, _WINDOW_SAMPLES) if lag > 0 else [t]
+        cmd = np.atleast_2d(self._command(np.asarray(window)))
+        low, high = cmd.min(axis=0), cmd.max(axis=0)
+        q = np.asarray(measured, dtype=float)
+        return np.maximum(0.0, np.maximum(low - q, q - high))
+
+    def update(self, t, measured):
+        """Feed one measured pose at time ``t``; return the newly detected faults."""
+        errors = self.errors(t, measured)
+        off = errors > self.settings.fault_threshold
+        past = np.atleast_1d(self._command(max(0.0, t - self.settings.tracking_lag)))
+        self._moved |= np.abs(past - self._start) > self.settings.fault_threshold
+        new = []
+        for i, name in enumerate(self.joint_names):
+            if not off[i]:
+                self._off_since.pop(i, None)
+                continue
+            since = self._off_since.setdefault(i, t)
+            if name in self.reported or t - since < self.settings.fault_hold - 1e-9:
+                continue
+            if not self._others_track(i, off):
+                continue
+            self.reported[name] = (t, float(measured[i]))
+            new.append((name, float(measured[i])))
+        return new
+
+    def _others_track(self, i, off):
+        movers = [k for k in self._group_of.get(i, []) if self._movers[k]]
+        if not movers:
+            return True
+        following = sum(1 for k in movers if self._moved[k] and not off[k])
+        failing = sum(1 for k in movers if off[k])
+        return following >= 1 and following >= failing
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """How a play ended: ``ok``, a one-line ``reason``, and the faults it detected."""
+
+    ok: bool
+    reason: str
+    faults: tuple = ()
+
+
+class Playback:
+    """One play of a planned motion: feed measured poses, get an Outcome once it ends."""
+
+    def __init__(self, plan, groups, settings=MonitorSettings()):
+        """Watch ``plan`` (a PlannedMotion) whose joints are split into ``groups``."""
+        self.plan = plan
+        self.settings = settings
+        self.detector = StuckJointDetector(plan.joint_names, groups, plan.command_at,
+                                           plan.duration, settings)
+        self.outcome = None
+        self.faults = []
+
+    def update(self, t, measured):
+        """Feed the measured pose (in the plan's joint order) ``t`` s after the start."""
+        if self.outcome is not None:
+            return self.outcome
+        measured = np.asarray(measured, dtype=float)
+        new = self.detector.update(t, measured)
+        if new:
+            self.faults.extend(new)
+            text = ', '.join(f'{j} held at {math.degrees(a):.1f} deg' for j, a in new)
+            self.outcome = Outcome(False, f'actuator fault detected: {text}', tuple(new))
+            return self.outcome
+        if t < self.plan.duration:
+            return None
+        off = np.abs(measured - self.plan.final)
+        if np.all(off <= self.settings.goal_tolerance):
+            self.outcome = Outcome(True, f'finished in {t:.2f} s (planned '
+                                   f'{self.plan.duration:.2f} s, stretch {self.plan.stretch:.2f})')
+        elif t > self.plan.duration + self.settings.goal_time:
+            worst = int(np.argmax(off))
+            self.outcome = Outcome(False, f'timeout: {self.plan.joint_names[worst]} still '
+                                   f'{math.degrees(off[worst]):.1f} deg off its goal '
+                                   f'{self.settings.goal_time:g} s after the end of the motion')
+        return self.outcome
+
+    def abort(self, reason):
+        """End the play as failed (a rejected goal, a shutdown, a newer play)."""
+        if self.outcome is None:
+            self.outcome = Outcome(False, reason)
+        return self.outcome

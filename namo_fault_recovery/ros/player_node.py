@@ -1,0 +1,323 @@
+"""
+``gesture_player``: plays the current gesture library on the arm controllers.
+
+Modelled on PAL's play_motion2.  It keeps the latest ``/gesture_library`` version and
+offers one ``std_srvs/Trigger`` service per gesture, ``~/play/<gesture>``, answered when
+the motion has finished or failed (with the reason) from an ``async`` callback, so no
+executor thread waits.  A play sends each controller (parameter ``controllers``) one
+``trajectory_msgs/JointTrajectory`` on ``<controller>/joint_trajectory``: its joints
+only, zero stamp (start now), positions and velocities of a smooth speed-limited
+trajectory that approaches from the measured ``/joint_states``
+(:mod:`..playback.timing`).  A locked joint (from ``recovery_node``'s ``/diagnostics``
+and from the player's own fault reports) is commanded at its lock angle at every point.
+A joint that stays off its command while the others track is reported on
+``/actuator_fault`` with its measured angle, and the play fails with that reason
+(:mod:`..playback.monitor`); ``recovery_node`` then reconfigures the library, and the
+next play waits (``library_wait_sec``) for that new version.
+"""
+
+import functools
+import math
+import sys
+import threading
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+import numpy as np
+import rclpy
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from .messages import duration_msg, stamp_key, status_values, trajectory_angles
+from ..model.robot import load_robot
+from ..playback.book import GestureTrack, parse_lock_angle, PlayerBook
+from ..playback.monitor import MonitorSettings, Outcome, Playback
+from ..playback.timing import plan_motion, TimingSettings
+
+NODE_NAME = 'gesture_player'
+RECOVERY_PREFIX = 'recovery_node: '
+TICK = 0.05
+
+
+def _declare(node):
+    """Declare the parameters; return (robot, controllers, timing, monitor, waits)."""
+    robot_file = node.declare_parameter('robot_file', '').value or None
+    robot = load_robot(robot_file)
+    controllers = list(node.declare_parameter(
+        'controllers', ['right_arm_controller', 'left_arm_controller']).value)
+    groups = {}
+    defaults = {'right_arm_controller': robot.arms['right'].joint_names,
+                'left_arm_controller': robot.arms['left'].joint_names}
+    for name in controllers:
+        default = list(defaults.get(name, ())) or Parameter.Type.STRING_ARRAY
+        joints = node.declare_parameter(f'{name}.joints', default).value or []
+        unknown = [j for j in joints if j not in robot.joint_names]
+        if not joints or unknown:
+            raise ValueError(f'{name}.joints: expected joints of the robot, got {joints!r}')
+        groups[name] = list(joints)
+    timing = TimingSettings(
+        approach_velocity=node.declare_parameter('approach_velocity', 0.5).value,
+        approach_min_duration=node.declare_parameter('approach_min_duration', 0.0).value,
+        sample_period=node.declare_parameter('sample_period', 0.05).value)
+    monitor = MonitorSettings(
+        fault_threshold=math.radians(node.declare_parameter('fault_threshold_deg', 5.0).value),
+        fault_hold=node.declare_parameter('fault_hold_sec', 0.3).value,
+        tracking_lag=node.declare_parameter('tracking_lag_sec', 0.25).value,
+        goal_tolerance=math.radians(node.declare_parameter('goal_tolerance_deg', 2.0).value),
+        goal_time=node.declare_parameter('goal_time_sec', 2.0).value)
+    waits = {'library': node.declare_parameter('library_wait_sec', 10.0).value,
+             'joint_states': node.declare_parameter('joint_states_timeout_sec', 1.0).value,
+             'first_states': node.declare_parameter('joint_states_wait_sec', 5.0).value,
+             'report_faults': node.declare_parameter('report_faults', True).value}
+    return robot, groups, timing, monitor, waits
+
+
+class GesturePlayer(Node):
+    """Play gestures of the current library on trajectory controllers."""
+
+    def __init__(self, **kwargs):
+        """Declare parameters and create the interfaces."""
+        super().__init__(NODE_NAME, **kwargs)
+        (self._robot, self._groups, self._timing, self._monitor,
+         self._waits) = _declare(self)
+        self._joints = [j for group in self._groups.values() for j in group]
+        self._book = PlayerBook()
+        self._measured = {}           # joint -> angle
+        self._measured_at = None
+        self._play = None             # (gesture, Playback, start time, future)
+        self._waiters = []            # (deadline, future): woken by inputs or the deadline
+        self._waiter_lock = threading.Lock()
+        self._play_services = {}
+        self._wake = self.create_guard_condition(lambda: None)
+        inputs = MutuallyExclusiveCallbackGroup()
+        self._service_group = ReentrantCallbackGroup()
+        latched = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.create_subscription(JointTrajectory, '/gesture_library', self._on_library,
+                                 latched, callback_group=inputs)
+        self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 50,
+                                 callback_group=inputs)
+        self.create_subscription(JointState, '/joint_states', self._on_joint_states,
+                                 QoSProfile(depth=10,
+                                            reliability=ReliabilityPolicy.BEST_EFFORT),
+                                 callback_group=inputs)
+        self._fault_pub = self.create_publisher(JointState, '/actuator_fault', 100)
+        self._command_pubs = {c: self.create_publisher(JointTrajectory,
+                                                       f'{c}/joint_trajectory', 10)
+                              for c in self._groups}
+        self.create_timer(TICK, self._tick, callback_group=inputs)
+        self.get_logger().info(f'controllers: {", ".join(self._groups)}; waiting for '
+                               f'/gesture_library')
+
+    # --- inputs ---------------------------------------------------------------------
+
+    def _on_library(self, msg):
+        try:
+            positions, times = trajectory_angles(msg)
+        except (ValueError, IndexError):
+            return
+        track = GestureTrack(msg.header.frame_id, tuple(msg.joint_names), np.array(times),
+                             positions, stamp_key(msg.header.stamp))
+        if not track.name or not len(times):
+            return
+        self._book.add_gesture(track, time.monotonic())
+        if track.name not in self._play_services:
+            self._play_services[track.name] = self.create_service(
+                Trigger, f'~/play/{track.name}',
+                functools.partial(self._on_play, track.name),
+                callback_group=self._service_group)
+            self.get_logger().info(f'gesture {track.name!r}: ~/play/{track.name} offered')
+        self._resolve_waiters(lambda deadline: True)
+
+    def _on_diagnostics(self, msg):
+        statuses = {s.name[len(RECOVERY_PREFIX):]: s for s in msg.status
+                    if s.name.startswith(RECOVERY_PREFIX)}
+        if 'faults' not in statuses:
+            return
+        failed = status_values(statuses['faults']).get('failed_joints', '').split()
+        locks = {}
+        for joint in failed:
+            status = statuses.get(f'joint {joint}')
+            if status is not None:
+                locks[joint] = parse_lock_angle(status_values(status).get('lock_angle_rad'))
+        self._book.node_status(failed, locks)
+
+    def _on_joint_states(self, msg):
+        now = time.monotonic()
+        for name, angle in zip(msg.name, msg.position):
+            self._measured[name] = float(angle)
+        self._measured_at = now
+        if self._waiters:
+            self._resolve_waiters(lambda deadline: True)
+        if self._play is None:
+            return
+        gesture, playback, start, future = self._play
+        if any(j not in self._measured for j in playback.plan.joint_names):
+            return
+        q = [self._measured[j] for j in playback.plan.joint_names]
+        outcome = playback.update(now - start, q)
+        if outcome is not None:
+            self._finish(outcome)
+
+    def _tick(self):
+        now = time.monotonic()
+        if self._play is not None:
+            playback, start = self._play[1], self._play[2]
+            stale = self._measured_at is None or now - self._measured_at > \
+                self._waits['joint_states']
+            if stale and now - start > playback.plan.duration + self._monitor.goal_time:
+                self._finish(playback.abort('no /joint_states: cannot tell whether the '
+                                            'motion finished'))
+        self._resolve_waiters(lambda deadline: now >= deadline)
+
+    def _wait(self, deadline):
+        """Return a future done at the next library or joint state, or at ``deadline``."""
+        future = Future()
+        with self._waiter_lock:
+            self._waiters.append((deadline, future))
+        return future
+
+    def _resolve_waiters(self, due):
+        with self._waiter_lock:
+            done = [f for d, f in self._waiters if due(d)]
+            self._waiters = [(d, f) for d, f in self._waiters if not due(d)]
+        for future in done:
+            future.set_result(None)
+        if done:
+            self._wake.trigger()
+
+    # --- playing --------------------------------------------------------------------
+
+    async def _on_play(self, gesture, request, response):
+        outcome = await self._play_gesture(gesture)
+        response.success = outcome.ok
+        response.message = f'{gesture}: {outcome.reason}'
+        self.get_logger().info(response.message)
+        return response
+
+    async def _play_gesture(self, gesture):
+        if self._play is not None:
+            return Outcome(False, f'busy playing {self._play[0]!r}')
+        end = time.monotonic() + self._waits['library']
+        while self._book.library_outdated() and time.monotonic() < end:
+            await self._wait(end)
+        track = self._book.gesture(gesture)
+        if track is None:
+            return Outcome(False, 'not in the library')
+        end = time.monotonic() + self._waits['first_states']
+        while any(j not in self._measured for j in self._joints) and time.monotonic() < end:
+            await self._wait(end)   # none yet (just started, or slow discovery)
+        fresh = self._measured_at is not None and \
+            time.monotonic() - self._measured_at <= self._waits['joint_states']
+        missing = [j for j in self._joints if j not in self._measured]
+        if not fresh or missing:
+            return Outcome(False, 'no recent /joint_states for '
+                                  + (', '.join(missing[:3]) if missing else 'the arms'))
+        try:
+            plan = self._plan(track)
+        except (KeyError, ValueError) as exc:
+            return Outcome(False, f'cannot plan: {exc}')
+        end = time.monotonic() + self._waits['first_states']
+        while time.monotonic() < end and not all(
+                pub.get_subscription_count() for pub in self._command_pubs.values()):
+            await self._wait(end)   # a goal published before the match would be lost
+        idle = [c for c, pub in self._command_pubs.items() if not pub.get_subscription_count()]
+        if idle:
+            return Outcome(False, f'nobody subscribes to {idle[0]}/joint_trajectory; is the '
+                                  f'controller running?')
+        future = Future()
+        self._play = (gesture, Playback(plan, list(self._groups.values()), self._monitor),
+                      time.monotonic(), future)
+        for controller, joints in self._groups.items():
+            self._command_pubs[controller].publish(self._trajectory(plan, joints))
+        return await future
+
+    def _plan(self, track):
+        columns = [track.joint_names.index(j) for j in self._joints]
+        arms = {j: (side, i) for side in ('right', 'left')
+                for i, j in enumerate(self._robot.arms[side].joint_names)}
+        limits = [self._robot.velocity_limits[arms[j][1]] for j in self._joints]
+        lower = [self._robot.arms[arms[j][0]].lower[arms[j][1]] for j in self._joints]
+        upper = [self._robot.arms[arms[j][0]].upper[arms[j][1]] for j in self._joints]
+        start = [self._measured[j] for j in self._joints]
+        return plan_motion(self._joints, start, track.times, track.positions[:, columns],
+                           limits, locks=self._book.locks(dict(self._measured)),
+                           lower=lower, upper=upper, settings=self._timing)
+
+    @staticmethod
+    def _trajectory(plan, joints):
+        positions, velocities = plan.columns(joints)
+        msg = JointTrajectory(joint_names=list(joints))   # zero stamp: start now
+        for t, q, v in zip(plan.times, positions, velocities):
+            if t <= 0.0:
+                continue       # the controller starts from where the arm is
+            msg.points.append(JointTrajectoryPoint(
+                positions=[float(a) for a in q], velocities=[float(a) for a in v],
+                time_from_start=duration_msg(float(t))))
+        return msg
+
+    def _finish(self, outcome):
+        gesture, playback, start, future = self._play
+        self._play = None
+        if outcome.faults and self._waits['report_faults']:
+            now = time.monotonic()
+            for joint, angle in outcome.faults:
+                self._book.report(joint, angle, now)
+            self._fault_pub.publish(JointState(name=[j for j, _ in outcome.faults],
+                                               position=[a for _, a in outcome.faults]))
+            self.get_logger().warning(f'{gesture}: {outcome.reason}; reported on '
+                                      f'/actuator_fault')
+        if not outcome.ok:
+            self._hold(playback)
+        future.set_result(outcome)
+        self._wake.trigger()
+
+    def _hold(self, playback):
+        """Stop a failed play where the arms are (a locked or stuck joint where it is)."""
+        locks = self._book.locks(dict(self._measured))
+        for controller, joints in self._groups.items():
+            q = [locks.get(j, self._measured.get(j, 0.0)) for j in joints]
+            self._command_pubs[controller].publish(JointTrajectory(
+                joint_names=list(joints), points=[JointTrajectoryPoint(
+                    positions=q, velocities=[0.0] * len(joints),
+                    time_from_start=duration_msg(0.2))]))
+
+
+def main(args=None):
+    """Run the player until Ctrl-C or SIGTERM; return the exit code."""
+    rclpy.init(args=args)      # rclpy's handlers turn SIGINT and SIGTERM into a shutdown
+    node = executor = None
+    try:
+        executor = MultiThreadedExecutor(num_threads=3)
+        try:
+            node = GesturePlayer()
+        except (ValueError, ParameterException) as exc:   # a bad parameter or robot file
+            sys.stderr.write(f'{NODE_NAME}: error: {exc}\n')
+            return 1
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception:  # noqa: B902
+        if rclpy.ok():
+            raise          # a genuine error: let it be seen
+        # Otherwise a signal shut ROS down during start-up or while a thread waited.
+    finally:
+        if executor is not None:
+            executor.shutdown(timeout_sec=2.0)
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

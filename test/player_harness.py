@@ -1,0 +1,222 @@
+"""
+Test-side rclpy node around ``gesture_player``, for the DDS tests.
+
+It records every command, fault report, joint state, library version and diagnostics,
+and calls the play services.
+:class:`FakeArms` also emulates the two arm controllers (the DDS tests of the player
+alone); with the simulator, :class:`Recorder` alone watches ``namo_sim``.
+"""
+
+import threading
+import time
+
+from builtin_interfaces.msg import Duration
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from namo_fault_recovery import load_library, load_robot
+import numpy as np
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+ROBOT = load_robot()
+LIBRARY = load_library(ROBOT)
+NAMES = list(ROBOT.joint_names)
+CONTROLLERS = {'right_arm_controller': NAMES[:7], 'left_arm_controller': NAMES[7:]}
+
+
+def _seconds(d):
+    return d.sec + d.nanosec * 1e-9
+
+
+class Recorder:
+    """Watches the player and the arms; publishes a library and diagnostics on request."""
+
+    def __init__(self, domain, name='play_recorder'):
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node(name, context=self.context)
+        self.lock = threading.Lock()
+        self.q = np.zeros(14)          # the latest /joint_states, in NAMES order
+        self.states = 0
+        self.commands = []             # (controller, msg) every command sent
+        self.faults = []
+        self.library = {}              # stamp ns -> {gesture: msg}
+        self.diagnostics = []
+        for controller in CONTROLLERS:
+            self.node.create_subscription(
+                JointTrajectory, f'/{controller}/joint_trajectory',
+                lambda msg, c=controller: self._on_command(c, msg), 100)
+        self.node.create_subscription(JointState, '/actuator_fault', self.faults.append, 10)
+        self.node.create_subscription(JointState, '/joint_states', self._on_state, 10)
+        latched = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.node.create_subscription(JointTrajectory, '/gesture_library', self._on_library,
+                                      latched)
+        self.node.create_subscription(DiagnosticArray, '/diagnostics',
+                                      self.diagnostics.append, 50)
+        self.library_pub = self.node.create_publisher(JointTrajectory, '/gesture_library',
+                                                      latched)
+        self.diag_pub = self.node.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.setup()
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def setup(self):
+        """Create further entities before spinning starts (subclasses)."""
+
+    def _spin(self):
+        try:
+            self.executor.spin()
+        except Exception:  # noqa: B902 - the context is shut down at the end
+            pass
+
+    def close(self):
+        self.executor.shutdown(timeout_sec=2.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self.thread.join(timeout=5.0)
+
+    def _on_command(self, controller, msg):
+        with self.lock:
+            self.commands.append((controller, msg))
+
+    def _on_state(self, msg):
+        with self.lock:
+            for name, angle in zip(msg.name, msg.position):
+                if name in NAMES:
+                    self.q[NAMES.index(name)] = angle
+            self.states += 1
+
+    def _on_library(self, msg):
+        key = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        with self.lock:
+            self.library.setdefault(key, {})[msg.header.frame_id] = msg
+
+    def measured(self):
+        """Return the latest measured pose (rad, NAMES order)."""
+        with self.lock:
+            return self.q.copy()
+
+    def settled(self, timeout=5.0, tol=1e-4):
+        """Wait until the measured pose stops moving (two reads 0.2 s apart); return it."""
+        end = time.monotonic() + timeout
+        q = self.measured()
+        while time.monotonic() < end:
+            time.sleep(0.2)
+            q, before = self.measured(), q
+            if np.max(np.abs(q - before)) < tol:
+                return q
+        raise AssertionError(f'the arms still move {timeout} s after the play')
+
+    def wait(self, predicate, timeout, what):
+        """Wait until ``predicate()`` is truthy; return it (assert on timeout)."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            value = predicate()
+            if value:
+                return value
+            time.sleep(0.02)
+        raise AssertionError(f'timed out after {timeout} s waiting for {what}')
+
+    def newest_library(self):
+        """Return {gesture: positions (keyframes, 14) in NAMES order} of the newest stamp."""
+        with self.lock:
+            if not self.library:
+                return None
+            msgs = dict(self.library[max(self.library)])
+        out = {}
+        for name, msg in msgs.items():
+            order = [list(msg.joint_names).index(j) for j in NAMES]
+            out[name] = np.array([[p.positions[i] for i in order] for p in msg.points])
+        return out
+
+    def commanded(self, since, joint):
+        """All positions commanded to ``joint`` by the messages received after ``since``."""
+        out = []
+        with self.lock:
+            commands = list(self.commands[since:])
+        for controller, msg in commands:
+            if joint in msg.joint_names:
+                k = list(msg.joint_names).index(joint)
+                out += [p.positions[k] for p in msg.points]
+        return np.array(out)
+
+    def publish_library(self, stamp_sec, locks=None):
+        """Publish the packaged library, locked joints held at their lock."""
+        for gesture in LIBRARY:
+            msg = JointTrajectory(joint_names=NAMES)
+            msg.header.stamp.sec = stamp_sec
+            msg.header.frame_id = gesture.name
+            for kf in gesture.keyframes:
+                q = np.concatenate([kf.right, kf.left])
+                if locks:
+                    for joint, angle in locks.items():
+                        q[NAMES.index(joint)] = angle
+                sec = int(kf.time_from_start)
+                msg.points.append(JointTrajectoryPoint(
+                    positions=list(q), time_from_start=Duration(
+                        sec=sec, nanosec=int(round((kf.time_from_start - sec) * 1e9)))))
+            self.library_pub.publish(msg)
+
+    def publish_node_faults(self, locks):
+        """Publish recovery_node-style diagnostics for ``locks``."""
+        statuses = [DiagnosticStatus(name='recovery_node: faults', values=[
+            KeyValue(key='failed_joints', value=' '.join(locks))])]
+        for joint, angle in locks.items():
+            statuses.append(DiagnosticStatus(name=f'recovery_node: joint {joint}', values=[
+                KeyValue(key='lock_angle_rad', value=repr(angle))]))
+        self.diag_pub.publish(DiagnosticArray(status=statuses))
+
+    def trigger(self, service, timeout=30.0):
+        """Call a std_srvs/Trigger service; return the response (assert on timeout)."""
+        client = self.node.create_client(Trigger, service)
+        assert client.wait_for_service(timeout_sec=20.0), f'no service {service}'
+        future = client.call_async(Trigger.Request())
+        end = time.monotonic() + timeout
+        while not future.done() and time.monotonic() < end:
+            time.sleep(0.02)
+        assert future.done(), f'no answer from {service} within {timeout} s'
+        return future.result()
+
+    def play(self, gesture, timeout=30.0):
+        """Play one gesture on the gesture_player; return the Trigger response."""
+        return self.trigger(f'/gesture_player/play/{gesture}', timeout)
+
+
+class FakeArms(Recorder):
+    """Recorder plus two fake trajectory controllers that publish /joint_states."""
+
+    def setup(self):
+        self.stuck = {}
+        self.active = {}          # controller -> (start time, start q, msg)
+        self.state_pub = self.node.create_publisher(JointState, '/joint_states', 10)
+        self.node.create_timer(0.01, self._step)
+
+    def _on_command(self, controller, msg):
+        with self.lock:
+            self.commands.append((controller, msg))
+            self.active[controller] = (time.monotonic(), self.q.copy(), msg)
+
+    def _on_state(self, msg):
+        with self.lock:
+            self.states += 1
+
+    def _step(self):
+        now = time.monotonic()
+        with self.lock:
+            for controller, (t0, q0, msg) in self.active.items():
+                cols = [NAMES.index(j) for j in msg.joint_names]
+                times = [0.0] + [_seconds(p.time_from_start) for p in msg.points]
+                for k, col in enumerate(cols):
+                    values = [q0[col]] + [p.positions[k] for p in msg.points]
+                    self.q[col] = np.interp(now - t0, times, values)
+            for joint, angle in self.stuck.items():
+                self.q[NAMES.index(joint)] = angle
+            q = self.q.copy()
+        self.state_pub.publish(JointState(name=NAMES, position=list(q)))

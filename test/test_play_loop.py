@@ -1,0 +1,102 @@
+"""
+The whole loop over DDS: the real ``recovery_node`` and ``gesture_player`` processes.
+
+The arms are ``player_harness.FakeArms`` (kinematic controllers in the test process).
+A joint is stuck; playing wai detects it, reports it on /actuator_fault, the node
+reconfigures the library, and wai is played again: the stuck joint is never commanded
+away from its angle and the executed key pose scores as the library says it does.
+Three scenarios in sequence: a right-arm joint, a left-arm joint, two faults one after
+the other.
+"""
+
+import math
+
+from namo_fault_recovery.cli.player_commands import player_command
+from namo_fault_recovery.objective.score import ScoreWeights, SimilarityScore
+from node_harness import NodeProcess, ros_env, session_domain, TIMEOUT
+import numpy as np
+from player_harness import FakeArms, LIBRARY, NAMES, ROBOT
+import pytest
+
+pytestmark = pytest.mark.slow
+
+DOMAIN = session_domain(0)       # modules run one after the other: the ids are reused
+SCORE_TOL = 0.05     # the fake arms track exactly: only the goal tolerance is left
+WAI = SimilarityScore.for_gesture(ROBOT, LIBRARY['wai'], 0, ScoreWeights())
+
+
+@pytest.fixture(scope='module')
+def loop(tmp_path_factory):
+    recovery = NodeProcess(DOMAIN, state_dir=tmp_path_factory.mktemp('state'))
+    player = NodeProcess(DOMAIN, command=player_command(), env=ros_env(DOMAIN))
+    arms = FakeArms(DOMAIN)
+    try:
+        arms.wait(lambda: (arms.newest_library() or {}).get('wai') is not None, TIMEOUT,
+                  'the reference library')
+        yield arms
+    finally:
+        arms.close()
+        codes = [proc.stop() for proc in (player, recovery)]    # all stopped, then checked
+        for proc, code in zip((player, recovery), codes):
+            assert code == 0, proc.describe()
+            assert 'Traceback' not in proc.stderr + proc.stdout, proc.describe()
+
+
+def _library_score(arms, gesture):
+    """Return ``<gesture>.score_after`` of the node's newest up-to-date diagnostics."""
+    for msg in reversed(list(arms.diagnostics)):
+        for status in msg.status:
+            if status.name == 'recovery_node: reconfiguration':
+                values = {kv.key: kv.value for kv in status.values}
+                if values.get('up_to_date') == 'true':
+                    return float(values[f'{gesture}.score_after'])
+    return None
+
+
+def _stick_and_recover(arms, joint, angle, locked):
+    """Stick ``joint`` at ``angle``; play wai twice; check detection, lock and score."""
+    with arms.lock:
+        arms.stuck[joint] = angle
+    faults = len(arms.faults)
+    response = arms.play('wai')
+    assert not response.success and joint in response.message, response.message
+    report = arms.wait(lambda: arms.faults[faults:], 5.0, '/actuator_fault')[-1]
+    assert list(report.name) == [joint]
+    assert report.position[0] == pytest.approx(angle, abs=math.radians(0.5))
+    locked = dict(locked, **{joint: report.position[0]})
+
+    def reconfigured():
+        lib = arms.newest_library()
+        return lib and all(np.allclose(lib['wai'][:, NAMES.index(j)], a, atol=1e-9)
+                           for j, a in locked.items())
+    arms.wait(reconfigured, TIMEOUT, f'a library with {", ".join(locked)} locked')
+    before = len(arms.commands)
+    response = arms.play('wai')
+    assert response.success, response.message
+    for j, a in locked.items():
+        commanded = arms.commanded(before, j)
+        assert commanded.size > 10 and np.all(commanded == a), (j, commanded)
+    q = arms.settled()      # the final pose, once the arm came to rest
+    executed = float(WAI(q[:7], q[7:])[0])
+    library = arms.wait(lambda: _library_score(arms, 'wai'), TIMEOUT, 'the diagnostics')
+    planned = float(WAI(*np.split(arms.newest_library()['wai'][-1], 2))[0])
+    assert planned == pytest.approx(library, rel=1e-4)
+    assert executed == pytest.approx(library, abs=SCORE_TOL)
+    return locked
+
+
+def test_stuck_joints_detected_reported_and_played_around(loop):
+    arms = loop
+    # a right-arm joint
+    _stick_and_recover(arms, 'right_arm_joint2', math.radians(-20.0), {})
+    assert arms.trigger('/clear_faults').success
+    with arms.lock:
+        arms.stuck = {}
+    # a left-arm joint
+    _stick_and_recover(arms, 'left_arm_joint1', math.radians(10.0), {})
+    assert arms.trigger('/clear_faults').success
+    with arms.lock:
+        arms.stuck = {}
+    # two faults, one after the other
+    locked = _stick_and_recover(arms, 'right_arm_joint2', math.radians(-20.0), {})
+    _stick_and_recover(arms, 'left_arm_joint1', math.radians(10.0), locked)
