@@ -15,7 +15,6 @@ import time
 import numpy as np
 
 from .common import UsageError
-from ..ros.sim_node import sim_command
 
 EXIT_FAILURE = 1
 
@@ -369,7 +368,7 @@ def cmd_demo_play(args, out):
     procs = [('recovery_node',) + _start('recovery_node', node_command(),
                                          ['-p', f'state_dir:={workdir}'], domain, workdir,
                                          out),
-             ('namo_sim',) + _start('namo_sim', sim_command(),
+             ('namo_sim',) + _start('namo_sim', _sim_command(),
                                     ['-p', f'stuck_joints:=[{spec}]'], domain, workdir, out),
              ('gesture_player',) + _start('gesture_player', player_command(), [], domain,
                                           workdir, out)]
@@ -468,3 +467,9 @@ def _demo_plots(args, out, names, gesture, first, second, locks):
         path = Path(args.plot) / f'{gesture}_{suffix}.png'
         plot_play(path, names, commands, measured, f'{gesture}: {title}', locks)
         out.write(f'figure saved: {path}\n')
+
+
+def _sim_command():
+    """Return the command that starts namo_sim (imported here: it loads rclpy and mujoco)."""
+    from ..ros.sim_node import sim_command
+    return sim_command()

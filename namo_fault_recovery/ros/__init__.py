@@ -26,6 +26,8 @@ Clients and benchmarks of a running node:
 
 The simulated robot:
 
+- :mod:`.player_node`: ``gesture_player``, which plays the library on the arm controllers
+  and reports a joint that stays off its command;
 - :mod:`.sim_node`: ``namo_sim``, Namo in MuJoCo behind two joint trajectory controllers
   (the physics and the controller rules are in ``sim/``, free of ROS).
 """
