@@ -368,7 +368,7 @@ def cmd_demo_play(args, out):
     procs = [('recovery_node',) + _start('recovery_node', node_command(),
                                          ['-p', f'state_dir:={workdir}'], domain, workdir,
                                          out),
-             ('namo_sim',) + _start('namo_sim', _sim_command(),
+             ('namo_sim',) + _start('namo_sim', sim_command(),
                                     ['-p', f'stuck_joints:=[{spec}]'], domain, workdir, out),
              ('gesture_player',) + _start('gesture_player', player_command(), [], domain,
                                           workdir, out)]
@@ -469,7 +469,7 @@ def _demo_plots(args, out, names, gesture, first, second, locks):
         out.write(f'figure saved: {path}\n')
 
 
-def _sim_command():
+def sim_command():
     """Return the command that starts namo_sim (imported here: it loads rclpy and mujoco)."""
-    from ..ros.sim_node import sim_command
-    return sim_command()
+    from ..ros.sim_node import sim_command as command
+    return command()
