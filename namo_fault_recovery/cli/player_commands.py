@@ -15,7 +15,6 @@ import time
 import numpy as np
 
 from .common import UsageError
-from ..ros.sim_node import sim_command
 
 EXIT_FAILURE = 1
 
@@ -179,6 +178,12 @@ def bench_detection(args, out):
 
 
 # --- demo-play: the whole loop with the simulator -------------------------------------
+
+
+def sim_command():
+    """Return the command that starts ``namo_sim`` (imported lazily: no ROS at start)."""
+    from ..ros.sim_node import sim_command as command
+    return command()
 
 
 class _LoopWatcher:
