@@ -9,9 +9,9 @@ The ``namo-recovery`` command line, one module per command group.
 - :mod:`.demo`: ``demo``, a private node driven end to end;
 - :mod:`.latency_bench`: ``bench latency``;
 - :mod:`.stream_bench_command`: ``bench stream`` (the measurement is in ``ros/``);
-- :mod:`.export`: ``export --format play_motion2``, the library as play_motion2 motions;
-- :mod:`.player_commands`: ``play``, ``demo-play`` (the whole loop on the simulator) and
-  ``bench detection``;
+- :mod:`.export`: ``export --format play_motion2`` (from the running node or a solve);
+- :mod:`.player_commands`: ``play``, ``demo-play`` and ``bench detection``, around
+  ``gesture_player``;
 - :mod:`.urdf`: ``urdf``, Namo's URDF from the robot file;
 - :mod:`.ros_common`: what the ROS commands share (``--namespace``, errors, tables);
 - :mod:`.private_node`: the node process that ``demo`` and ``bench latency`` start;

@@ -180,6 +180,12 @@ def bench_detection(args, out):
 # --- demo-play: the whole loop with the simulator -------------------------------------
 
 
+def sim_command():
+    """Return the command that starts ``namo_sim`` (imported lazily: no ROS at start)."""
+    from ..ros.sim_node import sim_command as command
+    return command()
+
+
 class _LoopWatcher:
     """An rclpy node that records what the loop does (commands, states, faults, library)."""
 
@@ -467,9 +473,3 @@ def _demo_plots(args, out, names, gesture, first, second, locks):
         path = Path(args.plot) / f'{gesture}_{suffix}.png'
         plot_play(path, names, commands, measured, f'{gesture}: {title}', locks)
         out.write(f'figure saved: {path}\n')
-
-
-def sim_command():
-    """Return the command that starts namo_sim (imported here: it loads rclpy and mujoco)."""
-    from ..ros.sim_node import sim_command as command
-    return command()

@@ -5,9 +5,9 @@ Playing the gesture library on the robot, free of ROS.
   speed-limited trajectory that holds every locked joint at its lock angle;
 - :mod:`.monitor`: tracking of the commands on the measured joint states: a stuck
   joint is a fault, the last point reached within tolerance is the end of the motion;
+- :mod:`.book`: library versions and lock angles known between plays;
 - :mod:`.export`: the library as a play_motion2 motions file;
-- :mod:`.book`: what the player knows between plays: library versions and locks;
-- :mod:`.plot`: the figure of one play, commanded and measured angles (matplotlib).
+- :mod:`.plot`: the figure of one play (commanded and measured angles).
 
 The ``gesture_player`` node (:mod:`..ros.player_node`) only moves messages in and out.
 """

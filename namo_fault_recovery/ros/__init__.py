@@ -24,6 +24,11 @@ Clients and benchmarks of a running node:
 - :mod:`.client`: the typed rclpy client of a running node, used by the ROS commands;
 - :mod:`.stream_bench`: the deadline under a ``/joint_states`` stream and a CPU burner.
 
+The gesture player:
+
+- :mod:`.player_node`: ``gesture_player``, the library played on the arm controllers
+  (timing and detection are in ``playback/``, free of ROS).
+
 The simulated robot:
 
 - :mod:`.player_node`: ``gesture_player``, which plays the library on the arm controllers
