@@ -13,6 +13,7 @@ The node and its parts (the parts are free of DDS, with fast unit tests):
 - :mod:`.dispatcher`: the thread that runs the newest request and publishes it;
 - :mod:`.engine_process`: the engine in its own process (no shared interpreter lock);
 - :mod:`.answer_pacer`: service answers released a few at a time;
+- :mod:`.persistence`: the state file in the order the run book needs, off the hot paths;
 - :mod:`.restore`: the checks before publishing, and the restore decision;
 - :mod:`.state_store`: the persisted fault set and library (no ROS types);
 - :mod:`.diagnostics`: ``/diagnostics`` built from a snapshot;

@@ -9,7 +9,6 @@ when needed), services answer from ``async`` callbacks that await the run book, 
 periodic work runs on a steady clock, independent of ``use_sim_time``.
 """
 
-import itertools
 import threading
 import time
 
@@ -38,9 +37,8 @@ from .inputs import BadInput, parse_fault
 from .parameters import (check_parameter, declare_parameters, DEFAULT_STATE_DIR, MARKER_PARAMS,
                          node_settings, one_line, parameter_specs, RERUN_PARAMS, shorten,
                          StartupError)
-from .restore import plan_restart
+from .persistence import Persistence
 from .run_book import Outcome, RunBook
-from .state_store import BackgroundWriter, fingerprint, StateStore
 from ..errors import ConfigError
 from ..model.gestures import load_library
 from ..model.robot import load_robot
@@ -68,9 +66,6 @@ class RecoveryNode(Node):
         except (ConfigError, FileNotFoundError) as exc:
             raise StartupError(f'invalid configuration: {one_line(exc)}') from None
         self._prefix = diagnostics.status_prefix(self.get_fully_qualified_name())
-        self._fingerprint = fingerprint(self._robot.source, self._library.source)
-        self._store = StateStore(values['state_dir'] or DEFAULT_STATE_DIR)
-        self._state_problem = None
         self._inputs = InputMonitor(self._robot, self._log_rejection)
         self._last_stamp_ns = 0
         self._diag_dirty = True
@@ -85,10 +80,9 @@ class RecoveryNode(Node):
             self._engine.stop()
             raise StartupError(f'the engine process did not start: {exc}') from None
         self._book = RunBook(on_request=self._engine.cancel)
-        self._persist_lock = threading.Lock()
-        self._seq = itertools.count(1)
-        self._writer = BackgroundWriter(self._save)
-        self._intake = FaultIntake(self._book, self._commit_faults, self._on_accepted,
+        self._state = Persistence(values['state_dir'] or DEFAULT_STATE_DIR, self._robot,
+                                  self._library, self._book, self.get_logger().error)
+        self._intake = FaultIntake(self._book, self._state.commit_faults, self._on_accepted,
                                    self._inputs.measured, on_error=self._intake_error)
         self._dispatcher = Dispatcher(self._book, self._engine, self._robot, self._library,
                                       lambda: self._settings, self._publish_and_persist,
@@ -101,13 +95,13 @@ class RecoveryNode(Node):
             raise
         self._answers = AnswerPacer(self._wake.trigger)
         self._answers.start()
-        self._writer.start()
+        self._state.start()
         self._intake.start()
         self._dispatcher.start()
         self._ready = True
         self.get_logger().info(
             f'robot {self._robot.name} ({self._robot.source}), {len(self._library)} gestures '
-            f'({self._library.source}); state in {self._store.directory}; engine process '
+            f'({self._library.source}); state in {self._state.store.directory}; engine process '
             f'started')
 
     # --- interfaces -----------------------------------------------------------------
@@ -270,34 +264,9 @@ class RecoveryNode(Node):
 
     # --- outputs, persistence, restore ----------------------------------------------
 
-    def _commit_faults(self, faults):
-        """Persist a new fault set (synced), then hand it to the run book: one step."""
-        with self._persist_lock:
-            self._save(faults, self._book.current, next(self._seq))
-            self._book.set_faults(faults)
-
     def _publish_and_persist(self, generation, faults, result):
-        """
-        Publish a run's library if still current, then queue it for the state file.
-
-        Under the lock that orders fault commits, so the sequence number says which of a
-        library and a new fault set is newer; the write itself is off the publish path.
-        """
-        with self._persist_lock:
-            ready = self._book.publish(generation, result, self._publish_library)
-            if ready is not None:
-                self._writer.submit(faults, result, next(self._seq))
-        return ready
-
-    def _save(self, faults, library, seq=None):
-        try:
-            self._store.save(faults, library, self._fingerprint, seq)
-            self._state_problem = None
-        except (OSError, ValueError) as exc:
-            if self._state_problem is None:
-                self.get_logger().error(f'cannot write the state file {self._store.path}: '
-                                        f'{exc}; the state will not survive a restart')
-            self._state_problem = shorten(f'cannot write {self._store.path}: {exc}')
+        return self._state.publish_and_queue(generation, faults, result,
+                                             self._publish_library)
 
     def _publish_library(self, result):
         """Publish a library version; return its stamp (ns, strictly increasing)."""
@@ -325,11 +294,9 @@ class RecoveryNode(Node):
         """Publish the reference, then restore the persisted fault set (and library)."""
         reference = reference_result(self._library)
         self._book.mark_published_without_run(reference, self._publish_library(reference))
-        plan = plan_restart(self._store, self._robot, self._library, self._fingerprint,
-                            self._settings.engine)
+        plan = self._state.plan_restart(self._settings.engine)
         if plan.problem:
-            self._state_problem = shorten(plan.problem, 500)
-            self.get_logger().error(f'{self._state_problem}; starting without faults')
+            self.get_logger().error(f'{self._state.problem}; starting without faults')
         if not plan.faults:
             if self._settings.engine.tool_length_mm > 0:
                 self._book.request()      # a tool from the start is a structure change
@@ -356,7 +323,7 @@ class RecoveryNode(Node):
     def publish_diagnostics(self):
         """Publish /diagnostics from a snapshot of the state."""
         snap = diagnostics.snapshot(self._book, self._inputs, self._settings,
-                                    self._state_problem, self._store.path,
+                                    self._state.problem, self._state.store.path,
                                     self._engine.restarts)
         try:
             msg = DiagnosticArray()
@@ -389,9 +356,9 @@ class RecoveryNode(Node):
         self._intake.stop()
         self._dispatcher.join()
         self._engine.stop()
-        writer = getattr(self, '_writer', None)
-        if writer is not None:
-            writer.stop()
+        state = getattr(self, '_state', None)
+        if state is not None:
+            state.stop()
         answers = getattr(self, '_answers', None)
         if answers is not None:
             answers.stop()

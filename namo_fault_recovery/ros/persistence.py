@@ -1,0 +1,76 @@
+"""
+The node's persistence: the state file, in the order the run book needs, off the hot paths.
+
+Free of ROS.  A new fault set is written (synced) *before* the run book sees it, under
+one lock with a sequence number; a published library is queued for a background writer
+under the same lock, so the numbers say which of a library and a newer fault set came
+last and a slow write never overwrites a newer state.  A write failure is reported once
+and kept for ``/diagnostics``, never fatal.
+"""
+
+import itertools
+import threading
+
+from .parameters import shorten
+from .restore import plan_restart
+from .state_store import BackgroundWriter, fingerprint, StateStore
+
+
+class Persistence:
+    """The state file of one node: fault commits, library writes, the restart plan."""
+
+    def __init__(self, directory, robot, library, book, on_error):
+        self.store = StateStore(directory)
+        self.fingerprint = fingerprint(robot.source, library.source)
+        self._robot = robot
+        self._library = library
+        self._book = book
+        self._on_error = on_error          # on_error(text): log it
+        self._lock = threading.Lock()
+        self._seq = itertools.count(1)
+        self._writer = BackgroundWriter(self._save)
+        self.problem = None                # the last write problem, or a set-aside file
+
+    def start(self):
+        """Start the background writer."""
+        self._writer.start()
+
+    def commit_faults(self, faults):
+        """Write a new fault set (synced), then hand it to the run book: one step."""
+        with self._lock:
+            self._save(faults, self._book.current, next(self._seq))
+            self._book.set_faults(faults)
+
+    def publish_and_queue(self, generation, faults, result, publish):
+        """
+        Publish a run's library with ``publish`` if still current; queue it for the file.
+
+        Returns the run book's callers to tell, or None if the run went stale.
+        """
+        with self._lock:
+            ready = self._book.publish(generation, result, publish)
+            if ready is not None:
+                self._writer.submit(faults, result, next(self._seq))
+        return ready
+
+    def plan_restart(self, settings):
+        """Read the state file and return the RestartPlan (a bad file is set aside)."""
+        plan = plan_restart(self.store, self._robot, self._library, self.fingerprint,
+                            settings)
+        if plan.problem:
+            self.problem = shorten(plan.problem, 500)
+        return plan
+
+    def _save(self, faults, library, seq=None):
+        try:
+            self.store.save(faults, library, self.fingerprint, seq)
+            self.problem = None
+        except (OSError, ValueError) as exc:
+            if self.problem is None:
+                self._on_error(f'cannot write the state file {self.store.path}: {exc}; the '
+                               f'state will not survive a restart')
+            self.problem = shorten(f'cannot write {self.store.path}: {exc}')
+
+    def stop(self):
+        """Write what is queued, then stop the writer."""
+        self._writer.stop()
