@@ -277,3 +277,17 @@ def test_params_file_sets_the_parameters(tmp_path, client):
     finally:
         assert node.stop() == 0
     no_traceback(node)
+
+
+def test_diagnostics_keep_coming_with_use_sim_time_and_no_clock(tmp_path, client):
+    # Periodic work runs on a steady clock: simulated time that never advances (no
+    # /clock publisher) must not stop /diagnostics.
+    node = NodeProcess(DOMAIN, state_dir=tmp_path, args=['-p', 'use_sim_time:=true'])
+    try:
+        client.wait_library(what='the reference library')
+        since = client.diag_count()
+        time.sleep(3.5)                  # the diagnostics period is 1 s
+        assert client.diag_count() - since >= 3, 'periodic /diagnostics stopped'
+    finally:
+        assert node.stop() == 0, node.describe()
+    no_traceback(node)
