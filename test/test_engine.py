@@ -145,3 +145,23 @@ def test_scores_and_breakdown_are_those_of_the_published_keyframes(robot, produc
         assert g.score_mean == pytest.approx(np.mean(scores), rel=1e-9)
         assert g.breakdown == pytest.approx(parts[worst], rel=1e-9, abs=1e-9)
         assert set(g.breakdown) >= {'elbow', 'wrist', 'tip', 'palm'}
+
+
+def test_a_cut_short_motion_worse_than_the_locked_design_is_replaced_by_it(robot, library):
+    from dataclasses import replace
+    from namo_fault_recovery.recovery.engine import no_worse_than_locked
+    settings = RecoverySettings()
+    result = recover(robot, library, {'right_arm_joint2': None}, settings, seed=0)
+    lock = result.locks['right_arm_joint2']
+    wai = result['wai']
+    kept = no_worse_than_locked(robot, library['wai'], wai, result.locks, settings)
+    assert kept is wai                                   # better than the design: kept
+    worse = replace(wai, score_after=wai.score_before + 10.0)
+    fixed = no_worse_than_locked(robot, library['wai'], worse, result.locks, settings)
+    assert fixed.score_after == wai.score_before
+    column = robot.joint_names.index('right_arm_joint2')
+    for q, kf in zip(fixed.positions, library['wai'].keyframes):
+        design = list(kf.positions())
+        design[column] = lock
+        assert list(q) == design
+    assert 'cut short' in fixed.message

@@ -24,7 +24,9 @@ from .locks import frozen_arms, LOCK_STRATEGIES
 from .motion import adapt_library, DEFAULT_CONTINUITY, DEFAULT_DISTORTION_MM
 from .motion import DEFAULT_STAY_CLOSE, METHODS, typical_points
 from .result import GestureResult, LibraryResult, reference_result
+from ..model.kinematics import batch_forward
 from ..model.robot import ARMS, N_JOINTS
+from ..objective.collision import CollisionModel
 from ..objective.score import gesture_targets, ScoreWeights, SimilarityScore
 from ..optimize import ALGORITHMS, PRESETS
 from ..optimize.base import Clock
@@ -168,6 +170,8 @@ def recover(robot, library, faults=None, settings=None, *, seed=None, clock=None
             tip_error_max_mm=float(g.tip_error_max_mm),
             max_jump_designed_deg=float(g.jump_designed_deg),
             max_jump_before_deg=float(g.jump_before_deg)))
+    gestures = [no_worse_than_locked(robot, library[g.name], g, report.locks, settings)
+                for g in gestures]
     # ``per_point`` runs no typical-point engine: its statuses say it all.
     success = (report.deadline_met and (engine is None or engine.success)
                and all(math.isfinite(g.score_after) for g in gestures))
@@ -180,6 +184,42 @@ def recover(robot, library, faults=None, settings=None, *, seed=None, clock=None
         cancelled=report.cancelled, settings=public,
         tool_mm=settings.tool_length_mm, tool_arm=settings.tool_arm,
         seed=seed, notes=tuple(str(n) for n in report.notes), nfev=int(report.nfev))
+
+
+def no_worse_than_locked(robot, gesture, result, locks, settings):
+    """
+    Return ``result``, or the locked design if a cut-short search left it worse.
+
+    A run that the deadline (or a cancel) stops early can end with a motion that scores
+    worse than no adaptation at all (typical points half-solved, then Kriging spreads
+    the half-made corrections).  The design with the failed joints at their locks
+    (``score_before``) is then published instead, checked for collisions like any
+    other result, and the message says so.
+    """
+    if not result.score_after > result.score_before:
+        return result
+    columns = {robot.joint_names.index(j): float(a) for j, a in locks.items()}
+    positions = tuple(tuple(columns.get(k, float(a)) for k, a in enumerate(kf.positions()))
+                      for kf in gesture.keyframes)
+    collides, pairs = result.collides, result.colliding_pairs
+    if settings.collision_check:
+        model = robot.with_tool(settings.tool_length_mm, settings.tool_arm)
+        checker = CollisionModel(model, gesture_targets(gesture), robot.capsules)
+        q = np.array(positions)
+        lm_r = batch_forward(model, q[:, :N_JOINTS], 'right')
+        lm_l = batch_forward(model, q[:, N_JOINTS:], 'left')
+        rows = np.arange(len(q))
+        collides = bool(np.any(checker.collides(lm_r, lm_l, rows)))
+        pairs = tuple(sorted({str(p) for names in checker.colliding_pairs(lm_r, lm_l, rows)
+                              for p in names}))
+    note = ('the search was cut short before it beat the design with the locks applied; '
+            'that design is published')
+    return replace(result, positions=positions, score_after=result.score_before,
+                   score_mean=result.score_before_mean,
+                   tip_error_mm=result.tip_error_before_mm,
+                   max_jump_deg=result.max_jump_before_deg, collides=collides,
+                   colliding_pairs=pairs, breakdown={},
+                   message=f'{result.message}; {note}' if result.message else note)
 
 
 def worst_breakdowns(robot, library, adapted, settings):
