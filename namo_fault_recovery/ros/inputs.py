@@ -8,6 +8,8 @@ message changes nothing: the caller keeps its previous state.
 
 import math
 
+from ..recovery.locks import clamp_lock
+
 
 MAX_REASON = 300      # characters: a rejected value never makes a reason unbounded
 
@@ -72,9 +74,8 @@ def parse_fault(robot, names, positions=(), velocities=(), efforts=()):
                         f'{name!r} is outside its limits [{arm.lower[index]:.6g}, '
                         f'{arm.upper[index]:.6g}] rad')
                 # Within the tolerance of the limits: clamp, so that every published
-                # angle is within its limits bit for bit.
-                arm = robot.arms[side]
-                angle = min(max(value, float(arm.lower[index])), float(arm.upper[index]))
+                # angle is within its limits bit for bit (the engine's own clamp).
+                angle = clamp_lock(robot, name, value)
         faults[name] = angle
     return faults
 
