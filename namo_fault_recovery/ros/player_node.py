@@ -27,7 +27,7 @@ import numpy as np
 import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -296,7 +296,10 @@ def main(args=None):
     rclpy.init(args=args)      # rclpy's handlers turn SIGINT and SIGTERM into a shutdown
     node = executor = None
     try:
-        executor = MultiThreadedExecutor(num_threads=3)
+        # One thread: no callback blocks, and Jazzy's executors resume every pending
+        # ``async`` play at each wake-up; with a thread pool those resumptions competed
+        # for the interpreter lock with /joint_states, which then stalled for seconds.
+        executor = SingleThreadedExecutor()
         try:
             node = GesturePlayer()
         except (ValueError, ParameterException) as exc:   # a bad parameter or robot file

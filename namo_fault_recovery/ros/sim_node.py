@@ -34,7 +34,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 import rclpy
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
@@ -282,8 +282,8 @@ class SimNode(Node):
                 if report is not None:
                     self.contact_pub.publish(report)
             except Exception:  # noqa: B902 - the context is shutting down
-                if self._stop.is_set():
-                    return
+                if self._stop.is_set() or not self.context.ok():
+                    return     # SIGTERM shut ROS down before main() stopped this thread
                 raise
             step += 1
             next_time += dt
@@ -345,7 +345,8 @@ def main(args=None):
     code = 0
     try:
         node = SimNode()
-        executor = MultiThreadedExecutor(num_threads=2)
+        # One executor thread: every callback is short, and the physics has its own.
+        executor = SingleThreadedExecutor()
         executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
