@@ -183,7 +183,8 @@ def recover(robot, library, faults=None, settings=None, *, seed=None, clock=None
         deadline_met=bool(report.deadline_met), success=bool(success),
         cancelled=report.cancelled, settings=public,
         tool_mm=settings.tool_length_mm, tool_arm=settings.tool_arm,
-        seed=seed, notes=tuple(str(n) for n in report.notes), nfev=int(report.nfev))
+        seed=seed, notes=tuple(str(n) for n in report.notes), nfev=int(report.nfev),
+        origin='unbounded' if budget is None else 'deadline')
 
 
 def no_worse_than_locked(robot, gesture, result, locks, settings):

@@ -212,7 +212,11 @@ class LibraryResult:
       like the node's parameters; ``seed``: the seed the run used (None: not recorded);
       ``notes``: what a person should know about the run (lock choice, skipped stages);
     - ``tool_mm`` / ``tool_arm``: a tool lengthening that hand (mm, 0: none);
-    - ``nfev``: objective evaluations of the whole run.
+    - ``nfev``: objective evaluations of the whole run;
+    - ``origin``: how this version was obtained: ``reference`` (no structure change),
+      ``deadline`` (a search within the deadline), ``unbounded`` (a search with no
+      deadline), ``table`` (the node's precomputed contingency table) or ``refined`` (the
+      node's background refinement after a deadline result).
     """
 
     gestures: tuple
@@ -230,6 +234,7 @@ class LibraryResult:
     seed: int = None
     notes: tuple = ()
     nfev: int = 0
+    origin: str = 'deadline'
 
     @property
     def names(self):
@@ -259,6 +264,7 @@ class LibraryResult:
             'settings': dict(self.settings),
             'tool_mm': self.tool_mm, 'tool_arm': self.tool_arm,
             'seed': self.seed, 'notes': list(self.notes), 'nfev': self.nfev,
+            'origin': self.origin,
         }
 
     @classmethod
@@ -294,6 +300,7 @@ class LibraryResult:
                 seed=None if seed is None else int(seed),
                 notes=tuple(str(n) for n in notes),
                 nfev=int(doc.get('nfev', 0)),
+                origin=str(doc.get('origin', 'deadline')),
             )
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             if isinstance(exc, MalformedResult):
@@ -311,7 +318,11 @@ def reference_result(library, deadline=0.0, settings=None, seed=None):
                       status='unchanged', message='reference gesture')
         for g in library)
     return LibraryResult(gestures=gestures, deadline=deadline, settings=dict(settings or {}),
-                         seed=seed)
+                         seed=seed, origin='reference')
+
+
+ORIGIN_TEXT = {'table': ' from the contingency table',
+               'refined': ' refined in the background after the deadline result'}
 
 
 def summary(result):
@@ -338,6 +349,7 @@ def summary(result):
     text = (f"{'reconfigured' if result.success else 'FAILED to fully reconfigure'} "
             f'{finite}/{len(result.gestures)} gestures in {result.wall_time:.3f} s '
             f'({timing}) for {locks}')
+    text += ORIGIN_TEXT.get(result.origin, '')
     if result.frozen_arms:
         text += f"; frozen arm(s): {', '.join(result.frozen_arms)}"
     if result.cancelled:

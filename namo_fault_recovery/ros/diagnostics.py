@@ -143,7 +143,8 @@ def reconfiguration_status(snap, up_to_date, hw, prefix):
     if current is None:
         return status(prefix, dk.RECONFIGURATION, 'STALE', 'no library published yet', hw,
                       pairs)
-    pairs += [(dk.WALL_TIME_SEC, f'{current.wall_time:.4f}'),
+    pairs += [(dk.LIBRARY_ORIGIN, current.origin),
+              (dk.WALL_TIME_SEC, f'{current.wall_time:.4f}'),
               (dk.REQUEST_TO_PUBLISH_SEC, '' if snap.request_to_publish is None
                else f'{snap.request_to_publish:.4f}'),
               (dk.DEADLINE_MET, dk.flag(current.deadline_met)),

@@ -22,7 +22,8 @@ from ..recovery.result import summary
 class Dispatcher:
     """The thread between the run book and the engine process."""
 
-    def __init__(self, book, engine, robot, library, settings, publish, log):
+    def __init__(self, book, engine, robot, library, settings, publish, log,
+                 publish_refined=None):
         self._book = book
         self._engine = engine
         self._robot = robot
@@ -30,8 +31,11 @@ class Dispatcher:
         self._settings = settings          # callable: the current NodeSettings
         self._publish = publish            # publish(generation, faults, result) -> callers
         self._log = log                    # log(level, text)
+        # publish_refined(generation, faults, result) -> True if published
+        self._publish_refined = publish_refined
         self._thread = threading.Thread(target=self._loop, name='dispatcher', daemon=True)
         self.last_engine_time = 0.0
+        self.last_refinement = ''           # why the last refinement ended
 
     def start(self):
         """Start the dispatcher thread."""
@@ -89,6 +93,30 @@ class Dispatcher:
         level = 'info' if result.success else 'warning'
         if all(math.isfinite(g.score_after) for g in result.gestures):
             self._log(level, summary(result))
+        if result.origin == 'deadline' and settings.refine_budget_sec > 0 \
+                and self._publish_refined is not None:
+            self._refine(run, result, settings)
+
+    def _refine(self, run, result, settings):
+        """Keep improving ``run``'s library in the engine until done or superseded."""
+        if not self._book.refining(run.generation):
+            return
+
+        def improved(better):
+            if check_result(self._robot, self._library, better, run.faults):
+                return                            # never publish a library that fails it
+            if self._publish_refined(run.generation, run.faults, better):
+                self._log('info', f'refined: {summary(better)}')
+
+        try:
+            reason = self._engine.refine(run.generation, result, settings.engine,
+                                         settings.refine_budget_sec, improved)
+            self.last_refinement = reason
+        except EngineError as exc:
+            self.last_refinement = f'failed: {exc}'
+            self._log('warning', f'refinement stopped: {exc}; the published library stays')
+        finally:
+            self._book.refined(run.generation)
 
     def _fail(self, run, reason):
         ready = self._book.failed(run.generation, reason)

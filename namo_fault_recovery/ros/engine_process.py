@@ -16,6 +16,7 @@ import time
 import traceback
 
 _STOP = None
+_REFINE = 'refine'
 
 
 class EngineError(RuntimeError):
@@ -61,6 +62,9 @@ def _serve(conn, robot_file, gesture_file, current):
             return                                   # the node went away
         if request is _STOP:
             return
+        if request[0] == _REFINE:
+            _refine(conn, robot, library, request[1:], current, quantisations)
+            continue
         run_id, faults, settings, seed, start, measured = request
 
         def cancel(run_id=run_id):
@@ -76,6 +80,30 @@ def _serve(conn, robot_file, gesture_file, current):
         except Exception as exc:  # noqa: B902 - report every failure to the node
             conn.send(('error', run_id, f'{type(exc).__name__}: {exc}'[:500],
                        traceback.format_exc(limit=5)[-2000:]))
+
+
+def _refine(conn, robot, library, request, current, quantisations):
+    """Child: send each better library of a refinement, then its end."""
+    from ..optimize.base import Clock
+    from ..recovery.refine import refinements
+
+    run_id, published, settings, budget = request
+
+    def cancel():
+        return current.value != run_id
+
+    tries = 0
+    try:
+        clock = Clock(budget, cancel)
+        quant = quantisations(settings.vq_distortion_mm, clock)
+        for better in refinements(robot, library, published, settings, clock=clock,
+                                  quantisations=quant):
+            tries += 1
+            conn.send(('improved', run_id, better))
+        reason = 'cancelled' if cancel() else ('budget' if clock.expired() else 'converged')
+        conn.send(('refined', run_id, reason))
+    except Exception as exc:  # noqa: B902 - report every failure to the node
+        conn.send(('refined', run_id, f'failed: {type(exc).__name__}: {exc}'[:500]))
 
 
 class EngineProcess:
@@ -160,6 +188,37 @@ class EngineProcess:
         if answer[0] == 'ok':
             return answer[2], answer[3]
         raise EngineError(answer[2])
+
+    def refine(self, run_id, published, settings, budget, on_improved, hang_margin=5.0):
+        """
+        Refine ``published`` in the child for ``budget`` seconds; return why it ended.
+
+        Calls ``on_improved(result)`` for each better library as it arrives.  A newer run
+        cancels it (:meth:`cancel`).  Raises :class:`EngineError` as :meth:`run` does.
+        """
+        try:
+            self._ensure_ready(time.monotonic() + self._start_timeout)
+            self._current.value = run_id
+            self._conn.send((_REFINE, run_id, published, settings, budget))
+            end = time.monotonic() + budget + hang_margin
+            while True:
+                if not self._conn.poll(max(end - time.monotonic(), 0.0)):
+                    raise EngineError('the engine process did not end a refinement in '
+                                      'time; it was restarted')
+                answer = self._conn.recv()
+                if answer[1] != run_id:
+                    continue
+                if answer[0] == 'improved':
+                    on_improved(answer[2])
+                else:
+                    return answer[2]
+        except (EOFError, OSError, BrokenPipeError) as exc:
+            self._restart()
+            raise EngineError(f'the engine process died ({type(exc).__name__}); it was '
+                              f'restarted') from None
+        except EngineError:
+            self._restart()
+            raise
 
     def _restart(self):
         self.restarts += 1

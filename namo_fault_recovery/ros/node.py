@@ -86,7 +86,7 @@ class RecoveryNode(Node):
                                    self._inputs.measured, on_error=self._intake_error)
         self._dispatcher = Dispatcher(self._book, self._engine, self._robot, self._library,
                                       lambda: self._settings, self._publish_and_persist,
-                                      self._log)
+                                      self._log, self._publish_refined)
         try:
             self._create_interfaces()
             self._restore()
@@ -267,6 +267,10 @@ class RecoveryNode(Node):
     def _publish_and_persist(self, generation, faults, result):
         return self._state.publish_and_queue(generation, faults, result,
                                              self._publish_library)
+
+    def _publish_refined(self, generation, faults, result):
+        return self._state.publish_refined_and_queue(generation, faults, result,
+                                                     self._publish_library)
 
     def _publish_library(self, result):
         """Publish a library version; return its stamp (ns, strictly increasing)."""

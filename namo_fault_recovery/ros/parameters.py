@@ -58,6 +58,8 @@ class NodeSettings:
     seed: object                 # None draws one per run
     marker_frame_id: str = 'base_link'
     marker_spacing: float = 0.8
+    refine_budget_sec: float = 10.0
+    contingency_table: bool = True
 
 
 def fp_range(low, high):
@@ -131,6 +133,19 @@ def parameter_specs():
         ('marker_spacing', 0.8, ParameterDescriptor(
             description='distance (m) between the gestures shown on /gesture_markers',
             floating_point_range=fp_range(0.0, 10.0))),
+        ('refine_budget_sec', 10.0, ParameterDescriptor(
+            description='after a deadline result the node keeps searching in the background '
+                        'for this long (s), and publishes each better library as a new '
+                        'version; 0 = off.  A new fault cancels it',
+            floating_point_range=fp_range(0.0, 600.0))),
+        ('contingency_table', True, ParameterDescriptor(
+            description='precompute, at low priority, the library for every single fault '
+                        '(and every further one once faults are active), kept in state_dir; '
+                        'a fault found there is answered at once')),
+        ('contingency_file', '', ParameterDescriptor(
+            description="a table built offline by 'namo-recovery precompute' to load at "
+                        'start (used only if built for this robot, library and settings)',
+            read_only=True)),
         ('diagnostics_period_sec', 1.0, ParameterDescriptor(
             description='period (s) of /diagnostics (also published on every change)',
             floating_point_range=fp_range(0.1, 60.0), read_only=True)),
@@ -181,7 +196,9 @@ def node_settings(values):
         continuity_weight=float(values['continuity_weight']), weights=weights)
     return NodeSettings(engine=engine, seed=None if seed < 0 else seed,
                         marker_frame_id=values['marker_frame_id'],
-                        marker_spacing=float(values['marker_spacing']))
+                        marker_spacing=float(values['marker_spacing']),
+                        refine_budget_sec=float(values['refine_budget_sec']),
+                        contingency_table=bool(values['contingency_table']))
 
 
 class StartupError(Exception):

@@ -53,6 +53,14 @@ class Persistence:
                 self._writer.submit(faults, result, next(self._seq))
         return ready
 
+    def publish_refined_and_queue(self, generation, faults, result, publish):
+        """Publish a refinement of ``generation`` if still current; queue it; return True."""
+        with self._lock:
+            published = self._book.publish_refined(generation, result, publish)
+            if published:
+                self._writer.submit(faults, result, next(self._seq))
+        return published
+
     def plan_restart(self, settings):
         """Read the state file and return the RestartPlan (a bad file is set aside)."""
         plan = plan_restart(self.store, self._robot, self._library, self.fingerprint,

@@ -138,6 +138,42 @@ class RunBook:
                 return None
             return self._published_locked(generation, result, publish(result))
 
+    def refining(self, generation):
+        """
+        Mark ``generation``'s published library as being refined; return False if stale.
+
+        While it refines, a new request cancels it (``on_request``) as it would a run.
+        """
+        with self._cond:
+            if generation != self._requested or self._published != generation \
+                    or self.stopping:
+                return False
+            self._running = generation
+            return True
+
+    def publish_refined(self, generation, result, publish):
+        """
+        Publish a better library for the already published ``generation``, if current.
+
+        A new library version with nobody to tell (its callers were told at the first
+        publication); ``request_to_publish`` keeps the first publication's span.  Returns
+        True if published, False if ``generation`` went stale.
+        """
+        with self._cond:
+            if generation != self._requested or self._published != generation \
+                    or self.stopping:
+                return False
+            self.current = result
+            self.version += 1
+            self.stamp_ns = publish(result)
+            return True
+
+    def refined(self, generation):
+        """Mark the end of ``generation``'s refinement (done, converged or cancelled)."""
+        with self._cond:
+            if self._running == generation:
+                self._running = None
+
     def _published_locked(self, generation, result, stamp_ns):
         # From the request to the publication: the span the deadline covers.
         self.request_to_publish = time.monotonic() - self._requested_at
