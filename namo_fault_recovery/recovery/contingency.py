@@ -63,7 +63,7 @@ import time
 import numpy as np
 
 from .engine import recover
-from .locks import resolve_locks
+from .locks import resolve_locks, validate_angle
 from .motion import typical_points
 from .result import LibraryResult, MalformedResult
 from ..files import write_text_atomically
@@ -162,14 +162,15 @@ def fault_sets(robot, library, settings, active=None, joints=None):
     right arm first).  Joints of ``active`` are not failed again.  With the ``average``
     and ``measured`` strategies every angle is resolved (:func:`table_locks`; measured
     falls back to the average offline); with ``optimal`` the joints without an angle stay
-    None, so that the engine optimises their locks as it does live.
+    None, so that the engine optimises their locks as it does live.  Raises ValueError
+    for an unknown joint or an active angle beyond its limits.
     """
     active = dict(active or {})
-    for joint in active:
-        robot.locate_joint(joint)
+    for joint, angle in active.items():
+        validate_angle(robot, joint, angle)
     names = robot.joint_names if joints is None else tuple(joints)
     for joint in names:
-        robot.locate_joint(joint)
+        validate_angle(robot, joint, None)
     out = []
     for joint in names:
         if joint in active:
