@@ -13,8 +13,9 @@ The ``namo-recovery`` command line, one module per command group.
 - :mod:`.player_commands`: ``play``, ``demo-play`` and ``bench detection``, around
   ``gesture_player``;
 - :mod:`.urdf`: ``urdf``, Namo's URDF from the robot file;
+- :mod:`.precompute`: ``precompute``, the contingency table built offline;
 - :mod:`.ros_common`: what the ROS commands share (``--namespace``, errors, tables);
 - :mod:`.private_node`: the node process that ``demo`` and ``bench latency`` start;
-- :mod:`.common`: argument parsing shared by the groups;
+- :mod:`.common`: argument parsing shared by the groups (faults, the setting options);
 - :mod:`.__main__`: ``python -m namo_fault_recovery.cli``.
 """

@@ -10,7 +10,8 @@ import sys
 
 import numpy as np
 
-from .common import gesture_and_keyframe, parse_faults, Parser, UsageError
+from .common import add_setting_options, engine_settings, gesture_and_keyframe
+from .common import parse_faults, Parser, UsageError
 from ..errors import ConfigError
 from ..model.gestures import load_library
 from ..model.kinematics import forward_kinematics
@@ -145,20 +146,12 @@ def solve_settings(args):
     ``--deadline-sec 0`` or ``--no-deadline`` runs without a deadline.
     """
     from ..optimize.base import Clock
-    from ..recovery.engine import RecoverySettings
     deadline = args.deadline_sec
     if not math.isfinite(deadline) or deadline < 0:
         raise UsageError(f'--deadline-sec: expected a number of seconds >= 0 (0: none), '
                          f'got {deadline}')
     no_deadline = args.no_deadline or deadline == 0
-    values = {name: getattr(args, name) for name in SETTING_OPTIONS}
-    if no_deadline:
-        values.pop('deadline_sec')
-    try:
-        settings = RecoverySettings(**values)
-    except ValueError as exc:
-        raise UsageError(f'--{str(exc).replace("_", "-", str(exc).index(":"))}'
-                         if ':' in str(exc) else str(exc)) from None
+    settings = engine_settings(args, omit=('deadline_sec',) if no_deadline else ())
     return settings, Clock(None if no_deadline else settings.deadline_sec)
 
 
@@ -229,21 +222,9 @@ def write_solve_text(result, out):
                                                   for c, v in g.breakdown.items()) + '\n')
 
 
-# The ``solve`` options that are RecoverySettings fields (and node parameters).
-SETTING_OPTIONS = ('deadline_sec', 'lock_strategy', 'optimizer', 'optimizer_preset',
-                   'bimanual', 'collision_check', 'tool_length_mm', 'tool_arm',
-                   'trajectory_method', 'vq_distortion_mm', 'continuity_weight')
-
-
 def add_solve_parser(sub):
     """Add ``solve``: options named like the node's parameters, with its defaults."""
-    import argparse
-    from ..model.robot import ARMS
-    from ..optimize import ALGORITHMS, PRESETS
     from ..recovery.engine import RecoverySettings
-    from ..recovery.keyframes import BIMANUAL_MODES
-    from ..recovery.locks import LOCK_STRATEGIES
-    from ..recovery.motion import METHODS
     d = RecoverySettings()
     p = sub.add_parser('solve', help='recover the library for a fault set (as the node does)')
     p.add_argument('--fault', action='append', metavar='JOINT[=DEG]',
@@ -256,28 +237,7 @@ def add_solve_parser(sub):
                    metavar='SEC', help=f'budget for the whole library in s (default '
                                        f'{d.deadline_sec:g}; 0: no deadline)')
     p.add_argument('--no-deadline', action='store_true', help='run without a deadline')
-    p.add_argument('--lock-strategy', choices=LOCK_STRATEGIES, default=d.lock_strategy)
-    p.add_argument('--optimizer', '--algorithm', choices=sorted(ALGORITHMS),
-                   default=d.optimizer)
-    p.add_argument('--optimizer-preset', '--preset', choices=PRESETS,
-                   default=d.optimizer_preset,
-                   help="'default' (our tuned ABC) or 'paper' (the paper's Table 3)")
-    p.add_argument('--bimanual', choices=BIMANUAL_MODES, default=d.bimanual,
-                   help='stage 2 for two-handed gestures: the healthy arm moves too '
-                        "('auto': when stage 1 scores above the threshold)")
-    p.add_argument('--collision-check', action=argparse.BooleanOptionalAction,
-                   default=d.collision_check,
-                   help='keep arms and torso apart and report what still collides')
-    p.add_argument('--no-collision', dest='collision_check', action='store_false',
-                   help='same as --no-collision-check')
-    p.add_argument('--tool-length-mm', type=float, default=d.tool_length_mm, metavar='MM',
-                   help='a tool lengthening the hand of --tool-arm (mm)')
-    p.add_argument('--tool-arm', choices=ARMS, default=d.tool_arm)
-    p.add_argument('--trajectory-method', choices=METHODS, default=d.trajectory_method)
-    p.add_argument('--vq-distortion-mm', type=float, default=d.vq_distortion_mm, metavar='MM',
-                   help='typical-point threshold (mm of fingertip)')
-    p.add_argument('--continuity-weight', type=float, default=d.continuity_weight,
-                   metavar='W', help='per-point jump penalty (per deg^2)')
+    add_setting_options(p)
     p.add_argument('--seed', type=int, default=None,
                    help='seed for a reproducible run (default: drawn, and printed)')
     p.add_argument('--json', action='store_true',
@@ -323,6 +283,8 @@ def build_parser():
     player_commands.register(sub, bench_sub)   # play, demo-play, bench detection
     from . import urdf as urdf_cli
     urdf_cli.register(sub)                   # urdf
+    from . import precompute
+    precompute.register(sub)                 # precompute (the contingency table)
     return parser
 
 

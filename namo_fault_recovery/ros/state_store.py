@@ -2,11 +2,12 @@
 Persistence of the node's state: the fault set and the last published library.
 
 Free of ROS.  The state is one JSON document, ``state.json`` in the state directory.  It
-is written atomically: to a temporary file in the same directory, flushed and synced,
-then renamed over the old file with ``os.replace``, so a reader (or a node restarted
-after SIGKILL or a power cut) sees either the old state or the new one, never half of
-one.  A state file that cannot be read back is *set aside* (renamed to
-``state.json.corrupt-<time>``) and reported; it is never fatal.
+is written atomically (:func:`~namo_fault_recovery.files.write_text_atomically`: a
+temporary file in the same directory, flushed and synced, then renamed over the old file
+with ``os.replace``), so a reader (or a node restarted after SIGKILL or a power cut)
+sees either the old state or the new one, never half of one.  A state file that cannot be
+read back is *set aside* (renamed to ``state.json.corrupt-<time>``) and reported; it is
+never fatal.
 """
 
 from dataclasses import dataclass
@@ -14,10 +15,10 @@ import hashlib
 import json
 import os
 from pathlib import Path
-import tempfile
 import threading
 import time
 
+from ..files import write_text_atomically
 from ..recovery.result import finite_number, LibraryResult, MalformedResult
 
 STATE_FILE = 'state.json'
@@ -173,38 +174,10 @@ class StateStore:
         with self._lock:
             if seq is not None and seq < self._written_seq:
                 return False
-            self.directory.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=f'.{STATE_FILE}.', suffix='.tmp',
-                                       dir=self.directory)
-            try:
-                with os.fdopen(fd, 'w', encoding='utf-8') as handle:
-                    handle.write(text)
-                    handle.flush()
-                    os.fsync(handle.fileno())
-                os.replace(tmp, self.path)
-            except BaseException:
-                try:
-                    os.unlink(tmp)
-                except OSError:
-                    pass
-                raise
-            _fsync_dir(self.directory)
+            write_text_atomically(self.path, text)
             if seq is not None:
                 self._written_seq = seq
             return True
-
-
-def _fsync_dir(directory):
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
 
 
 class BackgroundWriter:
