@@ -5,7 +5,8 @@ Kriging from typical points (:mod:`.motion`) is fast but leaves the fingertip of
 path between the typical points; exploring every point in order (``per_point``) reaches
 the path but takes seconds per motion.  Here the free joints of all T points of one
 motion are stacked into one vector of T x D variables and minimised together by
-L-BFGS-B (scipy), warm-started from the Kriging result.  Every objective call runs one
+projected L-BFGS (:func:`projected_lbfgs`, numpy; or scipy's L-BFGS-B), warm-started
+from the Kriging result.  Every objective call runs one
 batched forward-kinematics-and-Jacobian pass over all points
 (:func:`~namo_fault_recovery.model.kinematics.batch_forward_jacobian`), so the gradient is
 analytic and there is no Python loop over the points.
@@ -185,15 +186,25 @@ class TrajectoryResult:
     status: str           # 'converged', 'iterations', 'deadline' or 'cancelled'
 
 
-def optimise_trajectory(problem, clock, maxiter=DEFAULT_MAXITER, ftol=1e-9, maxcor=20):
-    """
-    Minimise a :class:`TrajectoryProblem` with L-BFGS-B from its warm start.
+SOLVERS = ('lbfgs', 'scipy')
 
-    ``clock`` (a :class:`~namo_fault_recovery.optimize.base.Clock`) owns the deadline and
-    the cancel flag: the objective stops the run when it has expired, and the best point
-    evaluated so far is returned, so the result is never worse than the warm start on
-    the objective.
+
+def optimise_trajectory(problem, clock, maxiter=DEFAULT_MAXITER, ftol=1e-9, solver='lbfgs',
+                        memory=20):
     """
+    Minimise a :class:`TrajectoryProblem` from its warm start; return a result.
+
+    ``solver='lbfgs'`` is :func:`projected_lbfgs` (numpy only), ``'scipy'`` scipy's
+    L-BFGS-B: the same method, but on a shared machine scipy's routine spent ~3 ms of
+    threaded BLAS per iteration on a 600-variable circle (0.5 ms for the objective),
+    against ~0.1 ms for the numpy loop, so the numpy one is the default; a test
+    cross-checks the two.  ``clock`` (a :class:`~namo_fault_recovery.optimize.base.Clock`)
+    owns the deadline and the cancel flag: the objective stops the run when it has
+    expired, and the best point evaluated so far is returned, so the result is never
+    worse than the warm start on the objective.
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f'solver: expected one of {", ".join(SOLVERS)}, got {solver!r}')
     best = {'f': np.inf, 'x': problem.x0}
 
     def fun(x):
@@ -209,11 +220,16 @@ def optimise_trajectory(problem, clock, maxiter=DEFAULT_MAXITER, ftol=1e-9, maxc
     best['f'] = start_value
     status, nit = 'converged', 0
     try:
-        res = minimize(fun, problem.x0, jac=True, method='L-BFGS-B', bounds=problem.bounds(),
-                       options={'maxiter': maxiter, 'ftol': ftol, 'gtol': 1e-8,
-                                'maxcor': maxcor})
-        nit = int(res.nit)
-        if res.status == 1:
+        if solver == 'scipy':
+            res = minimize(fun, problem.x0, jac=True, method='L-BFGS-B',
+                           bounds=problem.bounds(),
+                           options={'maxiter': maxiter, 'ftol': ftol, 'gtol': 1e-8,
+                                    'maxcor': memory})
+            nit, done = int(res.nit), res.status != 1
+        else:
+            nit, done = projected_lbfgs(fun, problem.x0, problem.lower, problem.upper,
+                                        maxiter=maxiter, ftol=ftol, memory=memory)
+        if not done:
             status = 'iterations'
     except _Stop:
         status = 'cancelled' if clock.reason == 2 else 'deadline'
@@ -221,6 +237,71 @@ def optimise_trajectory(problem, clock, maxiter=DEFAULT_MAXITER, ftol=1e-9, maxc
     q_r, q_l = problem.assemble(x)
     return TrajectoryResult(q_r, q_l, float(best['f']), float(start_value),
                             problem.nfev - nfev0, nit, status)
+
+
+def projected_lbfgs(fun, x0, lower, upper, maxiter=DEFAULT_MAXITER, ftol=1e-9, gtol=1e-8,
+                    memory=20, first_step=0.02):
+    """
+    Minimise ``fun(x) -> (f, g)`` within box bounds by projected L-BFGS; return (nit, done).
+
+    Variables at a bound whose gradient pushes outwards are held there; the L-BFGS
+    direction (two-loop recursion over the last ``memory`` pairs) is taken on the others,
+    and a backtracking Armijo search runs along the projected path.  ``first_step``
+    (rad) is the largest move of the first iteration, before any curvature is known.
+    ``done`` is False when ``maxiter`` ran out.  The caller keeps the best point (every
+    evaluation goes through ``fun``); all of it is vector arithmetic on x, so there is
+    no loop over the points of a motion.
+    """
+    x = np.clip(np.asarray(x0, dtype=float), lower, upper)
+    f, g = fun(x)
+    pairs = []
+    for nit in range(1, maxiter + 1):
+        free = ~(((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0)))
+        pg = np.where(free, g, 0.0)
+        if np.abs(pg).max(initial=0.0) <= gtol:
+            return nit - 1, True
+        d = -_two_loop(pg, pairs, free)
+        slope = float(g @ d)
+        if not slope < 0:
+            pairs.clear()
+            d, slope = -pg, -float(pg @ pg)
+        step = 1.0 if pairs else min(1.0, first_step / np.abs(d).max())
+        for _ in range(30):
+            xn = np.clip(x + step * d, lower, upper)
+            fn, gn = fun(xn)
+            if fn <= f + 1e-4 * float(g @ (xn - x)):
+                break
+            step *= 0.5
+        else:
+            return nit, True        # no descent left at machine precision
+        sk, yk = xn - x, gn - g
+        if float(sk @ yk) > 1e-10 * float(yk @ yk):
+            pairs.append((sk, yk, 1.0 / float(sk @ yk)))
+            if len(pairs) > memory:
+                pairs.pop(0)
+        done = f - fn <= ftol * max(abs(f), abs(fn), 1.0)
+        x, f, g = xn, fn, gn
+        if done:
+            return nit, True
+    return maxiter, False
+
+
+def _two_loop(g, pairs, free):
+    """Return H g for the L-BFGS inverse Hessian H of ``pairs``, on the ``free`` variables."""
+    q = g.copy()
+    alphas = []
+    for s, y, rho in reversed(pairs):
+        a = rho * float(s @ q)
+        q -= a * y
+        q[~free] = 0.0
+        alphas.append(a)
+    if pairs:
+        s, y, _ = pairs[-1]
+        q *= float(s @ y) / float(y @ y)
+    for (s, y, rho), a in zip(pairs, reversed(alphas)):
+        q += (a - rho * float(y @ q)) * s
+        q[~free] = 0.0
+    return q
 
 
 def designed_step_deg(design):
@@ -233,7 +314,7 @@ def designed_step_deg(design):
 
 def optimise_motion(robot, scorer, target_ids, start_right, start_left, layout, design,
                     clock, *, smoothness=DEFAULT_SMOOTHNESS, step_penalty=DEFAULT_STEP_PENALTY,
-                    collision=None, maxiter=DEFAULT_MAXITER):
+                    collision=None, maxiter=DEFAULT_MAXITER, solver='lbfgs'):
     """
     Optimise one whole motion from its warm start; return a :class:`TrajectoryResult`.
 
@@ -244,4 +325,4 @@ def optimise_motion(robot, scorer, target_ids, start_right, start_left, layout, 
     problem = TrajectoryProblem(robot, scorer, target_ids, start_right, start_left, layout,
                                 smoothness=smoothness, step_cap_deg=designed_step_deg(design),
                                 step_penalty=step_penalty, collision=collision)
-    return optimise_trajectory(problem, clock, maxiter=maxiter)
+    return optimise_trajectory(problem, clock, maxiter=maxiter, solver=solver)
