@@ -176,6 +176,21 @@ def test_paper_bench_in_two_processes(tmp_path):
     assert len(list((tmp_path / 'cases').glob('*.json'))) == 4
 
 
+def test_motion_deadline_bench_reports_each_case(tmp_path, robot):
+    assert len(motion.deadline_cases(robot)) == 17    # 14 single faults, 2 tools, elbow
+    out = io.StringIO()
+    case = ('left_arm_joint1 (average lock)', {'faults': {'left_arm_joint1': None}})
+    rows = motion.bench_motion_deadline(out, str(tmp_path), seed=0, deadline=1.0,
+                                        cases=[case])
+    doc = json.loads((tmp_path / 'motion_deadline.json').read_text())
+    assert doc['rows'] == rows and len(rows) == 1
+    row = rows[0]
+    for key in ('deadline_met', 'wall_ms', 'tip_error_vs_per_point_mm', 'max_step_deg',
+                'designed_step_deg'):
+        assert key in row
+    assert 'target <= +1 mm' in out.getvalue()
+
+
 def test_motion_bench_compares_both_methods_on_the_wave(tmp_path):
     out = io.StringIO()
     rows = motion.bench_motion(out, str(tmp_path), seed=0, motions=('bye',))

@@ -353,12 +353,13 @@ def test_tool_and_lock_combine(robot, circle):
     assert g.tip_error_mean_mm < 10.0
 
 
-def test_auto_falls_back_to_kriging_when_the_deadline_is_short(robot, product_library):
+def test_auto_optimises_the_circle_after_kriging_within_the_deadline(robot, product_library):
     res = adapt_library(robot, product_library, {ELBOW: None}, method='auto', deadline=1.0,
                         seed=0)
     g = res['circle']
-    assert g.method == 'kriging'
-    assert any('circle' in n and 'Kriging' in n for n in res.notes)
+    # The whole-trajectory pass replaces the Kriging result when it improves on it (it
+    # keeps Kriging's only if the deadline left it no time at all).
+    assert g.method in ('trajectory', 'kriging')
     assert len(g.keyframes) == 100 and len(g.kriging_sigma_deg) == 100
     assert res['bye'].method == 'keyframes'
 

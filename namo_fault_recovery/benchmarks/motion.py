@@ -7,20 +7,31 @@ motion and on the Bye wave, each with both methods in the same run.  Per case it
 the exploration cost (objective evaluations, and the Kriging method's share of the
 per-point one), the wall time, the fingertip error against the designed path (mean and
 max, mm), the similarity score and the largest joint jump between successive points.
+
+With ``--deadline`` (:func:`bench_motion_deadline`) it runs the node's case instead:
+the whole library that holds the circle, the node's settings and method ``auto`` within
+the deadline, for all 14 single faults, the 50 and 100 mm tools and the elbow locked at
+0 with expansion; per case, whether the deadline was met, the wall time, the circle's
+mean fingertip error against the per-point pass without a deadline, and its largest
+joint step against the designed one.
 """
 
 from dataclasses import replace
 import json
 import math
 import os
+from pathlib import Path
 import time
 
 from . import common
+from ..errors import ConfigError
 from ..model.gestures import GestureLibrary, load_library
-from ..model.robot import load_robot
+from ..model.robot import ARMS, load_robot
 from ..optimize.base import Clock
-from ..recovery.engine import recover
+from ..recovery.engine import recover, RecoverySettings
+from ..recovery.locks import resolve_locks
 from ..recovery.motion import DEFAULT_DISTORTION_MM, typical_points
+from ..resources import config_path, DEFAULT_GESTURE_FILE
 
 ELBOW = 'right_arm_joint4'
 SCENARIOS = (
@@ -134,5 +145,99 @@ def bench_motion(out, out_dir, seed=0, motions=MOTIONS, robot_file=None, gesture
     with open(path, 'w', encoding='utf-8') as stream:
         json.dump({'seed': seed, 'distortion_mm': distortion_mm, 'rows': rows}, stream,
                   indent=1)
+    out.write(f'written: {path}\n')
+    return rows
+
+
+def library_holding(robot, name, gesture_file=None):
+    """
+    Return a gesture library that holds ``name``: ``gesture_file``, else a packaged one.
+
+    The packaged library is tried first, then every other library file next to it (the
+    demo motions may live in a file of their own).
+    """
+    if gesture_file is not None:
+        return load_library(robot, gesture_file)
+    library = load_library(robot)
+    if any(g.name == name for g in library):
+        return library
+    folder = Path(config_path(DEFAULT_GESTURE_FILE)).parent
+    for path in sorted(folder.glob('*.yaml')):
+        try:
+            other = load_library(robot, path)
+        except (ConfigError, ValueError, KeyError, TypeError):
+            continue     # not a gesture library
+        if any(g.name == name for g in other):
+            return other
+    raise ValueError(f'no gesture library in {folder} holds {name!r}')
+
+
+def deadline_cases(robot):
+    """Return the node-case scenarios: every single fault, the tools, the elbow at 0."""
+    cases = [(f'{j} (average lock)', {'faults': {j: None}})
+             for side in ARMS for j in robot.arms[side].joint_names]
+    return cases + [('tool 50 mm', {'tool_mm': 50.0}), ('tool 100 mm', {'tool_mm': 100.0}),
+                    ('elbow locked at 0, with expansion', {'faults': {ELBOW: 0.0}})]
+
+
+def bench_motion_deadline(out, out_dir, seed=0, deadline=1.0, robot_file=None,
+                          gesture_file=None, motion='circle', cases=None):
+    """
+    Run the node's case for every scenario; print the table, write motion_deadline.json.
+
+    ``auto`` adapts the whole library holding ``motion`` with the node's settings within
+    ``deadline`` (s); the reference is ``per_point`` on that motion alone, with the same
+    locks and no deadline.
+    """
+    robot = load_robot(robot_file)
+    library = library_holding(robot, motion, gesture_file)
+    designed = None
+    out.write(f'# bench motion --deadline {deadline:g}: {motion} in a library of '
+              f'{len(library)} gestures, seed {seed}; '
+              f'{common.format_machine(common.machine_info())}\n')
+    out.write(f'{"case":36s} {"met":>4s} {"wall ms":>8s} {"method":>10s} '
+              f'{"tip mm":>7s} {"pp tip":>7s} {"diff":>6s} {"step":>5s} {"pp st":>5s} '
+              f'{"score":>6s} {"pp sc":>6s} {"coll":>4s}\n')
+    rows = []
+    for label, kwargs in (cases or deadline_cases(robot)):
+        faults, tool = kwargs.get('faults', {}), kwargs.get('tool_mm', 0.0)
+        settings = RecoverySettings(deadline_sec=float(deadline), trajectory_method='auto',
+                                    tool_length_mm=float(tool))
+        start = time.monotonic()
+        res = recover(robot, library, faults, settings, seed=seed,
+                      clock=Clock(float(deadline)))
+        wall = time.monotonic() - start
+        g = res[motion]
+        locks, _ = resolve_locks(robot, library, faults, settings.lock_strategy)
+        ref = recover(robot, GestureLibrary((library[motion],), '<bench>'), locks,
+                      settings.with_changes(trajectory_method='per_point'), seed=seed,
+                      clock=Clock(None))[motion]
+        designed = g.max_jump_designed_deg
+        row = {'case': label, 'deadline_met': bool(res.deadline_met), 'wall_ms': 1000 * wall,
+               'method': g.method, 'tip_error_mean_mm': g.tip_error_mm,
+               'tip_error_max_mm': g.tip_error_max_mm,
+               'per_point_tip_error_mean_mm': ref.tip_error_mm,
+               'tip_error_vs_per_point_mm': g.tip_error_mm - ref.tip_error_mm,
+               'max_step_deg': g.max_jump_deg, 'per_point_max_step_deg': ref.max_jump_deg,
+               'designed_step_deg': designed, 'score_mean': g.score_mean,
+               'per_point_score_mean': ref.score_mean, 'collides': bool(g.collides),
+               'notes': list(res.notes)}
+        rows.append(row)
+        out.write(f'{label:36s} {"yes" if row["deadline_met"] else "NO":>4s} '
+                  f'{row["wall_ms"]:8.0f} {g.method:>10s} {g.tip_error_mm:7.2f} '
+                  f'{ref.tip_error_mm:7.2f} {row["tip_error_vs_per_point_mm"]:+6.2f} '
+                  f'{g.max_jump_deg:5.2f} {ref.max_jump_deg:5.2f} {g.score_mean:6.2f} '
+                  f'{ref.score_mean:6.2f} {"yes" if g.collides else "no":>4s}\n')
+    out.write(f'\nmet: deadline met by the whole library (auto, node settings); wall: its '
+              f"recover() time; tip / pp tip: the {motion}'s mean fingertip error (mm), auto "
+              f'within the deadline / per point without one (same locks); diff: tip - pp '
+              f'tip (target <= +1 mm); step / pp st: largest joint step (deg), designed '
+              f'{designed:.2f} (target <= {1.5 * designed:.2f}); score: mean similarity '
+              f'score; coll: the adapted motion collides somewhere.\n')
+    os.makedirs(out_dir, exist_ok=True)
+    path = os.path.join(out_dir, 'motion_deadline.json')
+    with open(path, 'w', encoding='utf-8') as stream:
+        json.dump({'seed': seed, 'deadline': deadline, 'motion': motion, 'rows': rows},
+                  stream, indent=1)
     out.write(f'written: {path}\n')
     return rows

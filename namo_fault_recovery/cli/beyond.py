@@ -60,6 +60,12 @@ def cmd_collision(args, out):
 def cmd_motion(args, out):
     """Typical points + Kriging vs per-point exploration on the circle and the wave."""
     from ..benchmarks import motion
+    if args.deadline is not None:
+        motion.bench_motion_deadline(out, _out(args, 'motion'), seed=args.seed,
+                                     deadline=args.deadline,
+                                     robot_file=getattr(args, 'robot_file', None),
+                                     gesture_file=getattr(args, 'gesture_file', None))
+        return 0
     motion.bench_motion(out, _out(args, 'motion'), seed=args.seed,
                         robot_file=getattr(args, 'robot_file', None),
                         gesture_file=getattr(args, 'gesture_file', None))
@@ -79,6 +85,11 @@ def register(bench_sub):
             p.add_argument('--seeds', type=int, default=3, help='seeds per case (default 3)')
         else:
             p.add_argument('--seed', type=int, default=0, help='seed (default 0)')
+        if name == 'motion':
+            p.add_argument('--deadline', type=float, default=None, metavar='S',
+                           help='instead: the node case (whole library, auto) within this '
+                                'deadline for every single fault, the tools and the elbow '
+                                'at 0, against per point without a deadline')
         if name == 'collision':
             p.add_argument('--no-plots', action='store_true', help='skip the PNG figure')
         p.add_argument('--out', default=None, help='output directory (default bench_out/NAME)')

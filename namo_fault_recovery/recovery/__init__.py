@@ -11,7 +11,9 @@ From a fault set to an adapted gesture library, free of ROS.
 - :mod:`.keyframes`: the batched pose problems of every keyframe, solved within one
   deadline (the first paper's method, with stage 2 and the collision term);
 - :mod:`.motion`: whole-motion adaptation (the second paper: typical points and Kriging,
-  or point by point);
+  point by point, or Kriging then the whole trajectory at once);
+- :mod:`.trajectory_opt`: whole-trajectory optimisation of a dense motion (every point
+  at once, batched analytic gradients, a smoothness term; ``auto``'s pass after Kriging);
 - :mod:`.vq`: vector quantisation that picks a motion's typical points;
 - :mod:`.kriging`: the variogram fit and ordinary Kriging;
 - :mod:`.budget`: how the caller's one deadline clock is shared out (reserves, shares).

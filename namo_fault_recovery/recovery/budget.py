@@ -18,5 +18,5 @@ ENGINE_RESERVE = 0.015    # reconfigure_library: scoring and the collision check
 
 # Shares of the time left.
 VQ_SHARE = 0.2            # typical points (vector quantisation) of the whole library
-TYPICAL_SHARE = 0.9       # the typical points' search in ``auto`` (per point gets the rest)
+TYPICAL_SHARE = 0.9       # typical points in ``auto`` (the whole-trajectory pass: the rest)
 STAGE1_SHARE = 0.6        # stage 1 (and each expansion stage) when a later stage may follow

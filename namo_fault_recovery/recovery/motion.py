@@ -12,9 +12,13 @@ Two methods reconfigure every point of every gesture's motion:
   the previous point's solution plus the designed step, with a penalty on joint-space
   jumps away from it, so that the motion never flips between redundant solutions.
 
-``auto`` (the node's) runs ``kriging`` first, which is fast, then refines gesture by
-gesture with ``per_point`` while the deadline allows; a gesture whose per-point pass
-cannot finish keeps its Kriging result, and the notes say so.
+``auto`` (the node's) runs ``kriging`` first, which is fast, then optimises every
+point of each dense motion at once from the Kriging result (:mod:`.trajectory_opt`:
+one batched problem per motion, analytic gradients, a smoothness term between
+neighbouring points, the collision penalty when the collision check is on) until it
+converges or the deadline, keeping the best trajectory so far; the notes say when the
+deadline cut it short.  A motion short enough to be explored at every keyframe is left
+as the keyframe engine solved it.
 """
 
 from dataclasses import dataclass, field, replace
@@ -27,6 +31,7 @@ from .keyframes import (apply_locks, DEFAULT_EXPANSION_THRESHOLD, free_layout, j
                         locked_sets, PoseProblem, reconfigure_library)
 from .kriging import OrdinaryKriging
 from .locks import check_strategy, resolve_locks
+from .trajectory_opt import DEFAULT_SMOOTHNESS, optimise_motion
 from .vq import quantise
 from ..model.gestures import GestureLibrary, Keyframe
 from ..model.kinematics import batch_forward
@@ -175,7 +180,8 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
                   deadline=1.0, seed=None, algorithm='abc', preset='default',
                   settings=None, lock_strategy='average', measured=None, weights=None,
                   expansion_threshold=DEFAULT_EXPANSION_THRESHOLD, cancel=None,
-                  quantisations=None, stay_close=DEFAULT_STAY_CLOSE, clock=None, **engine):
+                  quantisations=None, stay_close=DEFAULT_STAY_CLOSE, clock=None,
+                  smoothness=DEFAULT_SMOOTHNESS, **engine):
     """
     Adapt every motion of ``library`` to a changed structure (faults and/or a tool).
 
@@ -189,6 +195,8 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
     run), then tries the lock angles that do best at the typical points, and keeps
     whichever adapted library has the lower total (the sum over motions of their worst
     point's score): never worse than ``average``.
+    ``smoothness`` (per deg^2 of joint step between consecutive points) weights the
+    coupling term of ``auto``'s whole-trajectory pass.
     Returns a :class:`MotionAdaptation`; a pure function of the inputs and ``seed`` up
     to where the deadline cuts the search.
     """
@@ -216,7 +224,7 @@ def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
                continuity=continuity, algorithm=algorithm, preset=preset,
                settings=settings, weights=weights, expansion_threshold=expansion_threshold,
                quantisations=quantisations, stay_close=stay_close, engine=engine,
-               lock_strategy=lock_strategy)
+               lock_strategy=lock_strategy, smoothness=smoothness)
     if lock_strategy == 'optimal':
         out = _adapt_optimal(job, faults, measured, seed, search)
     else:
@@ -326,6 +334,7 @@ def _adapt(job, locks, seed, search):
     algo = make_algorithm(job.algorithm, job.preset, **(job.settings or {}))
     results = []
     offset = 0
+    n_left = sum(1 for g in library if quantisations.get(g.name) is not None)
     for gesture in library:
         n = len(gesture.keyframes)
         ids = np.arange(offset, offset + n)
@@ -352,35 +361,40 @@ def _adapt(job, locks, seed, search):
                                            job.continuity, search)
                 nfev += used
             q_r, q_l, sigma = _spread(robot, gesture, picks[gesture.name], solved, locks)
-        chain = affected and (method == 'per_point'
-                              or (method == 'auto' and how == 'kriging'))
-        if chain:
-            if typical_res is not None:
-                layouts = [layout]      # the joints the typical points ended with
-            else:
-                designed = joint_set(robot, gesture.joints) if gesture.joints else None
-                layouts = [free_layout(robot, gesture.arms, locked, faulted, designed)]
-                allowed = set(designed) if designed else None
-                for extra in gesture.expand:
-                    allowed |= joint_set(robot, extra)
-                    layouts.append(free_layout(robot, gesture.arms, locked, faulted, allowed))
+        if method == 'auto' and how == 'kriging' and affected and free:
+            # Every point at once, from the Kriging result; each dense motion left gets
+            # an equal share of the time left (unused time rolls over).
+            n_left -= 1
+            out = optimise_motion(model, scorer, ids, q_r, q_l, layout,
+                                  design, search.child(share=1.0 / (n_left + 1)),
+                                  smoothness=job.smoothness, collision=checker)
+            if out.value < out.value_start:
+                q_r, q_l, how = out.q_right, out.q_left, 'trajectory'
+            nfev += out.nfev
+            if out.status in ('deadline', 'cancelled'):
+                notes.append(f'{gesture.name}: the whole-trajectory pass was cut short '
+                             f'({out.status}) after {out.nfev} evaluations; the best '
+                             f'trajectory so far is used')
+        if affected and method == 'per_point':
+            designed = joint_set(robot, gesture.joints) if gesture.joints else None
+            layouts = [free_layout(robot, gesture.arms, locked, faulted, designed)]
+            allowed = set(designed) if designed else None
+            for extra in gesture.expand:
+                allowed |= joint_set(robot, extra)
+                layouts.append(free_layout(robot, gesture.arms, locked, faulted, allowed))
             out = _chain_with_expansion(model, scorer, ids, base_r, base_l, design, layouts,
                                         algo, job.continuity, job.expansion_threshold, search,
-                                        rng, q_r, q_l, typical_res is None)
+                                        rng, q_r, q_l, True)
             if out is None:
-                kept = ('the typical-point result with Kriging is used' if typical_res
-                        is not None else 'the motion is published unadapted (locks applied)')
                 notes.append(f'{gesture.name}: the per-point pass could not finish by the '
-                             f'deadline; {kept}')
-                if method == 'per_point':
-                    status = 'deadline'
+                             f'deadline; the motion is published unadapted (locks applied)')
+                status = 'deadline'
             else:
                 q_r, q_l, extra_nfev, chain_stage, chain_free, chain_status = out
-                nfev = (nfev if method == 'auto' else 0) + extra_nfev
+                nfev = extra_nfev
                 how = 'per_point'
-                if typical_res is None:
-                    stage = chain_stage
-                    free = tuple(robot.arms[s].joint_names[j] for s, j in chain_free)
+                stage = chain_stage
+                free = tuple(robot.arms[s].joint_names[j] for s, j in chain_free)
                 status = chain_status     # the published motion is the chain's
         # Every angle published lies within its limits, bit for bit (the locks are
         # clamped into theirs, so clipping leaves them as they are).
@@ -560,6 +574,8 @@ def _describe(robot, model, scorer, gesture, ids, design, base_r, base_l, q_r, q
                    for i, kf in enumerate(gesture.keyframes))
     label = {'kriging': f'{len(picks)} typical points + Kriging',
              'per_point': 'every point explored in order',
+             'trajectory': f'{len(picks)} typical points + Kriging, then every point '
+                           f'optimised at once',
              'keyframes': 'every keyframe explored'}[how]
     message = f'{gesture.name}: {label}; mean score {after.mean():.2f}'
     if status == 'deadline':
