@@ -7,6 +7,7 @@ From a fault set to an adapted gesture library, free of ROS.
   node, the state file, the messages, ``solve`` and the benchmarks read;
 - :mod:`.contingency`: the contingency table, best libraries precomputed offline per
   likely fault set, keyed by resolved lock angles (``namo-recovery precompute``);
+- :mod:`.refine`: anytime refinement, ever better libraries after the deadline result;
 - :mod:`.locks`: lock strategies (``average``, ``measured``, ``optimal``) and lock angles;
 - :mod:`.keyframes`: the batched pose problems of every keyframe, solved within one
   deadline (the first paper's method, with stage 2 and the collision term);

@@ -11,7 +11,10 @@ The node and its parts (the parts are free of DDS, with fast unit tests):
 - :mod:`.input_monitor`: the latest joint state, measured angles and rejected inputs;
 - :mod:`.inputs`: validation of fault reports and joint states (no ROS types);
 - :mod:`.dispatcher`: the thread that runs the newest request and publishes it;
-- :mod:`.engine_process`: the engine in its own process (no shared interpreter lock);
+- :mod:`.engine_process`: the engine in its own process (no shared interpreter lock),
+  which also refines a published library in the background;
+- :mod:`.contingency_keeper`: the contingency table looked up before a live run, built
+  by a low-priority background process and kept in ``state_dir``;
 - :mod:`.answer_pacer`: service answers released a few at a time;
 - :mod:`.persistence`: the state file in the order the run book needs, off the hot paths;
 - :mod:`.restore`: the checks before publishing, and the restore decision;
@@ -25,12 +28,7 @@ Clients and benchmarks of a running node:
 - :mod:`.client`: the typed rclpy client of a running node, used by the ROS commands;
 - :mod:`.stream_bench`: the deadline under a ``/joint_states`` stream and a CPU burner.
 
-The gesture player:
-
-- :mod:`.player_node`: ``gesture_player``, the library played on the arm controllers
-  (timing and detection are in ``playback/``, free of ROS).
-
-The simulated robot:
+The gesture player and the simulated robot:
 
 - :mod:`.player_node`: ``gesture_player``, which plays the library on the arm controllers
   and reports a joint that stays off its command;

@@ -23,7 +23,7 @@ class Dispatcher:
     """The thread between the run book and the engine process."""
 
     def __init__(self, book, engine, robot, library, settings, publish, log,
-                 publish_refined=None):
+                 publish_refined=None, table=None):
         self._book = book
         self._engine = engine
         self._robot = robot
@@ -33,6 +33,7 @@ class Dispatcher:
         self._log = log                    # log(level, text)
         # publish_refined(generation, faults, result) -> True if published
         self._publish_refined = publish_refined
+        self._table = table                # a ContingencyKeeper, or None
         self._thread = threading.Thread(target=self._loop, name='dispatcher', daemon=True)
         self.last_engine_time = 0.0
         self.last_refinement = ''           # why the last refinement ended
@@ -73,12 +74,20 @@ class Dispatcher:
             result = recover(self._robot, self._library, faults, engine, seed=settings.seed)
         else:
             measured = {j: f.measured for j, f in run.faults.items() if f.measured is not None}
-            try:
-                result, self.last_engine_time = self._engine.run(
-                    run.generation, faults, engine, settings.seed, run.requested_at, measured)
-            except EngineError as exc:
-                self._fail(run, str(exc))
-                return
+            result = self._lookup(faults, engine, measured, settings)
+            if result is None:
+                if self._table is not None:
+                    self._table.pause()            # the live run gets the CPU
+                try:
+                    result, self.last_engine_time = self._engine.run(
+                        run.generation, faults, engine, settings.seed, run.requested_at,
+                        measured)
+                except EngineError as exc:
+                    self._fail(run, str(exc))
+                    return
+                finally:
+                    if self._table is not None:
+                        self._table.resume()
         if not self._book.is_current(run.generation):
             return                                # superseded: a newer run answers
         problem = check_result(self._robot, self._library, result, run.faults)
@@ -93,9 +102,17 @@ class Dispatcher:
         level = 'info' if result.success else 'warning'
         if all(math.isfinite(g.score_after) for g in result.gestures):
             self._log(level, summary(result))
+        if self._table is not None and settings.contingency_table:
+            self._table.configure(engine, active=dict(result.locks))
         if result.origin == 'deadline' and settings.refine_budget_sec > 0 \
                 and self._publish_refined is not None:
             self._refine(run, result, settings)
+
+    def _lookup(self, faults, engine, measured, settings):
+        """Return the contingency table's library for ``faults``, or None (a miss)."""
+        if self._table is None or not settings.contingency_table:
+            return None
+        return self._table.lookup(faults, engine, measured)
 
     def _refine(self, run, result, settings):
         """Keep improving ``run``'s library in the engine until done or superseded."""

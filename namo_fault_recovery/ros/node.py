@@ -29,6 +29,7 @@ from . import diagnostic_keys as dk
 from . import diagnostics
 from . import messages as conv
 from .answer_pacer import AnswerPacer
+from .contingency_keeper import ContingencyKeeper
 from .dispatcher import Dispatcher
 from .engine_process import EngineError, EngineProcess
 from .fault_intake import After, Clear, FaultIntake, Report
@@ -84,9 +85,12 @@ class RecoveryNode(Node):
                                   self._library, self._book, self.get_logger().error)
         self._intake = FaultIntake(self._book, self._state.commit_faults, self._on_accepted,
                                    self._inputs.measured, on_error=self._intake_error)
+        self._table = ContingencyKeeper(self._robot, self._library,
+                                        self._state.store.directory, self._log,
+                                        values['contingency_file'] or None)
         self._dispatcher = Dispatcher(self._book, self._engine, self._robot, self._library,
                                       lambda: self._settings, self._publish_and_persist,
-                                      self._log, self._publish_refined)
+                                      self._log, self._publish_refined, self._table)
         try:
             self._create_interfaces()
             self._restore()
@@ -98,6 +102,9 @@ class RecoveryNode(Node):
         self._state.start()
         self._intake.start()
         self._dispatcher.start()
+        if self._settings.contingency_table:
+            self._table.configure(self._settings.engine,
+                                  active={j: f.angle for j, f in self._book.faults.items()})
         self._ready = True
         self.get_logger().info(
             f'robot {self._robot.name} ({self._robot.source}), {len(self._library)} gestures '
@@ -360,6 +367,9 @@ class RecoveryNode(Node):
         self._intake.stop()
         self._dispatcher.join()
         self._engine.stop()
+        table = getattr(self, '_table', None)
+        if table is not None:
+            table.stop()
         state = getattr(self, '_state', None)
         if state is not None:
             state.stop()

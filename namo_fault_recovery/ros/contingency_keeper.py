@@ -1,0 +1,238 @@
+"""
+The node's contingency table: looked up before a live run, built in the background.
+
+Free of ROS.  :class:`ContingencyKeeper` holds the
+:class:`~namo_fault_recovery.recovery.contingency.ContingencyTable` for the robot, the
+library and the settings in use (their fingerprint), kept in ``state_dir`` so that a
+restart reuses it and a changed setting starts a new one.  A table built offline
+(``namo-recovery precompute``) can be loaded too, if its fingerprint matches.
+
+The entries still missing (every single fault; once faults are active, every further
+single fault on top of them) are built by one child process (``spawn``) at the lowest
+CPU priority (``nice`` 19), and stopped (``SIGSTOP``) while a live run computes, so that
+it never competes with one.  Each entry arrives over a pipe, joins the table, and the
+table file is rewritten atomically.  :meth:`ContingencyKeeper.lookup` is a dictionary
+look-up: a hit is published at once.
+"""
+
+from dataclasses import replace
+import multiprocessing
+import os
+import signal
+import threading
+import time
+
+from ..recovery.contingency import (ContingencyTable, entry_key, fault_sets, measure_entry,
+                                    table_fingerprint, table_locks)
+from ..recovery.motion import typical_points
+
+TABLE_FILE = 'contingency_table.json'
+BUILD_SEEDS = (0, 1, 2, 3)
+
+
+def _build(conn, robot, library, settings, plan, seeds):
+    """Child: build each fault set of ``plan`` at the lowest priority; send each entry."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)     # Ctrl-C is the node's to handle
+    try:
+        os.nice(19)
+    except OSError:
+        pass
+    quantisations = typical_points(robot, library, settings.vq_distortion_mm)
+    for faults in plan:
+        built = measure_entry(robot, library, faults, settings, seeds,
+                              quantisations=quantisations)
+        conn.send(('entry', built.locks, built.result, built.cpu_sec))
+    conn.send(('done', None, None, 0.0))
+
+
+class ContingencyKeeper:
+    """The table of one node: lookup, background build, persistence."""
+
+    def __init__(self, robot, library, state_dir, log, offline_file=None, seeds=BUILD_SEEDS):
+        self._robot = robot
+        self._library = library
+        self._path = os.path.join(os.path.expanduser(str(state_dir)), TABLE_FILE)
+        self._offline = offline_file or None
+        self._log = log                       # log(level, text)
+        self._seeds = tuple(seeds)
+        self._lock = threading.Lock()
+        self._ctx = multiprocessing.get_context('spawn')
+        self._table = None
+        self._fp_cache = None
+        self._plan_keys = ()
+        self._proc = None
+        self._conn = None
+        self._reader = None
+        self._paused = False
+        self.build_cpu_sec = 0.0              # CPU seconds of the entries built so far
+        self.building = False
+
+    # --- lookup ---------------------------------------------------------------------
+
+    def lookup(self, faults, settings, measured=None):
+        """Return the table's library for ``faults`` (origin ``table``), or None."""
+        with self._lock:
+            table = self._table
+            if table is None or table.fingerprint != self._fingerprint(settings):
+                return None
+        try:
+            locks = table_locks(self._robot, self._library, faults, settings, measured)
+        except ValueError:
+            return None
+        hit = table.lookup(locks)
+        if hit is None:
+            return None
+        return replace(hit, faults=dict(faults), origin='table')
+
+    @property
+    def entries(self):
+        """Return the number of entries of the table in use."""
+        with self._lock:
+            return 0 if self._table is None else len(self._table)
+
+    @property
+    def path(self):
+        """Return the table file in ``state_dir``."""
+        return self._path
+
+    # --- configuration and build ----------------------------------------------------
+
+    def configure(self, settings, active=None):
+        """
+        Use the table for ``settings``; build what is missing for the ``active`` locks.
+
+        Loads the table file (or the offline one) when the fingerprint changed, then
+        (re)starts the builder on the fault sets not yet in it.  Cheap when nothing
+        changed.
+        """
+        fingerprint = self._fingerprint(settings)
+        with self._lock:
+            if self._table is None or self._table.fingerprint != fingerprint:
+                self._table = self._load(fingerprint)
+            try:
+                plan = fault_sets(self._robot, self._library, settings, active=active)
+            except ValueError as exc:
+                self._log('warning', f'contingency table: {exc}; nothing more is built')
+                plan = []
+            plan = [f for f in plan if entry_key(
+                table_locks(self._robot, self._library, f, settings)) not in
+                self._table.entries]
+            keys = tuple(entry_key(table_locks(self._robot, self._library, f, settings))
+                         for f in plan)
+            if keys == self._plan_keys and (self.building or not keys):
+                return
+            self._plan_keys = keys
+        self._stop_builder()
+        if plan:
+            self._start_builder(settings, plan)
+
+    def _fingerprint(self, settings):
+        cached = self._fp_cache
+        if cached is not None and cached[0] == settings:
+            return cached[1]
+        fingerprint = table_fingerprint(self._robot, self._library, settings)
+        self._fp_cache = (settings, fingerprint)
+        return fingerprint
+
+    def _load(self, fingerprint):
+        table, reason = ContingencyTable.load(self._path, fingerprint)
+        if reason is None:
+            self._log('info', f'contingency table: {len(table)} entries reused from '
+                              f'{self._path}')
+        if self._offline:
+            offline, why = ContingencyTable.load(self._offline, fingerprint)
+            if why is None:
+                for key, (locks, result) in offline.entries.items():
+                    table.entries.setdefault(key, (locks, result))
+                self._log('info', f'contingency table: {len(offline)} entries loaded from '
+                                  f'{self._offline}')
+            else:
+                self._log('warning', why)
+        return table
+
+    def _start_builder(self, settings, plan):
+        parent, child = self._ctx.Pipe()
+        proc = self._ctx.Process(target=_build, name='namo-recovery-table', daemon=True,
+                                 args=(child, self._robot, self._library, settings, plan,
+                                       self._seeds))
+        proc.start()
+        child.close()
+        with self._lock:
+            self._proc, self._conn, self.building = proc, parent, True
+            self._paused = False
+        self._reader = threading.Thread(target=self._receive, args=(parent, proc),
+                                        name='table-builder', daemon=True)
+        self._reader.start()
+        self._log('info', f'contingency table: building {len(plan)} entries in the '
+                          f'background (pid {proc.pid}, nice 19)')
+
+    def _receive(self, conn, proc):
+        began = time.monotonic()
+        built = 0
+        while True:
+            try:
+                kind, locks, result, cpu = conn.recv()
+            except (EOFError, OSError):
+                return                               # stopped (a new plan, or the node)
+            if kind == 'done':
+                with self._lock:
+                    if self._proc is proc:
+                        self.building = False
+                self._log('info', f'contingency table: {built} entries built in '
+                                  f'{time.monotonic() - began:.1f} s')
+                return
+            with self._lock:
+                if self._proc is not proc or self._table is None:
+                    return
+                self._table.add(result, locks)
+                self.build_cpu_sec += cpu
+                table = self._table
+            built += 1
+            self._save(table)
+
+    def _save(self, table):
+        try:
+            table.save(self._path)
+        except OSError as exc:
+            self._log('warning', f'contingency table: cannot write {self._path}: {exc}')
+
+    # --- the live run comes first ---------------------------------------------------
+
+    def pause(self):
+        """Stop the builder while a live run computes (SIGSTOP)."""
+        self._signal(signal.SIGSTOP, True)
+
+    def resume(self):
+        """Let the builder go on (SIGCONT)."""
+        self._signal(signal.SIGCONT, False)
+
+    def _signal(self, signum, paused):
+        with self._lock:
+            proc = self._proc
+            if proc is None or self._paused == paused or not proc.is_alive():
+                return
+            try:
+                os.kill(proc.pid, signum)
+                self._paused = paused
+            except OSError:
+                pass
+
+    def _stop_builder(self):
+        with self._lock:
+            proc, conn = self._proc, self._conn
+            self._proc = self._conn = None
+            self.building = False
+            self._paused = False
+        if proc is None:
+            return
+        try:
+            os.kill(proc.pid, signal.SIGCONT)
+        except OSError:
+            pass
+        proc.kill()
+        proc.join(timeout=2.0)
+        conn.close()
+
+    def stop(self):
+        """Stop the builder (the table file keeps what was built)."""
+        self._stop_builder()
