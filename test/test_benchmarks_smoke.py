@@ -176,10 +176,12 @@ def test_paper_bench_in_two_processes(tmp_path):
     assert len(list((tmp_path / 'cases').glob('*.json'))) == 4
 
 
-def test_motion_bench_compares_both_methods_on_the_wave(tmp_path):
+def test_motion_bench_compares_both_methods_on_the_wave(tmp_path, demo_library):
     out = io.StringIO()
     rows = motion.bench_motion(out, str(tmp_path), seed=0, motions=('bye',))
     text = out.getvalue()
+    # By default it reads the demo library, which holds both of its motions.
+    assert set(motion.MOTIONS) <= set(demo_library.names)
     assert '## bye: 6 points' in text and 'The paper (its own 3-DOF arm' in text
     assert len(rows) == 2 * len(motion.SCENARIOS)
     doc = json.loads((tmp_path / 'motion.json').read_text())
