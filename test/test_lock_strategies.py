@@ -127,14 +127,15 @@ def test_lock_within_the_tolerance_beyond_a_limit_is_clamped_exactly(robot, libr
 
 @pytest.mark.parametrize('method', ['kriging', 'per_point', 'auto'])
 def test_every_published_angle_is_within_its_limits_bit_for_bit(
-        robot, product_library, method):
+        robot, demo_library, method):
     # A lock at pi + 5e-10 is accepted (within robot.within_limits' 1e-9 tolerance);
-    # nothing the engine outputs may lie beyond +-pi, Kriging-interpolated points included.
+    # nothing the engine outputs may lie beyond +-pi, Kriging-interpolated points included
+    # (the demo library's dense circle has them).
     side, j = 'right', 3
     joint = robot.arms[side].joint_names[j]
     upper = float(robot.arms[side].upper[j])
     settings = RecoverySettings(trajectory_method=method)
-    res = recover(robot, product_library, {joint: upper + 5e-10}, settings, seed=0,
+    res = recover(robot, demo_library, {joint: upper + 5e-10}, settings, seed=0,
                   clock=Clock(None))
     assert res.locks[joint] == upper
     lower = np.concatenate([robot.arms[s].lower for s in ('right', 'left')])
