@@ -52,5 +52,9 @@ def config_path(name):
 
 
 DEFAULT_ROBOT_FILE = 'namo_robot.yaml'
-DEFAULT_GESTURE_FILE = 'gestures.yaml'
+DEFAULT_GESTURE_FILE = 'gestures.yaml'      # Namo's four gestures (Table 2, as motions)
 PAPER_GESTURE_FILE = 'paper_gestures.yaml'   # the paper's Table 2 poses
+# The demo library of motions: the four gestures plus the dense 100-point "draw a circle"
+# (``bench motion`` and the dense-motion demos; kept out of the default library so that
+# its lock averages stay Table 2's row).
+DEMO_MOTION_FILE = 'demo_motions.yaml'

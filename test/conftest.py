@@ -3,6 +3,7 @@
 from pathlib import Path
 
 from namo_fault_recovery import load_library, load_robot
+from namo_fault_recovery.resources import DEMO_MOTION_FILE
 import pytest
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / 'config'
@@ -21,5 +22,11 @@ def library(robot):
 
 @pytest.fixture(scope='session')
 def product_library(robot):
-    """Load the packaged product library: Table 2 gestures as motions, plus the circle."""
+    """Load the packaged product library: Namo's four Table 2 gestures as motions."""
     return load_library(robot)
+
+
+@pytest.fixture(scope='session')
+def demo_library(robot):
+    """Load the demo library of motions: the four gestures plus the dense 100-point circle."""
+    return load_library(robot, CONFIG_DIR / DEMO_MOTION_FILE)

@@ -13,6 +13,7 @@ import time
 from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from namo_fault_recovery import load_library, load_robot
+from namo_fault_recovery.resources import config_path, DEMO_MOTION_FILE
 import numpy as np
 import rclpy
 from rclpy.context import Context
@@ -23,7 +24,9 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 ROBOT = load_robot()
-LIBRARY = load_library(ROBOT)
+# The demo library of motions: the four packaged gestures plus the dense 100-point
+# circle, so that the player is tested on a dense motion too.
+LIBRARY = load_library(ROBOT, config_path(DEMO_MOTION_FILE))
 NAMES = list(ROBOT.joint_names)
 CONTROLLERS = {'right_arm_controller': NAMES[:7], 'left_arm_controller': NAMES[7:]}
 
@@ -148,7 +151,7 @@ class Recorder:
         return np.array(out)
 
     def publish_library(self, stamp_sec, locks=None):
-        """Publish the packaged library, locked joints held at their lock."""
+        """Publish the demo library (:data:`LIBRARY`), locked joints held at their lock."""
         for gesture in LIBRARY:
             msg = JointTrajectory(joint_names=NAMES)
             msg.header.stamp.sec = stamp_sec

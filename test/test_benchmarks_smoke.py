@@ -191,10 +191,12 @@ def test_motion_deadline_bench_reports_each_case(tmp_path, robot):
     assert 'target <= +1 mm' in out.getvalue()
 
 
-def test_motion_bench_compares_both_methods_on_the_wave(tmp_path):
+def test_motion_bench_compares_both_methods_on_the_wave(tmp_path, demo_library):
     out = io.StringIO()
     rows = motion.bench_motion(out, str(tmp_path), seed=0, motions=('bye',))
     text = out.getvalue()
+    # By default it reads the demo library, which holds both of its motions.
+    assert set(motion.MOTIONS) <= set(demo_library.names)
     assert '## bye: 6 points' in text and 'The paper (its own 3-DOF arm' in text
     assert len(rows) == 2 * len(motion.SCENARIOS)
     doc = json.loads((tmp_path / 'motion.json').read_text())

@@ -16,10 +16,17 @@ def run(argv):
 
 
 PAPER = str(Path(__file__).resolve().parent.parent / 'config' / 'paper_gestures.yaml')
+DEMO = str(Path(__file__).resolve().parent.parent / 'config' / 'demo_motions.yaml')
 
 
 def test_show_prints_library_and_landmarks():
     code, text = run(['show'])
+    assert code == 0
+    for name in ('wai', 'bye', 'salute', 'side_invite'):
+        assert f'\n{name}:' in text
+    assert '\ncircle:' not in text                     # the demo library's, below
+    assert '52.50,  -14.25' in text                    # Table 2 lock averages
+    code, text = run(['--gesture-file', DEMO, 'show'])
     assert code == 0
     for name in ('wai', 'bye', 'salute', 'side_invite', 'circle'):
         assert f'\n{name}:' in text

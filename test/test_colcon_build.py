@@ -12,6 +12,7 @@ import shutil
 import subprocess
 import sys
 
+from namo_fault_recovery import load_library, load_robot
 from node_harness import NodeProcess, ros_env, RosClient, session_domain
 import pytest
 
@@ -62,8 +63,11 @@ def test_colcon_installs_the_executable_share_files_and_index_marker(workspace):
     share = prefix / 'share' / PACKAGE
     assert (share / 'package.xml').is_file()
     for name in ('namo_robot.yaml', 'gestures.yaml', 'paper_gestures.yaml',
-                 'recovery_node.yaml', 'trajectories/circle.csv'):
+                 'demo_motions.yaml', 'recovery_node.yaml', 'trajectories/circle.csv'):
         assert (share / 'config' / name).is_file(), name
+    # The installed demo library finds its dense trajectory beside it.
+    demo = load_library(load_robot(), share / 'config' / 'demo_motions.yaml')
+    assert len(demo['circle'].keyframes) == 100
     docs = [p for p in sorted((ROOT / 'msg_docs').rglob('*')) if p.is_file()]
     assert docs
     for path in docs:
@@ -83,7 +87,8 @@ def test_installed_node_serves_the_contract(workspace, tmp_path):
     client = RosClient(DOMAIN)
     try:
         reference = client.wait_library(what='the library from the colcon-installed node')
-        assert sorted(reference.names) == ['bye', 'circle', 'salute', 'side_invite', 'wai']
+        # The packaged library: Namo's four gestures (the circle is in the demo library).
+        assert sorted(reference.names) == ['bye', 'salute', 'side_invite', 'wai']
         client.publish_fault(['right_arm_joint2'])
         client.wait_library(after=reference.stamp, what='a reconfigured library')
         response = client.trigger('/reconfigure_gestures')

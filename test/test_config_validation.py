@@ -154,3 +154,20 @@ def test_lock_averages_equal_table_2(library):
     # The left arm only takes part in Wai, so its averages are Wai's angles.
     np.testing.assert_allclose(np.degrees(library.lock_averages('left')),
                                [30, 5, -45, 90, -10, -45, 45], atol=1e-9)
+
+
+def test_demo_library_is_the_packaged_gestures_plus_the_circle(product_library, demo_library):
+    # The packaged library is exactly Namo's four gestures; the demo adds the circle.
+    assert product_library.names == ('wai', 'bye', 'salute', 'side_invite')
+    assert demo_library.names == product_library.names + ('circle',)
+    for g in product_library:
+        d = demo_library[g.name]
+        # demo_motions.yaml copies gestures.yaml's gestures: they must not drift apart.
+        for field in ('arms', 'two_handed', 'description', 'weights', 'joints', 'expand'):
+            assert getattr(d, field) == getattr(g, field), (g.name, field)
+        assert len(d.keyframes) == len(g.keyframes)
+        for a, b in zip(d.keyframes, g.keyframes):
+            assert a.time_from_start == b.time_from_start
+            np.testing.assert_array_equal(a.right, b.right)
+            np.testing.assert_array_equal(a.left, b.left)
+    assert len(demo_library['circle'].keyframes) == 100

@@ -16,15 +16,20 @@ FAULT = 'right_arm_joint2'
 
 
 @pytest.fixture(scope='module')
-def node_default(robot, product_library):
-    """Recover the product library with the node's defaults, seed 11, no deadline."""
-    return recover(robot, product_library, {FAULT: None}, RecoverySettings(), seed=11,
+def node_default(robot, demo_library):
+    """
+    Recover the demo library with the node's defaults, seed 11, no deadline.
+
+    The demo library (the four gestures plus the dense circle) exercises keyframed
+    gestures and a dense motion in one run.
+    """
+    return recover(robot, demo_library, {FAULT: None}, RecoverySettings(), seed=11,
                    clock=Clock(None))
 
 
 def test_same_seed_without_deadline_gives_the_same_library(
-        robot, product_library, node_default):
-    again = recover(robot, product_library, {FAULT: None}, RecoverySettings(), seed=11,
+        robot, demo_library, node_default):
+    again = recover(robot, demo_library, {FAULT: None}, RecoverySettings(), seed=11,
                     clock=Clock(None))
     assert again.names == node_default.names
     for a, b in zip(again.gestures, node_default.gestures):
@@ -35,10 +40,10 @@ def test_same_seed_without_deadline_gives_the_same_library(
     assert node_default['wai'].score_after < node_default['wai'].score_before
 
 
-def test_solve_gives_the_library_recover_gives(node_default):
+def test_solve_gives_the_library_recover_gives(demo_library, node_default):
     out = io.StringIO()
-    assert main(['solve', '--fault', FAULT, '--seed', '11', '--no-deadline', '--json'],
-                out) == 0
+    assert main(['--gesture-file', str(demo_library.source), 'solve', '--fault', FAULT,
+                 '--seed', '11', '--no-deadline', '--json'], out) == 0
     doc = json.loads(out.getvalue())
     assert doc['settings'] == RecoverySettings().public()
     assert doc['deadline'] is None and doc['seed'] == 11
@@ -130,10 +135,10 @@ def test_old_state_documents_still_load(node_default):
     assert old['circle'].positions == node_default['circle'].positions
 
 
-def test_scores_and_breakdown_are_those_of_the_published_keyframes(robot, product_library,
+def test_scores_and_breakdown_are_those_of_the_published_keyframes(robot, demo_library,
                                                                    node_default):
     for name in ('wai', 'circle'):
-        gesture, g = product_library[name], node_default[name]
+        gesture, g = demo_library[name], node_default[name]
         scores, parts = [], []
         for k, kf in enumerate(g.keyframes):
             scorer = SimilarityScore.for_gesture(robot, gesture, k, ScoreWeights())

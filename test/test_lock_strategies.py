@@ -17,6 +17,26 @@ def test_average_strategy_uses_the_library_mean(robot, library):
     assert notes == []
 
 
+# Spec section 2 (paper Table 2), last row "average": the paper's lock angles in degrees,
+# right arm joints 1-7.
+TABLE_2_AVERAGE_DEG = [52.5, -14.25, -5.25, 89.25, 8.75, -5.75, 30.5]
+# Spec section 4: the left arm takes part in Wai alone, so its averages are Wai's angles.
+WAI_DEG = [30, 5, -45, 90, -10, -45, 45]
+
+
+def test_packaged_library_average_locks_are_table_2s_last_row(robot, product_library):
+    # The packaged library holds Namo's four gestures as motions (the Bye wave's
+    # keyframes average to its Table 2 pose), so the "average" strategy locks every
+    # joint at Table 2's row, e.g. right joint 2 at -14.25 deg (a dense demo motion in
+    # the library would pull it away: -12.37 deg with the circle).
+    faults = dict.fromkeys(robot.joint_names)
+    locks, notes = resolve_locks(robot, product_library, faults, 'average')
+    assert notes == []
+    expected = TABLE_2_AVERAGE_DEG + WAI_DEG
+    for joint, deg in zip(robot.joint_names, expected):
+        assert locks[joint] == pytest.approx(np.radians(deg), abs=1e-12), joint
+
+
 def test_measured_strategy_uses_measurement_then_falls_back(robot, library):
     measured = {'right_arm_joint2': 0.25}
     locks, notes = resolve_locks(robot, library, {'right_arm_joint2': None,
@@ -107,14 +127,15 @@ def test_lock_within_the_tolerance_beyond_a_limit_is_clamped_exactly(robot, libr
 
 @pytest.mark.parametrize('method', ['kriging', 'per_point', 'auto'])
 def test_every_published_angle_is_within_its_limits_bit_for_bit(
-        robot, product_library, method):
+        robot, demo_library, method):
     # A lock at pi + 5e-10 is accepted (within robot.within_limits' 1e-9 tolerance);
-    # nothing the engine outputs may lie beyond +-pi, Kriging-interpolated points included.
+    # nothing the engine outputs may lie beyond +-pi, Kriging-interpolated points included
+    # (the demo library's dense circle has them).
     side, j = 'right', 3
     joint = robot.arms[side].joint_names[j]
     upper = float(robot.arms[side].upper[j])
     settings = RecoverySettings(trajectory_method=method)
-    res = recover(robot, product_library, {joint: upper + 5e-10}, settings, seed=0,
+    res = recover(robot, demo_library, {joint: upper + 5e-10}, settings, seed=0,
                   clock=Clock(None))
     assert res.locks[joint] == upper
     lower = np.concatenate([robot.arms[s].lower for s in ('right', 'left')])

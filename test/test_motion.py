@@ -20,14 +20,14 @@ ELBOW = 'right_arm_joint4'
 
 
 @pytest.fixture(scope='module')
-def circle(product_library):
-    return GestureLibrary((product_library['circle'],), '<test>')
+def circle(demo_library):
+    return GestureLibrary((demo_library['circle'],), '<test>')
 
 
 # --- the library --------------------------------------------------------------------
 
-def test_circle_is_a_150_mm_circle_in_front_of_the_robot(robot, product_library):
-    g = product_library['circle']
+def test_circle_is_a_150_mm_circle_in_front_of_the_robot(robot, demo_library):
+    g = demo_library['circle']
     assert len(g.keyframes) == 100
     tips = forward_kinematics(robot, g.joint_matrix()[:, :7], 'right').tip
     np.testing.assert_allclose(tips, circle_path(), atol=1e-3)   # CSV keeps 6 decimals
@@ -133,8 +133,8 @@ def test_tool_lengthens_the_hand_only(robot, library):
 # --- VQ -----------------------------------------------------------------------------
 
 @pytest.mark.parametrize('threshold', [20.0, 60.0, 150.0])
-def test_vq_respects_the_distortion_threshold(robot, product_library, threshold):
-    g = product_library['circle']
+def test_vq_respects_the_distortion_threshold(robot, demo_library, threshold):
+    g = demo_library['circle']
     tips = forward_kinematics(robot, g.joint_matrix()[:, :7]).tip
     q = quantise(np.degrees(g.joint_matrix()), threshold, features=tips, seed=1)
     assert q.distortion <= threshold
@@ -144,15 +144,15 @@ def test_vq_respects_the_distortion_threshold(robot, product_library, threshold)
     assert np.all(np.diff(q.typical) > 0)
 
 
-def test_vq_needs_more_points_for_a_tighter_threshold(robot, product_library):
-    g = product_library['circle']
+def test_vq_needs_more_points_for_a_tighter_threshold(robot, demo_library):
+    g = demo_library['circle']
     tips = forward_kinematics(robot, g.joint_matrix()[:, :7]).tip
     ks = [quantise(np.degrees(g.joint_matrix()), t, tips, seed=0).k for t in (120, 60, 20)]
     assert ks[0] < ks[1] < ks[2]
 
 
-def test_vq_out_of_time_explores_every_point_and_says_so(robot, product_library):
-    g = product_library['circle']
+def test_vq_out_of_time_explores_every_point_and_says_so(robot, demo_library):
+    g = demo_library['circle']
     tips = forward_kinematics(robot, g.joint_matrix()[:, :7]).tip
     x = np.degrees(g.joint_matrix())
     # An expired clock: the search stops after K = 1 (never before a first try).
@@ -164,24 +164,24 @@ def test_vq_out_of_time_explores_every_point_and_says_so(robot, product_library)
     assert quantise(x, 60.0, tips, seed=0).note == ''
 
 
-def test_typical_points_within_a_tiny_budget_still_give_a_library(robot, product_library):
+def test_typical_points_within_a_tiny_budget_still_give_a_library(robot, demo_library):
     # vq_distortion_mm 1.0 with two faults took 2.5 s against a 1 s deadline: the
     # typical-point search now stops when its share of the clock is spent.
-    typ = typical_points(robot, product_library, 1.0, clock=Clock(0.0))
+    typ = typical_points(robot, demo_library, 1.0, clock=Clock(0.0))
     assert typ['circle'].note.startswith('circle: the search for typical points stopped')
     assert typ['circle'].k == 100 and typ['wai'] is None
     faults = {'right_arm_joint2': None, 'left_arm_joint4': None}
-    res = adapt_library(robot, product_library, faults, method='kriging', distortion_mm=1.0,
+    res = adapt_library(robot, demo_library, faults, method='kriging', distortion_mm=1.0,
                         clock=Clock(0.0), seed=0)
     assert res.notes[0] == typ['circle'].note
-    assert [g.name for g in res.gestures] == [g.name for g in product_library]
-    for g, ref in zip(res.gestures, product_library):
+    assert [g.name for g in res.gestures] == [g.name for g in demo_library]
+    for g, ref in zip(res.gestures, demo_library):
         q = np.array([kf.positions() for kf in g.keyframes])
         assert q.shape == (len(ref.keyframes), 14) and np.isfinite(q).all()
     assert res['circle'].typical == tuple(range(100))
     assert not res.deadline_met     # the search had no time: it says so per motion
     assert res.locks['right_arm_joint2'] == pytest.approx(
-        product_library.lock_averages('right')[1], abs=1e-12)
+        demo_library.lock_averages('right')[1], abs=1e-12)
 
 
 def test_the_caller_clock_owns_deadline_and_cancel(robot, circle):
@@ -353,8 +353,8 @@ def test_tool_and_lock_combine(robot, circle):
     assert g.tip_error_mean_mm < 10.0
 
 
-def test_auto_optimises_the_circle_after_kriging_within_the_deadline(robot, product_library):
-    res = adapt_library(robot, product_library, {ELBOW: None}, method='auto', deadline=1.0,
+def test_auto_optimises_the_circle_after_kriging_within_the_deadline(robot, demo_library):
+    res = adapt_library(robot, demo_library, {ELBOW: None}, method='auto', deadline=1.0,
                         seed=0)
     g = res['circle']
     # The whole-trajectory pass replaces the Kriging result when it improves on it (it
@@ -365,20 +365,20 @@ def test_auto_optimises_the_circle_after_kriging_within_the_deadline(robot, prod
 
 
 @pytest.mark.parametrize('method', ['kriging', 'per_point'])
-def test_average_lock_is_over_whole_motions_not_typical_points(robot, product_library,
+def test_average_lock_is_over_whole_motions_not_typical_points(robot, demo_library,
                                                                method):
     # The paper's average: each gesture's keyframes averaged, then over the gestures.
-    expected = product_library.lock_averages('right')[1]
-    res = adapt_library(robot, product_library, {'right_arm_joint2': None}, method=method,
+    expected = demo_library.lock_averages('right')[1]
+    res = adapt_library(robot, demo_library, {'right_arm_joint2': None}, method=method,
                         deadline=0.05, seed=0)
     assert res.locks['right_arm_joint2'] == pytest.approx(expected, abs=1e-12)
 
 
-def test_typical_points_are_computed_once_per_library(robot, product_library):
-    typ = typical_points(robot, product_library)
+def test_typical_points_are_computed_once_per_library(robot, demo_library):
+    typ = typical_points(robot, demo_library)
     assert typ['wai'] is None and typ['bye'] is None
     assert typ['circle'].distortion <= 60.0
-    res = adapt_library(robot, product_library, {ELBOW: 0.0}, method='kriging', seed=0,
+    res = adapt_library(robot, demo_library, {ELBOW: 0.0}, method='kriging', seed=0,
                         deadline=None, quantisations=typ)
     assert res['circle'].typical == tuple(int(i) for i in typ['circle'].typical)
 

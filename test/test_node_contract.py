@@ -2,7 +2,9 @@
 The interface contract, against the real ``recovery_node`` process over DDS.
 
 One node process serves the whole module (its own ROS domain and state directory);
-each test starts from a known fault set.
+each test starts from a known fault set.  It loads the demo library of motions
+(``gesture_file``: the four gestures plus the dense 100-point circle), so that the
+contract is checked for keyframed gestures and a dense motion alike.
 """
 
 import csv
@@ -19,6 +21,7 @@ pytestmark = pytest.mark.slow
 
 DOMAIN = session_domain(0)
 CONFIG = Path(__file__).resolve().parent.parent / 'config'
+DEMO = CONFIG / 'demo_motions.yaml'
 GESTURES = ['wai', 'bye', 'salute', 'side_invite', 'circle']
 INF = float('inf')
 NAN = float('nan')
@@ -26,8 +29,9 @@ NAN = float('nan')
 
 @pytest.fixture(scope='module')
 def ros(tmp_path_factory):
-    node = NodeProcess(DOMAIN, state_dir=tmp_path_factory.mktemp('state'))
-    client = RosClient(DOMAIN)
+    node = NodeProcess(DOMAIN, state_dir=tmp_path_factory.mktemp('state'),
+                       args=['-p', f'gesture_file:={DEMO}'])
+    client = RosClient(DOMAIN, gestures=len(GESTURES))
     try:
         client.wait_library(what='the reference library')
         yield node, client
@@ -85,10 +89,10 @@ def file_reference():
     """
     Return gesture -> [(14 angles in rad, time_from_start)], read straight from the files.
 
-    Independent of the package's loaders: keyframes from gestures.yaml, dense
+    Independent of the package's loaders: keyframes from demo_motions.yaml, dense
     trajectories from their CSV with the csv module.
     """
-    doc = yaml.safe_load((CONFIG / 'gestures.yaml').read_text())
+    doc = yaml.safe_load(DEMO.read_text())
     assert doc['units'] == 'deg'
     out = {}
     for g in doc['gestures']:
@@ -109,7 +113,7 @@ def file_reference():
 
 def test_reference_library_reaches_a_late_subscriber(ros, robot):
     """Every keyframe of every motion, dense CSV trajectories included, round-trips."""
-    late = RosClient(DOMAIN, name='late_subscriber')
+    late = RosClient(DOMAIN, name='late_subscriber', gestures=len(GESTURES))
     try:
         version = late.wait_library(what='the library via transient local')
         # Keep-last depth = number of gestures: a late subscriber gets one whole version.
@@ -154,12 +158,12 @@ def test_markers_show_reference_and_reconfigured_skeletons(client):
     assert not [m for m in strips if m.ns == 'wai' and m.text.endswith('path')]
 
 
-def test_fault_locks_the_joint_and_improves_every_gesture(client, robot, product_library):
+def test_fault_locks_the_joint_and_improves_every_gesture(client, robot, demo_library):
     reset(client)
     version = inject(client, ['right_arm_joint2'])
-    lock = product_library.lock_averages('right')[1]
+    lock = demo_library.lock_averages('right')[1]
     column = version.column('right_arm_joint2')
-    assert len(column) == sum(len(g.keyframes) for g in product_library)
+    assert len(column) == sum(len(g.keyframes) for g in demo_library)
     assert all(a == lock for a in column)
     for name in GESTURES:
         for q in version.positions(name):
@@ -174,7 +178,7 @@ def test_fault_locks_the_joint_and_improves_every_gesture(client, robot, product
         after = float(recon[f'{name}.score_after'])
         assert math.isfinite(after) and after <= before + 1e-9, (name, before, after)
     # The unadapted score is the core's, with the lock applied.
-    core = adapt_library(robot, product_library, {'right_arm_joint2': None},
+    core = adapt_library(robot, demo_library, {'right_arm_joint2': None},
                          method='kriging', deadline=0.05, seed=0)
     assert float(recon['wai.score_before']) == pytest.approx(core['wai'].score_before,
                                                              abs=0.01)
@@ -185,14 +189,14 @@ def test_fault_locks_the_joint_and_improves_every_gesture(client, robot, product
     assert f'{math.degrees(lock):.2f} deg' in joint.message
 
 
-def test_reconfigure_service_answers_once_its_library_is_published(client, product_library):
+def test_reconfigure_service_answers_once_its_library_is_published(client, demo_library):
     reset(client)
     inject(client, ['right_arm_joint2'])
     response = client.trigger('/reconfigure_gestures')
     assert response.success, response.message
     text = response.message
     assert '\n' not in text
-    lock = math.degrees(product_library.lock_averages('right')[1])
+    lock = math.degrees(demo_library.lock_averages('right')[1])
     assert f'right_arm_joint2 at {lock:.2f} deg' in text
     for name in GESTURES:
         assert f'{name} ' in text
@@ -204,7 +208,7 @@ def test_reconfigure_service_answers_once_its_library_is_published(client, produ
                for a in version.column('right_arm_joint2'))
 
 
-def test_reconfigure_without_faults_reports_the_reference(client, product_library):
+def test_reconfigure_without_faults_reports_the_reference(client, demo_library):
     reference = reset(client)
     response = client.trigger('/reconfigure_gestures')
     assert response.success and 'no faults' in response.message
@@ -237,10 +241,10 @@ def test_position_in_the_fault_report_is_the_lock_angle(client):
     assert values(statuses, 'joint left_arm_joint4')['lock_source'] == 'fault report'
 
 
-def test_nan_position_lets_the_lock_strategy_choose(client, product_library):
+def test_nan_position_lets_the_lock_strategy_choose(client, demo_library):
     reset(client)
     version = inject(client, ['right_arm_joint5'], [NAN])
-    lock = product_library.lock_averages('right')[4]
+    lock = demo_library.lock_averages('right')[4]
     assert all(a == lock for a in version.column('right_arm_joint5'))
 
 
@@ -413,21 +417,21 @@ def test_bad_parameters_are_refused_with_a_reason(client):
         what='/diagnostics reporting the refused parameter')
     assert 'lock_strategy' in ' '.join(values(statuses, 'inputs').values())
     assert client.get_parameters('deadline_sec', 'lock_strategy', 'gesture_file') == [
-        1.0, 'average', '']
+        1.0, 'average', str(DEMO)]
 
 
 # --- real faults that are not bad input -----------------------------------------------
 
 
 def test_all_joints_of_one_arm_freeze_it_and_the_other_arm_is_served(client, robot,
-                                                                     product_library):
+                                                                     demo_library):
     reset(client)
     left = list(robot.arms['left'].joint_names)
     version = inject(client, left + ['right_arm_joint2'])
-    left_locks = product_library.lock_averages('left')
+    left_locks = demo_library.lock_averages('left')
     for k, joint in enumerate(left):
         assert all(a == left_locks[k] for a in version.column(joint)), joint
-    assert all(a == product_library.lock_averages('right')[1]
+    assert all(a == demo_library.lock_averages('right')[1]
                for a in version.column('right_arm_joint2'))
     statuses = wait_settled(client, left + ['right_arm_joint2'])
     assert statuses['arm left'].level == statuses['arm left'].ERROR

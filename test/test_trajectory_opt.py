@@ -10,6 +10,7 @@ from namo_fault_recovery.optimize.base import Clock
 from namo_fault_recovery.recovery.motion import adapt_library
 from namo_fault_recovery.recovery.trajectory_opt import optimise_trajectory
 from namo_fault_recovery.recovery.trajectory_opt import projected_lbfgs, TrajectoryProblem
+from namo_fault_recovery.resources import DEMO_MOTION_FILE
 import numpy as np
 import pytest
 
@@ -20,15 +21,8 @@ FREE = (('right', 0), ('right', 1), ('right', 2), ('right', 4), ('right', 5), ('
 
 @pytest.fixture(scope='module')
 def circle(robot):
-    """Load the dense circle from whichever library file of config/ holds it."""
-    for path in sorted(CONFIG_DIR.glob('*.yaml')):
-        try:
-            library = load_library(robot, path)
-        except Exception:   # noqa: B902 - not a gesture library
-            continue
-        if any(g.name == 'circle' for g in library):
-            return library['circle']
-    pytest.skip('no library file holds the circle')
+    """Load the dense circle from the demo library of motions."""
+    return load_library(robot, CONFIG_DIR / DEMO_MOTION_FILE)['circle']
 
 
 def _problem(robot, gesture, points, start=None, collision=False, **kw):

@@ -3,7 +3,9 @@
 
 The second source paper's three scenarios (a 50 mm tool, a 100 mm tool, the elbow
 locked at 0 deg with and without DOF expansion) are run on the dense "draw a circle"
-motion and on the Bye wave, each with both methods in the same run.  Per case it prints
+motion and on the Bye wave, each with both methods in the same run.  They are read from
+the demo library of motions (``config/demo_motions.yaml``) unless a gesture file is given:
+the packaged library holds Namo's four gestures only.  Per case it prints
 the exploration cost (objective evaluations, and the Kriging method's share of the
 per-point one), the wall time, the fingertip error against the designed path (mean and
 max, mm), the similarity score and the largest joint jump between successive points.
@@ -20,18 +22,16 @@ from dataclasses import replace
 import json
 import math
 import os
-from pathlib import Path
 import time
 
 from . import common
-from ..errors import ConfigError
 from ..model.gestures import GestureLibrary, load_library
 from ..model.robot import ARMS, load_robot
 from ..optimize.base import Clock
 from ..recovery.engine import recover, RecoverySettings
 from ..recovery.locks import resolve_locks
 from ..recovery.motion import DEFAULT_DISTORTION_MM, typical_points
-from ..resources import config_path, DEFAULT_GESTURE_FILE
+from ..resources import config_path, DEMO_MOTION_FILE
 
 ELBOW = 'right_arm_joint4'
 SCENARIOS = (
@@ -77,9 +77,14 @@ def run_case(robot, gesture, method, seed, min_points, distortion_mm=DEFAULT_DIS
 
 def bench_motion(out, out_dir, seed=0, motions=MOTIONS, robot_file=None, gesture_file=None,
                  distortion_mm=DEFAULT_DISTORTION_MM):
-    """Run every motion x scenario x method; print the table, write motion.json."""
+    """
+    Run every motion x scenario x method; print the table, write motion.json.
+
+    ``gesture_file`` None reads the demo library of motions, which holds the circle.
+    """
     robot = load_robot(robot_file)
-    library = load_library(robot, gesture_file)
+    library = load_library(robot, gesture_file if gesture_file is not None
+                           else config_path(DEMO_MOTION_FILE))
     out.write(f'# bench motion: seed {seed}; '
               f'{common.format_machine(common.machine_info())}\n')
     rows = []
@@ -150,26 +155,13 @@ def bench_motion(out, out_dir, seed=0, motions=MOTIONS, robot_file=None, gesture
 
 
 def library_holding(robot, name, gesture_file=None):
-    """
-    Return a gesture library that holds ``name``: ``gesture_file``, else a packaged one.
-
-    The packaged library is tried first, then every other library file next to it (the
-    demo motions may live in a file of their own).
-    """
-    if gesture_file is not None:
-        return load_library(robot, gesture_file)
-    library = load_library(robot)
-    if any(g.name == name for g in library):
-        return library
-    folder = Path(config_path(DEFAULT_GESTURE_FILE)).parent
-    for path in sorted(folder.glob('*.yaml')):
-        try:
-            other = load_library(robot, path)
-        except (ConfigError, ValueError, KeyError, TypeError):
-            continue     # not a gesture library
-        if any(g.name == name for g in other):
-            return other
-    raise ValueError(f'no gesture library in {folder} holds {name!r}')
+    """Return ``gesture_file``'s library (default: the demo motions); it must hold ``name``."""
+    library = load_library(robot, gesture_file if gesture_file is not None
+                           else config_path(DEMO_MOTION_FILE))
+    if not any(g.name == name for g in library):
+        raise ValueError(f'{library.source}: no gesture {name!r}; expected one of '
+                         f'{", ".join(g.name for g in library)}')
+    return library
 
 
 def deadline_cases(robot):

@@ -287,7 +287,9 @@ def register(subparsers):
     p.set_defaults(func=cmd_bench_deadline)
 
     p = subparsers.add_parser('plot', help='draw a gesture before and after adaptation (PNG)')
-    p.add_argument('--gesture', required=True, help='gesture name, e.g. wai or circle')
+    p.add_argument('--gesture', required=True,
+                   help='gesture name, e.g. wai, or circle with --gesture-file '
+                        'config/demo_motions.yaml (the demo library)')
     p.add_argument('--fault', action='append', metavar='JOINT[=DEG]',
                    help='failed joint, optionally with its lock angle in degrees '
                         '(default: the library average); repeatable')

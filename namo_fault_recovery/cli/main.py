@@ -253,7 +253,9 @@ def build_parser():
     parser.add_argument('--robot-file', default=None,
                         help='robot model YAML (default: the packaged Namo model)')
     parser.add_argument('--gesture-file', default=None,
-                        help='gesture library YAML (default: the packaged library)')
+                        help='gesture library YAML (default: the packaged library, the '
+                             'four gestures; bench motion: config/demo_motions.yaml, the '
+                             'demo library with the dense circle)')
     sub = parser.add_subparsers(dest='command', metavar='COMMAND', parser_class=Parser)
     sub.required = True
 
