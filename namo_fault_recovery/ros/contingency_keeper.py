@@ -22,6 +22,7 @@ import signal
 import threading
 import time
 
+from .engine_process import die_with_parent
 from ..recovery.contingency import (ContingencyTable, entry_key, fault_sets, measure_entry,
                                     table_fingerprint, table_locks)
 from ..recovery.motion import typical_points
@@ -33,6 +34,7 @@ BUILD_SEEDS = (0, 1, 2, 3)
 def _build(conn, robot, library, settings, plan, seeds):
     """Child: build each fault set of ``plan`` at the lowest priority; send each entry."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)     # Ctrl-C is the node's to handle
+    die_with_parent()
     try:
         os.nice(19)
     except OSError:

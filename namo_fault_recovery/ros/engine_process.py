@@ -9,6 +9,7 @@ Linux), and a shared counter cancels a run as soon as a newer one is wanted.  A 
 that dies or hangs is replaced, and the run is reported failed.
 """
 
+import ctypes
 import multiprocessing
 import os
 import signal
@@ -17,15 +18,25 @@ import traceback
 
 _STOP = None
 _REFINE = 'refine'
+_PR_SET_PDEATHSIG = 1
 
 
 class EngineError(RuntimeError):
     """The engine process failed a run (the message says why)."""
 
 
+def die_with_parent():
+    """Ask Linux to kill this (child) process when its parent dies, even by SIGKILL."""
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):
+        pass            # not Linux: the pipe's EOF still ends the child
+
+
 def _serve(conn, robot_file, gesture_file, current):
     """Child main loop: load the models, warm up, then answer requests until told to stop."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)     # Ctrl-C is the parent's to handle
+    die_with_parent()
     from ..model.gestures import load_library
     from ..model.robot import load_robot
     from ..optimize.base import Clock
