@@ -61,6 +61,10 @@ class ContingencyKeeper:
         self._ctx = multiprocessing.get_context('spawn')
         self._table = None
         self._fp_cache = None
+        self._wanted = None                   # (settings, active) to apply next
+        self._wanted_cond = threading.Condition()
+        self._thread = None
+        self._stopping = False
         self._plan_keys = ()
         self._proc = None
         self._conn = None
@@ -103,30 +107,54 @@ class ContingencyKeeper:
         """
         Use the table for ``settings``; build what is missing for the ``active`` locks.
 
-        Loads the table file (or the offline one) when the fingerprint changed, then
-        (re)starts the builder on the fault sets not yet in it.  Cheap when nothing
-        changed.
+        Returns at once: the keeper's thread loads the table file (or the offline one)
+        when the fingerprint changed, then (re)starts the builder on the fault sets not
+        yet in the table.
         """
+        with self._wanted_cond:
+            self._wanted = (settings, dict(active or {}))
+            self._wanted_cond.notify()
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._keep, name='table-keeper',
+                                                daemon=True)
+                self._thread.start()
+
+    def _keep(self):
+        while True:
+            with self._wanted_cond:
+                while self._wanted is None and not self._stopping:
+                    self._wanted_cond.wait()
+                if self._stopping:
+                    return
+                settings, active = self._wanted
+                self._wanted = None
+            try:
+                self._apply(settings, active)
+            except Exception as exc:  # noqa: B902 - the table is an optimisation only
+                self._log('warning', f'contingency table: {type(exc).__name__}: {exc}')
+
+    def _apply(self, settings, active):
         fingerprint = self._fingerprint(settings)
         with self._lock:
             if self._table is None or self._table.fingerprint != fingerprint:
                 self._table = self._load(fingerprint)
-            try:
-                plan = fault_sets(self._robot, self._library, settings, active=active)
-            except ValueError as exc:
-                self._log('warning', f'contingency table: {exc}; nothing more is built')
-                plan = []
-            plan = [f for f in plan if entry_key(
-                table_locks(self._robot, self._library, f, settings)) not in
-                self._table.entries]
-            keys = tuple(entry_key(table_locks(self._robot, self._library, f, settings))
-                         for f in plan)
+                self._plan_keys = ()
+            table = self._table
+        try:
+            plan = fault_sets(self._robot, self._library, settings, active=active)
+        except ValueError as exc:
+            self._log('warning', f'contingency table: {exc}; nothing more is built')
+            plan = []
+        keys = [entry_key(table_locks(self._robot, self._library, f, settings)) for f in plan]
+        missing = [(k, f) for k, f in zip(keys, plan) if k not in table.entries]
+        keys = tuple(k for k, _ in missing)
+        with self._lock:
             if keys == self._plan_keys and (self.building or not keys):
                 return
             self._plan_keys = keys
         self._stop_builder()
-        if plan:
-            self._start_builder(settings, plan)
+        if missing and not self._stopping:
+            self._start_builder(settings, [f for _, f in missing])
 
     def _fingerprint(self, settings):
         cached = self._fp_cache
@@ -236,5 +264,10 @@ class ContingencyKeeper:
         conn.close()
 
     def stop(self):
-        """Stop the builder (the table file keeps what was built)."""
+        """Stop the keeper's thread and the builder (the file keeps what was built)."""
+        with self._wanted_cond:
+            self._stopping = True
+            self._wanted_cond.notify()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
         self._stop_builder()

@@ -172,6 +172,9 @@ class RecoveryNode(Node):
             bool(self._book.faults) or tool or 'tool_length_mm' in names)
         if rerun:
             self._book.request()
+        elif (names & RERUN_PARAMS or 'contingency_table' in names) \
+                and self._settings.contingency_table:
+            self._table.configure(self._settings.engine)    # a new fingerprint: rebuild
         changed = ', '.join(f'{p.name}={shorten(repr(p.value))}' for p in parameters)
         self.get_logger().info(f'parameters set: {changed}'
                                + ('; reconfiguring the library' if rerun else ''))
