@@ -4,6 +4,7 @@ import io
 import json
 
 from namo_fault_recovery.cli.main import main
+from namo_fault_recovery.model.gestures import GestureLibrary
 from namo_fault_recovery.objective.score import ScoreWeights, SimilarityScore
 from namo_fault_recovery.optimize.base import Clock
 from namo_fault_recovery.recovery.engine import recover, RecoverySettings
@@ -170,3 +171,27 @@ def test_a_cut_short_motion_worse_than_the_locked_design_is_replaced_by_it(robot
         design[column] = lock
         assert list(q) == design
     assert 'cut short' in fixed.message
+
+
+@pytest.mark.parametrize('fault, gesture', [
+    # Keyframes 1 and 3 of the wave, solved independently, landed in basins 24.8 to
+    # 33.0 apart from seed to seed; each now restarts from its neighbours' branches.
+    ('right_arm_joint5', 'bye'),
+    # One pose: the reference start is in the best basin but 50 polish iterations
+    # stopped 3 % above its floor, in 9 seeds of 10.
+    ('right_arm_joint6', 'wai'),
+])
+def test_every_seed_finds_the_best_basin_of_the_served_library(
+        robot, product_library, fault, gesture):
+    # The node's library without the circle (its Kriging path is another matter), the
+    # node's settings, no deadline: every seed ends within 1 % of the best known, the
+    # best of these runs and of a much longer one (more starts, polished longer).
+    served = GestureLibrary(tuple(g for g in product_library if g.name != 'circle'),
+                            product_library.source)
+    scores = [recover(robot, served, {fault: None}, RecoverySettings(), seed=seed,
+                      clock=Clock(None))[gesture].score_after for seed in range(4)]
+    thorough = recover(robot, served, {fault: None}, RecoverySettings(), seed=0,
+                       clock=Clock(None), optimizer_overrides={
+                           'n_sources': 20, 'max_cycles': 40, 'polish': 8,
+                           'polish_maxiter': 300})[gesture].score_after
+    assert max(scores) <= 1.01 * min(scores + [thorough]), (scores, thorough)

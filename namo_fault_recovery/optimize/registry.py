@@ -12,7 +12,7 @@ PRESETS = ('default', 'paper')
 # at once, then a batched quasi-Newton polish of the best two sources (one of them the
 # reference start).  Chosen with `namo-recovery bench speed`; see README "Product default".
 DEFAULT_ABC = {'n_sources': 8, 'max_cycles': 8, 'limit': 20, 'polish': 2,
-               'polish_maxiter': 50, 'polish_ftol': 1e-7, 'use_x0': True}
+               'polish_maxiter': 100, 'polish_ftol': 1e-7, 'use_x0': True}
 
 
 def make_algorithm(name, preset='default', **overrides):

@@ -14,7 +14,10 @@ top of the paper's method:
 - stage 2 of a staged DOF expansion (the second source paper): when a two-handed
   gesture still scores above a threshold, the healthy arm moves too;
 - capsule self-collision (:mod:`..objective.collision`) as a penalty inside the optimisation, with
-  a final check reported per gesture.
+  a final check reported per gesture;
+- the keyframes of one motion share their branches: each is polished again from its
+  neighbours' solutions (:func:`_share_branches`), so that a motion's keyframes do not
+  end in different basins of the arm's redundancy by the luck of the colony.
 """
 
 import copy
@@ -32,6 +35,7 @@ from ..objective.collision import CollisionModel
 from ..objective.score import gesture_targets, SimilarityScore
 from ..optimize import make_algorithm, minimize, Problem, STATUS_CANCELLED, STATUS_DEADLINE
 from ..optimize.base import Clock
+from ..optimize.polish import polish
 
 _STATUS_NAMES = {0: 'converged', STATUS_DEADLINE: 'deadline', STATUS_CANCELLED: 'cancelled'}
 BIMANUAL_MODES = ('auto', 'off', 'on')
@@ -39,6 +43,9 @@ DEFAULT_BIMANUAL_THRESHOLD = 10.0
 LOCK_CANDIDATES = 12       # coarse lock angles per optimal joint (plus the start)
 _DEG2 = (180.0 / np.pi) ** 2
 DEFAULT_EXPANSION_THRESHOLD = 5.0   # mm of fingertip error
+SHARE_NEIGHBOURS = 5       # a keyframe is restarted from this many keyframes of its motion
+SHARE_SWEEPS = 3           # restart sweeps at most (each spreads a branch a little further)
+SHARE_POLISHED = 1         # of those restarts, the best-scoring ones are polished
 
 
 class PoseProblem(Problem):
@@ -79,6 +86,15 @@ class PoseProblem(Problem):
         self.continuity = float(continuity) * _DEG2 if anchor is not None else 0.0
         super().__init__(lower, upper, self._objective, n_batch=len(self.target_ids), x0=x0,
                          value_and_grad=self._value_and_grad)
+
+    def subset(self, rows):
+        """Return the same problem for some of its rows only (``rows``: indices)."""
+        rows = np.asarray(rows, dtype=int)
+        return PoseProblem(self.robot, self.scorer, self.target_ids[rows],
+                           self.base['right'][rows], self.base['left'][rows], self.free,
+                           self.collision, self.smooth, self.x0[rows],
+                           None if self.anchor is None else self.anchor[rows],
+                           self.continuity / _DEG2 if self.anchor is not None else 0.0)
 
     def assemble(self, x):
         """Return full (right, left) angles of shape (..., 7) for variables x (B, ..., D)."""
@@ -213,13 +229,17 @@ class LibraryReconfiguration:
 class _Batch:
     """Rows to solve: starting poses, target ids and free-variable layouts."""
 
-    def __init__(self, base_right, base_left, target_ids, layouts, x0=None, stay_close=0.0):
+    def __init__(self, base_right, base_left, target_ids, layouts, x0=None, stay_close=0.0,
+                 motions=None):
         self.right = np.array(base_right, dtype=float)
         self.left = np.array(base_left, dtype=float)
         self.target_ids = np.asarray(target_ids, dtype=int)
         self.layouts = list(layouts)
         self.x0 = x0   # optional {row: start vector in the row's layout}
         self.stay_close = stay_close   # penalty per deg^2 away from the reference pose
+        # Per row, the motion (gesture) it belongs to: rows of one motion share branches.
+        self.motions = (np.full(len(self.target_ids), -1) if motions is None
+                        else np.asarray(motions, dtype=int))
 
 
 def _solve(robot, scorer, checker, batch, algo, clock, rng, stats=None):
@@ -240,7 +260,8 @@ def _solve(robot, scorer, checker, batch, algo, clock, rng, stats=None):
     if rows.size == 0:
         return best_r, best_l, status
     sub = _Batch(batch.right[rows], batch.left[rows], ids[rows],
-                 [batch.layouts[k] for k in rows], stay_close=batch.stay_close)
+                 [batch.layouts[k] for k in rows], stay_close=batch.stay_close,
+                 motions=batch.motions[rows])
     r2, l2, st2 = _solve_once(robot, scorer, checker, sub, _repair_algorithm(algo), clock,
                               rng, stats)
     # Candidates per row: the plain result, the penalised one, and the starting pose
@@ -301,20 +322,25 @@ def _solve_once(robot, scorer, collision, batch, algo, clock, rng, stats=None):
         x0 = None
         if batch.x0 is not None:
             x0 = np.array([batch.x0[k] for k in members])
-        anchor = None
-        if batch.stay_close:
-            refs = [scorer.reference(k) for k in batch.target_ids[members]]
-            anchor = [[ref[0 if s == 'right' else 1][j] for s, j in free] for ref in refs]
+        refs = [scorer.reference(k) for k in batch.target_ids[members]]
+        designed = np.array([[ref[0 if s == 'right' else 1][j] for s, j in free]
+                             for ref in refs])
+        anchor = designed if batch.stay_close else None
         problem = PoseProblem(robot, scorer, batch.target_ids[members], batch.right[members],
                               batch.left[members], free, collision=collision, x0=x0,
                               anchor=anchor, continuity=batch.stay_close)
         start = problem.evaluate(problem.x0[:, None, :])[:, 0]
-        res = minimize(problem, algo, clock=clock.child(share=1.0 / n_left),
-                       seed=int(rng.integers(2 ** 63)))
-        if stats is not None:
-            stats['nfev'] = stats.get('nfev', 0) + res.nfev * len(members)
+        group_clock = clock.child(share=1.0 / n_left)
+        res = minimize(problem, algo, clock=group_clock, seed=int(rng.integers(2 ** 63)))
+        nfev = res.nfev * len(members)
         x = np.atleast_2d(res.x)
         f = np.atleast_1d(res.fun)
+        if getattr(algo, 'polish', 0):
+            x, f, used = _share_branches(problem, x, f, batch.motions[members], designed,
+                                         group_clock, algo.polish_maxiter, algo.polish_ftol)
+            nfev += used
+        if stats is not None:
+            stats['nfev'] = stats.get('nfev', 0) + nfev
         keep = f <= start
         x = np.where(keep[:, None], x, problem.x0)
         qr, ql = problem.assemble(x)
@@ -322,6 +348,66 @@ def _solve_once(robot, scorer, collision, batch, algo, clock, rng, stats=None):
             best_r[k], best_l[k] = qr[i], ql[i]
             status[k] = _STATUS_NAMES[res.status]
     return best_r, best_l, status
+
+
+def _share_branches(problem, x, f, motions, designed, clock, maxiter, ftol):
+    """
+    Restart each keyframe of a motion from its neighbours' solutions; keep what is better.
+
+    The keyframes of a motion are searched independently, and with the node's small
+    colony each lands in whichever branch of the arm's redundancy its best bee happened
+    to sample, while its designed pose (the locks applied) may lie in a worse basin.
+    Measured on the Bye wave with right joint 5 locked: keyframes 1 and 3, the same
+    pose, ended in basins 24.8 to 33.0 apart from seed to seed, so the motion's score
+    (its worst keyframe) missed the best basin in 3 runs of 8.  A neighbour's solution
+    shifted by the designed step between the two keyframes is a start in the branch
+    the neighbour found: each keyframe is polished from its ``SHARE_NEIGHBOURS``
+    nearest keyframes of the same motion (in designed angles), every start of every
+    keyframe in one batched call, and keeps the lowest value (the problem's own
+    objective), so no keyframe ends worse.  Sweeps repeat while a keyframe improves
+    (at most ``SHARE_SWEEPS``), so that a good branch spreads along the motion.
+
+    It runs with algorithms that polish (the node's default), with their polish
+    settings; the paper's preset, which does not, is left as the paper ran it.
+    ``x`` (B, D) and ``f`` (B,) are the solutions and values of ``problem``'s rows,
+    ``motions`` (B,) their motion (-1: none) and ``designed`` (B, D) the designed angles
+    of the free joints.  Returns (x, f, objective evaluations).
+    """
+    rows = np.nonzero([m >= 0 and np.count_nonzero(motions == m) > 1 for m in motions])[0]
+    if rows.size == 0:
+        return x, f, 0
+    x, f = x.copy(), f.copy()
+    width = min(SHARE_NEIGHBOURS,
+                max(np.count_nonzero(motions == motions[k]) for k in rows) - 1)
+    near = np.empty((len(rows), width), dtype=int)
+    for i, k in enumerate(rows):
+        mates = np.nonzero(motions == motions[k])[0]
+        mates = mates[mates != k]
+        gap = np.abs(designed[mates] - designed[k]).max(axis=1)
+        order = mates[np.argsort(gap, kind='stable')][:width]
+        near[i] = np.resize(order, width)   # a short motion repeats its neighbours
+    sub = problem.subset(rows)
+    nfev = 0
+    for _ in range(SHARE_SWEEPS):
+        if clock.expired():
+            break
+        starts = sub.clip(x[near] + designed[rows][:, None, :] - designed[near])
+        if SHARE_POLISHED < width:
+            # Screen: only the starts that already score best are polished.
+            f0 = sub.evaluate(starts)
+            keep = np.argsort(f0, axis=1, kind='stable')[:, :SHARE_POLISHED]
+            starts = np.take_along_axis(starts, keep[..., None], axis=1)
+        px, pf = polish(sub, starts, clock, maxiter=maxiter, ftol=ftol)
+        nfev += sub.nfev
+        sub.nfev = 0
+        pick = np.argmin(pf, axis=1)
+        fb = pf[np.arange(len(rows)), pick]
+        gain = fb < f[rows] - ftol * (1.0 + np.abs(f[rows]))
+        if not np.any(gain):
+            break
+        x[rows[gain]] = px[np.arange(len(rows)), pick][gain]
+        f[rows[gain]] = fb[gain]
+    return x, f, nfev
 
 
 def free_layout(robot, arms_used, locked, moving, allowed=None):
@@ -341,7 +427,7 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
                         bimanual='off', bimanual_threshold=DEFAULT_BIMANUAL_THRESHOLD,
                         collision=False, capsules=None, tool_mm=0.0, tool_arm='right',
                         expansion_threshold=DEFAULT_EXPANSION_THRESHOLD, stay_close=0.0,
-                        clock=None, lock_start=None):
+                        clock=None, lock_start=None, share_branches=True):
     """
     Reconfigure every gesture (or those named in ``gestures``) for a fault set.
 
@@ -364,6 +450,11 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
     its target (staged DOF expansion).  ``stay_close`` (per deg^2) penalises moving the
     free joints away from the reference pose: the smallest correction wins among
     equally good ones, so that neighbouring keyframes stay on one redundant branch.
+    ``share_branches`` (True, False, or the names of the gestures concerned) restarts
+    each keyframe of a gesture of several keyframes from the solutions found for its
+    other keyframes, so that every keyframe gets the best branch any of them found
+    (see :func:`_share_branches`); a caller that passes only some points of a motion
+    (its typical points) and reconciles them itself may leave that motion out.
 
     With ``lock_strategy='optimal'`` the joints without an angle start at the library
     average (or at ``lock_start[joint]``, e.g. the average over whole motions when
@@ -403,7 +494,8 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
     # result, the collision check).
     search = clock.child(reserve=ENGINE_RESERVE)
     setup = _Setup(robot, reference, selected, locks, weights, collision, capsules, algo,
-                   bimanual, bimanual_threshold, expansion_threshold, stay_close)
+                   bimanual, bimanual_threshold, expansion_threshold, stay_close,
+                   share_branches)
     notes += setup.notes
     stats = {'nfev': 0}
     out = _run(setup, [locks], rng, search, stats)
@@ -418,7 +510,8 @@ class _Setup:
     """What every run on one library shares: targets, scorer, layouts and stage plans."""
 
     def __init__(self, robot, reference, selected, locks, weights, collision, capsules,
-                 algo, bimanual, bimanual_threshold, expansion_threshold, stay_close):
+                 algo, bimanual, bimanual_threshold, expansion_threshold, stay_close,
+                 share_branches=True):
         self.robot = robot
         self.selected = selected
         self.algo = algo
@@ -432,6 +525,10 @@ class _Setup:
             for t in gesture_targets(gesture):
                 self.targets.append(t)
                 self.owners.append(gi)
+        # Per target, the motion whose keyframes share branches (-1: none).
+        names = None if isinstance(share_branches, bool) else set(share_branches)
+        self.motions = [g if (share_branches if names is None else selected[g].name in names)
+                        else -1 for g in self.owners]
         targets = self.targets
         self.scorer = SimilarityScore(robot, targets, weights, reference_robot=reference)
         self.checker = None
@@ -496,6 +593,7 @@ def _run(setup, lock_sets, rng, clock, stats):
     n_t, n_g, n_c = len(setup.targets), len(setup.selected), len(lock_sets)
     ids = np.tile(np.arange(n_t), n_c)
     owners = [g + c * n_g for c in range(n_c) for g in setup.owners]
+    motions = [-1 if g < 0 else g + c * n_g for c in range(n_c) for g in setup.motions]
     selected = setup.selected * n_c
     targets = setup.targets * n_c
     layouts = setup.layouts * n_c
@@ -512,7 +610,7 @@ def _run(setup, lock_sets, rng, clock, stats):
         stage1_clock = clock.child(share=STAGE1_SHARE)
     best_r, best_l, status = _solve(robot, scorer, checker,
                                     _Batch(base_r, base_l, ids, layouts,
-                                           stay_close=setup.stay_close),
+                                           stay_close=setup.stay_close, motions=motions),
                                     algo, stage1_clock, rng, stats)
     status = [s0 if s0 == 'frozen' else s for s0, s in zip(status0, status)]
     after = scorer.evaluate(best_r, best_l, ids)
@@ -522,7 +620,7 @@ def _run(setup, lock_sets, rng, clock, stats):
         expansion = _expand(robot, scorer, checker, selected, owners, targets, ids,
                             setup.locked, setup.faulted, designed, layouts, best_r, best_l,
                             after, status, setup.expansion_threshold, algo, clock,
-                            two_stage, rng, stats, setup.stay_close)
+                            two_stage, rng, stats, setup.stay_close, motions)
     stage1 = after.copy()
 
     # Stage 2: the healthy arm joins in for two-handed gestures that are still poor.
@@ -535,7 +633,8 @@ def _run(setup, lock_sets, rng, clock, stats):
             x0 = {}
             for i, k in enumerate(rows):
                 x0[i] = [(best_r if s == 'right' else best_l)[k, j] for s, j in lay2[i]]
-            batch = _Batch(best_r[rows], best_l[rows], ids[rows], lay2, x0)
+            batch = _Batch(best_r[rows], best_l[rows], ids[rows], lay2, x0,
+                           motions=[motions[k] for k in rows])
             r2, l2, st2 = _solve(robot, scorer, checker, batch, algo, clock, rng)
             f2 = scorer.evaluate(r2, l2, ids[rows])
             for i, k in enumerate(rows):
@@ -608,15 +707,16 @@ def _library_result(setup, locks, out, notes, wall, budget, seed, preset, lock_s
 
 def _expand(robot, scorer, checker, selected, owners, targets, ids, locked, faulted,
             designed, layouts, best_r, best_l, after, status, threshold, algo, clock,
-            two_stage, rng, stats, stay_close):
+            two_stage, rng, stats, stay_close, motions):
     """
     Staged DOF expansion: redo a gesture's keyframes with its next ``expand`` stage.
 
     A gesture moves to its next stage while the fingertip of one of its keyframes is
     more than ``threshold`` mm from its target (it cannot be reached well enough);
     each stage starts from the previous stage's result and adds joints
-    in the configured priority order.  ``layouts``, the poses, ``after`` and ``status``
-    are updated in place; returns the stage reached per keyframe.
+    in the configured priority order.  ``motions`` says which rows share branches (see
+    :class:`_Batch`).  ``layouts``, the poses, ``after`` and ``status`` are updated in
+    place; returns the stage reached per keyframe.
     """
     expansion = np.zeros(len(targets), dtype=int)
     allowed = [None if a is None else set(a) for a in designed]
@@ -638,7 +738,8 @@ def _expand(robot, scorer, checker, selected, owners, targets, ids, locked, faul
               for i, k in enumerate(rows)}
         later = any(len(selected[g].expand) > level for g in owners)
         stage_clock = clock.child(share=STAGE1_SHARE if (later or two_stage) else 1.0)
-        batch = _Batch(best_r[rows], best_l[rows], ids[rows], lay, x0, stay_close)
+        batch = _Batch(best_r[rows], best_l[rows], ids[rows], lay, x0, stay_close,
+                       [motions[k] for k in rows])
         r2, l2, st2 = _solve(robot, scorer, checker, batch, algo, stage_clock, rng, stats)
         f2 = scorer.evaluate(r2, l2, ids[rows])
         for i, k in enumerate(rows):

@@ -171,7 +171,11 @@ class _Job:
         return dict(algorithm=self.algorithm, preset=self.preset, settings=self.settings,
                     weights=self.weights, expansion_threshold=self.expansion_threshold,
                     tool_mm=self.tool_mm, tool_arm=self.tool_arm,
-                    stay_close=self.stay_close, **self.engine)
+                    stay_close=self.stay_close, **self.engine,
+                    # A motion explored at its typical points is made consistent by
+                    # _consistent; one explored at every keyframe shares its branches.
+                    share_branches=tuple(g.name for g in self.library
+                                         if self.quantisations.get(g.name) is None))
 
 
 def adapt_library(robot, library, faults=None, *, method='auto', tool_mm=0.0,
