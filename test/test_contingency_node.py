@@ -1,0 +1,132 @@
+"""
+The contingency table and the anytime refinement of the real ``recovery_node`` over DDS.
+
+Covers: a fault in the table is answered from it (``library_origin: table``); a restart
+reuses the table kept in ``state_dir``; a changed setting invalidates it (the next fault
+is searched live, and a new table is built); a miss is published at the deadline, then a
+better library arrives as a new version (``library_origin: refined``).
+"""
+
+import json
+from pathlib import Path
+import time
+
+from node_harness import NodeProcess, RosClient, session_domain, statuses_values
+import pytest
+
+pytestmark = pytest.mark.slow
+
+DOMAIN = session_domain(2)      # modules run one after the other: the ids are reused
+SINGLE_FAULTS = 14
+
+
+@pytest.fixture
+def client():
+    client = RosClient(DOMAIN)
+    yield client
+    client.close()
+
+
+def table_entries(state):
+    """Return the number of entries of the table file in ``state`` (0 if none yet)."""
+    try:
+        return len(json.loads((Path(state) / 'contingency_table.json').read_text())['entries'])
+    except (OSError, ValueError, KeyError):
+        return 0
+
+
+def wait_table(node, state, entries, timeout=180.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if table_entries(state) >= entries:
+            return
+        assert node.alive(), node.describe()
+        time.sleep(0.2)
+    pytest.fail(f'the table did not reach {entries} entries in {timeout:.0f} s; '
+                f'{table_entries(state)} so far\n{node.describe()}')
+
+
+def origin_of(client, version, since=0, timeout=20.0):
+    """Return the ``library_origin`` the node's diagnostics give for library ``version``."""
+    def matches(statuses):
+        values = statuses_values(statuses['reconfiguration'])
+        return values.get('library_version') == str(version)
+    statuses = client.wait_diag(matches, timeout=timeout, since=since,
+                                what=f'diagnostics of library version {version}')
+    return statuses_values(statuses['reconfiguration'])
+
+
+def version_after_fault(client, joints, positions=()):
+    """Publish a fault; return the diagnostics values of the library published for it."""
+    before = client.latest().stamp
+    since = client.diag_count()
+    client.publish_fault(joints, positions)
+    client.wait_library(after=before, what=f'the library for {joints}')
+
+    def published(statuses):
+        values = statuses_values(statuses['reconfiguration'])
+        return values.get('up_to_date') == 'true' and values.get('library_origin') != \
+            'reference'
+    statuses = client.wait_diag(published, since=since, what='the library for the fault')
+    return statuses_values(statuses['reconfiguration'])
+
+
+def test_table_hit_then_restart_reuses_then_a_setting_invalidates(tmp_path, client):
+    state = tmp_path / 'state'
+    node = NodeProcess(DOMAIN, state_dir=state, args=['-p', 'refine_budget_sec:=0.0'])
+    try:
+        client.wait_library(what='the reference library')
+        wait_table(node, state, SINGLE_FAULTS)
+        values = version_after_fault(client, ['right_arm_joint2'])
+        assert values['library_origin'] == 'table', values
+        assert 'from the contingency table' in client.trigger('/reconfigure_gestures').message
+        assert client.trigger('/clear_faults').success
+    finally:
+        assert node.stop() == 0, node.describe()
+    assert 'contingency table: building 14 entries' in node.stderr, node.describe()
+
+    # A restart with the same settings reuses the table: nothing is rebuilt.
+    node = NodeProcess(DOMAIN, state_dir=state, args=['-p', 'refine_budget_sec:=0.0'])
+    try:
+        client.wait_library(lambda v: True, after=client.latest().stamp,
+                            what="the restarted node's library")
+        node.wait_output(f'contingency table: {SINGLE_FAULTS}', timeout=30.0)
+        values = version_after_fault(client, ['right_arm_joint5'])
+        assert values['library_origin'] == 'table', values
+        assert client.trigger('/clear_faults').success
+        assert 'reused from' in node.stderr and 'building 14 entries' not in node.stderr, \
+            node.describe()
+
+        # A setting that changes the result makes the table unusable: the next fault
+        # is searched live, and a new table is built for the new settings.
+        results = client.set_parameters(continuity_weight=0.02)
+        assert all(r.successful for r in results), results
+        values = version_after_fault(client, ['right_arm_joint3'])
+        assert values['library_origin'] == 'deadline', values
+        node.wait_output('building 14 entries', timeout=30.0)
+    finally:
+        assert node.stop() == 0, node.describe()
+    assert 'Traceback' not in node.stderr, node.describe()
+
+
+def test_a_miss_is_published_at_the_deadline_then_refined(tmp_path, client):
+    state = tmp_path / 'state'
+    # No table, and a deadline so short that the search has room to improve.
+    node = NodeProcess(DOMAIN, state_dir=state,
+                       args=['-p', 'contingency_table:=false', '-p', 'deadline_sec:=0.05',
+                             '-p', 'refine_budget_sec:=20.0'])
+    try:
+        client.wait_library(what='the reference library')
+        since = client.diag_count()
+        first = version_after_fault(client, ['right_arm_joint1'])
+        assert first['library_origin'] == 'deadline', first
+        version = int(first['library_version'])
+        refined = origin_of(client, version + 1, since=since, timeout=30.0)
+        assert refined['library_origin'] == 'refined', refined
+
+        def total(values):
+            return sum(float(v) for k, v in values.items() if k.endswith('.score_after'))
+        assert total(refined) < total(first), (first, refined)
+    finally:
+        assert node.stop() == 0, node.describe()
+    assert 'refined: ' in node.stderr and 'Traceback' not in node.stderr, node.describe()
