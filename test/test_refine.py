@@ -1,0 +1,100 @@
+"""Fast unit tests of the anytime refinement and of the run book's refined versions."""
+
+from dataclasses import replace
+import json
+import time
+
+from namo_fault_recovery.optimize.base import Clock
+from namo_fault_recovery.recovery.engine import recover, RecoverySettings
+from namo_fault_recovery.recovery.refine import refinement_faults, refinements
+from namo_fault_recovery.ros.contingency_keeper import ContingencyKeeper, TABLE_FILE
+from namo_fault_recovery.ros.run_book import RunBook
+from namo_fault_recovery.ros.state_store import Fault
+
+SETTINGS = RecoverySettings(deadline_sec=0.02)
+FAULT = {'right_arm_joint1': None}
+
+
+def test_each_refinement_is_better_and_keeps_the_locks(robot, product_library):
+    published = recover(robot, product_library, FAULT, SETTINGS, seed=0)
+    assert published.origin == 'deadline'
+    totals = [published.total_score]
+    for better in refinements(robot, product_library, published, SETTINGS,
+                              clock=Clock(20.0), seeds=range(1, 4)):
+        assert better.origin == 'refined' and better.locks == published.locks
+        assert better.faults == published.faults
+        assert better.total_score < totals[-1] * (1 - 1e-3)
+        totals.append(better.total_score)
+    assert len(totals) > 1, 'a 20 ms search was not improved by three full runs'
+
+
+def test_a_cancel_ends_the_refinement_at_once(robot, product_library):
+    published = recover(robot, product_library, FAULT, SETTINGS, seed=0)
+    clock = Clock(60.0, cancel=lambda: True)
+    assert list(refinements(robot, product_library, published, SETTINGS, clock=clock)) == []
+
+
+def test_the_optimal_strategy_searches_the_lock_again(robot, product_library):
+    published = recover(robot, product_library, FAULT, SETTINGS, seed=0)
+    assert refinement_faults(published, SETTINGS) == published.locks
+    optimal = SETTINGS.with_changes(lock_strategy='optimal')
+    assert refinement_faults(published, optimal) == published.faults
+
+
+def test_a_refined_version_only_for_the_current_published_generation():
+    book = RunBook()
+    book.set_faults({'right_arm_joint1': Fault()})
+    run = book.next_run(timeout=1.0)
+    assert not book.refining(run.generation)           # not published yet
+    book.publish(run.generation, 'first', lambda r: 10)
+    assert book.refining(run.generation)
+    assert book.publish_refined(run.generation, 'better', lambda r: 11)
+    assert (book.current, book.version, book.stamp_ns) == ('better', 2, 11)
+    book.set_faults({'right_arm_joint2': Fault()})     # a new fault supersedes it
+    assert not book.publish_refined(run.generation, 'stale', lambda r: 12)
+    assert book.current == 'better'
+    book.refined(run.generation)
+
+
+def test_a_new_request_cancels_a_refinement():
+    cancelled = []
+    book = RunBook(on_request=lambda: cancelled.append(True))
+    book.set_faults({'right_arm_joint1': Fault()})
+    run = book.next_run(timeout=1.0)
+    book.publish(run.generation, 'first', lambda r: 10)
+    assert book.refining(run.generation)
+    book.request()
+    assert cancelled == [True]
+
+
+def test_the_keeper_builds_persists_and_reuses_its_table(robot, product_library, tmp_path):
+    logs = []
+    keeper = ContingencyKeeper(robot, product_library, tmp_path, lambda *a: logs.append(a),
+                               seeds=(0,))
+    settings = RecoverySettings()
+    path = tmp_path / TABLE_FILE
+    try:
+        keeper.configure(settings)
+        end = time.monotonic() + 120.0
+        while keeper.entries < 14 and time.monotonic() < end:
+            time.sleep(0.1)
+        assert keeper.entries == 14, logs
+        hit = keeper.lookup({'right_arm_joint2': None}, settings)
+        assert hit.origin == 'table' and hit.faults == {'right_arm_joint2': None}
+        assert keeper.lookup({'right_arm_joint2': 0.1}, settings) is None      # another lock
+        other = settings.with_changes(continuity_weight=0.5)
+        assert keeper.lookup({'right_arm_joint2': None}, other) is None        # other settings
+    finally:
+        keeper.stop()
+    assert len(json.loads(path.read_text())['entries']) == 14
+    again = ContingencyKeeper(robot, product_library, tmp_path, lambda *a: logs.append(a))
+    try:
+        again.configure(settings)
+        end = time.monotonic() + 10.0
+        while again.entries < 14 and time.monotonic() < end:
+            time.sleep(0.05)
+        assert again.entries == 14 and not again.building
+        assert replace(again.lookup({'right_arm_joint2': None}, settings), faults={}) \
+            == replace(hit, faults={})
+    finally:
+        again.stop()
