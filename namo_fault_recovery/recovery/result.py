@@ -321,7 +321,9 @@ def reference_result(library, deadline=0.0, settings=None, seed=None):
                          seed=seed, origin='reference')
 
 
-ORIGIN_TEXT = {'table': ' from the contingency table',
+ORIGIN_TEXT = {'deadline': ' by a live search',
+               'unbounded': ' by a search without deadline',
+               'table': ' from the contingency table',
                'refined': ' refined in the background after the deadline result'}
 
 
