@@ -241,3 +241,71 @@ def test_background_writer_never_writes_an_older_snapshot_over_a_newer_one(tmp_p
     writer.submit({'left_arm_joint2': Fault(0.2)}, None, 6)
     writer.stop()                         # writes what is pending first
     assert list(decode_state(store.path.read_text()).faults) == ['left_arm_joint2']
+
+
+# --- the publish path: the fault set's write overlaps the run; nothing is published before ---
+
+def test_a_fault_set_being_written_starts_the_run_but_is_published_only_once_on_disk(
+        tmp_path, robot, library):
+    from namo_fault_recovery.ros.persistence import Persistence
+    from namo_fault_recovery.ros.state_store import decode_state
+    book = RunBook()
+    state = Persistence(tmp_path, robot, library, book, on_error=lambda text: None)
+    saving, release, order = threading.Event(), threading.Event(), []
+    real_save = state.store.save
+
+    def slow_save(*args, **kwargs):
+        saving.set()
+        assert release.wait(5.0)
+        order.append('synced')
+        return real_save(*args, **kwargs)
+
+    state.store.save = slow_save
+    faults = {'right_arm_joint1': Fault(0.1)}
+    committer = threading.Thread(target=state.commit_faults, args=(faults, 0.0))
+    committer.start()
+    assert saving.wait(5.0)
+    run = book.next_run(timeout=5.0)                  # the run starts during the write
+    assert run is not None and run.faults == faults
+    assert book.snapshot()['faults'] == {}            # not shown before it is on disk
+    publisher = threading.Thread(target=state.publish_and_queue, args=(
+        run.generation, faults, reference_result(library),
+        lambda result: order.append('published') or 1, 0.0))
+    publisher.start()
+    publisher.join(0.2)
+    assert order == []                                # publication waits for the write
+    release.set()
+    committer.join(5.0)
+    publisher.join(5.0)
+    assert order == ['synced', 'published']
+    snap = book.snapshot()
+    assert snap['faults'] == faults and snap['fault_sync'] >= 0.0
+    assert snap['fault_to_request'] >= 0.0 and snap['publish_path'] >= 0.0
+    assert decode_state(state.store.path.read_text()).faults == faults
+
+
+def test_diagnostics_show_the_publish_path_figures(robot, library):
+    settings = node_settings(_defaults())
+    snap = diagnostics.Snapshot(
+        faults={}, fault_version=1, current=reference_result(library), version=1,
+        stamp_ns=5, pending=False, running=False, failed=None, settings=settings,
+        publish_path=0.0012, fault_to_request=0.0003, fault_sync=0.004)
+    out = {s.name: s for s in diagnostics.statuses(robot, snap, 'recovery_node: ')}
+    recon = {kv.key: kv.value for kv in out['recovery_node: reconfiguration'].values}
+    assert float(recon['publish_path_sec']) == pytest.approx(0.0012)
+    assert float(recon['fault_to_request_sec']) == pytest.approx(0.0003)
+    assert float(recon['fault_sync_sec']) == pytest.approx(0.004)
+
+
+def test_latest_worker_runs_the_newest_item_and_drops_the_superseded():
+    from namo_fault_recovery.ros.latest_worker import LatestWorker
+    done, seen = threading.Event(), []
+    worker = LatestWorker(lambda *item: (seen.append(item), done.set()), delay=0.0)
+    for k in range(3):
+        worker.submit(k, 'stamp')                     # before start: they collapse
+    worker.start()
+    try:
+        assert done.wait(5.0)
+    finally:
+        worker.stop()
+    assert seen == [(2, 'stamp')]

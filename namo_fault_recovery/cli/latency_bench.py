@@ -4,7 +4,12 @@
 For each of ``--count`` single-joint faults (cycling over the joints): clear the faults,
 publish the fault, time the arrival of the complete new library, then time a
 reconfigure_gestures round trip.  Prints p50/p95/max, and splits the latency into the
-engine's wall time (from ``/diagnostics``) and what the node and DDS add.
+engine's wall time (from ``/diagnostics``; none for a contingency-table hit) and what the
+node and DDS add, with the node's own figures of each library: ``publish_path_sec``
+(result in hand -> last gesture published), ``fault_to_request_sec`` and
+``fault_sync_sec``.  ``--joint-states-hz`` streams ``/joint_states`` from another process
+meanwhile; ``--node-param`` sets a parameter of the private node (e.g.
+``contingency_table:=false`` to time the engine path only).
 """
 
 import json
@@ -15,6 +20,7 @@ import numpy as np
 from .private_node import private_domain, PrivateNode
 from .ros_common import (add_connection_arguments, CommandError, domain_id, EXIT_FAILURE,
                          EXIT_USAGE, namespace, open_client, wrap)
+from ..ros import diagnostic_keys as keys
 
 
 def percentiles(values):
@@ -30,6 +36,7 @@ class _Samples:
 
     def __init__(self):
         self.latencies, self.round_trips, self.engine, self.overhead = [], [], [], []
+        self.figures = {key: [] for key, _ in NODE_FIGURES}
         self.failures = []
 
     def report(self, count):
@@ -41,7 +48,30 @@ class _Samples:
         if self.engine:
             report['engine_wall_time'] = percentiles(self.engine)
             report['node_and_dds_overhead'] = percentiles(self.overhead)
+        for key, values in self.figures.items():
+            if values:
+                report[key] = percentiles(values)
         return report
+
+
+# The node's own figures of each library (from /diagnostics), as the report names them.
+NODE_FIGURES = ((keys.FAULT_TO_REQUEST_SEC, '  node: fault received -> run requested'),
+                (keys.FAULT_SYNC_SEC, '  node: fault set synced (overlaps engine)'),
+                (keys.PUBLISH_PATH_SEC, '  node: result in hand -> published'))
+NO_ENGINE = ('reference', 'table')       # origins published without an engine run
+
+
+def _node_figures(client, library, samples, timeout=1.0):
+    """Add the node's figures of ``library`` from the /diagnostics that describes it."""
+    found = client.inbox.latest_diagnostics(lambda d: d.describes(library.stamp),
+                                            timeout=timeout)
+    values = found.values.get(keys.RECONFIGURATION, {}) if found is not None else {}
+    for key in samples.figures:
+        try:
+            samples.figures[key].append(float(values[key]))
+        except (KeyError, ValueError):
+            pass
+    return values.get(keys.LIBRARY_ORIGIN, '')
 
 
 def _answered(client, answer, stamp, timeout, what):
@@ -88,9 +118,11 @@ def _measure(args, client, samples, out):
             continue
         stamp = library.stamp
         samples.latencies.append(library.received - t0)
+        origin = _node_figures(client, library, samples)
         if library.described:
-            samples.engine.append(library.result.wall_time)
-            samples.overhead.append(samples.latencies[-1] - library.result.wall_time)
+            engine = 0.0 if origin in NO_ENGINE else library.result.wall_time
+            samples.engine.append(engine)
+            samples.overhead.append(samples.latencies[-1] - engine)
         t1 = time.monotonic()
         answer = client.reconfigure(args.timeout)
         samples.round_trips.append(time.monotonic() - t1)
@@ -114,10 +146,16 @@ def bench_latency(args, out):
         domain = private_domain() if domain is None else domain
         node = PrivateNode(args, domain, namespace(args), out)
     samples = _Samples()
+    stream = None
     try:
+        if args.joint_states_hz > 0:
+            from ..ros.stream_bench import StreamProcess
+            stream = StreamProcess(args.joint_states_hz, domain)
         with open_client(args, domain) as client:
             _measure(args, client, samples, out)
     finally:
+        if stream is not None:
+            stream.close()
         if node is not None:
             node.stop()
     report = samples.report(args.count)
@@ -128,7 +166,8 @@ def bench_latency(args, out):
     for label, key in (('fault publish -> full library received', 'fault_to_library'),
                        ('reconfigure_gestures round trip', 'reconfigure_service'),
                        ('  of which optimisation (engine wall time)', 'engine_wall_time'),
-                       ('  of which node + DDS (latency - engine)', 'node_and_dds_overhead')):
+                       ('  of which node + DDS (latency - engine)', 'node_and_dds_overhead'),
+                       *((label, key) for key, label in NODE_FIGURES)):
         if key in report:
             s = report[key]
             out.write(f"{label:<42} n={s['n']:<3} p50 {s['p50_ms']:7.1f} ms  "
@@ -146,6 +185,11 @@ def add_latency_arguments(parser):
                         help='joints to fault in turn (default: all 14)')
     parser.add_argument('--start-node', action='store_true',
                         help='start a private recovery_node for the benchmark')
+    parser.add_argument('--joint-states-hz', type=float, default=0.0, metavar='HZ',
+                        help='stream /joint_states at HZ from another process meanwhile')
+    parser.add_argument('--node-param', dest='node_params', action='append', default=[],
+                        metavar='NAME:=VALUE',
+                        help='a parameter of the private node (--start-node; repeatable)')
     parser.add_argument('--json', action='store_true', help='print one JSON document')
     parser.add_argument('-v', '--verbose', action='store_true', help='print every sample')
     add_connection_arguments(parser, timeout=30.0)

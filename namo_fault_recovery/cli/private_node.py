@@ -44,6 +44,8 @@ class PrivateNode:
             value = getattr(args, option, None)
             if value:
                 ros_args += ['-p', f'{option}:={os.path.abspath(value)}']
+        for param in getattr(args, 'node_params', None) or ():
+            ros_args += ['-p', param]
         env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED='1')
         self._log = open(os.path.join(self.workdir, 'node.log'), 'w+b')
         cmd = node_command() + ['--ros-args'] + ros_args

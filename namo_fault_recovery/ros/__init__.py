@@ -16,6 +16,7 @@ The node and its parts (the parts are free of DDS, with fast unit tests):
 - :mod:`.contingency_keeper`: the contingency table looked up before a live run, built
   by a low-priority background process and kept in ``state_dir``;
 - :mod:`.answer_pacer`: service answers released a few at a time;
+- :mod:`.latest_worker`: one delayed thread for the newest item (the RViz markers);
 - :mod:`.persistence`: the state file in the order the run book needs, off the hot paths;
 - :mod:`.restore`: the checks before publishing, and the restore decision;
 - :mod:`.state_store`: the persisted fault set and library (no ROS types);

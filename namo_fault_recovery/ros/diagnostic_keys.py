@@ -54,6 +54,13 @@ OPTIMIZER_PRESET = 'optimizer_preset'
 DEADLINE_SEC = 'deadline_sec'
 WALL_TIME_SEC = 'wall_time_sec'
 REQUEST_TO_PUBLISH_SEC = 'request_to_publish_sec'   # the span the deadline covers
+# The node's own share, last library: result in hand (engine answer received, table hit)
+# -> last gesture message published; it includes waiting for a fault set still syncing.
+PUBLISH_PATH_SEC = 'publish_path_sec'
+# Last fault batch: first report received -> run requested (the engine may start).
+FAULT_TO_REQUEST_SEC = 'fault_to_request_sec'
+# Last fault batch: the synced write of the fault set (overlaps the engine run).
+FAULT_SYNC_SEC = 'fault_sync_sec'
 DEADLINE_MET = 'deadline_met'
 SUCCESS = 'success'
 FROZEN_ARMS = 'frozen_arms'         # space-separated sides

@@ -52,6 +52,9 @@ class Snapshot:
     engine_restarts: int = 0
     waiting_callers: int = 0
     request_to_publish: float = None
+    publish_path: float = None
+    fault_to_request: float = None
+    fault_sync: float = None
 
 
 def snapshot(book, inputs, settings, state_problem, state_file, engine_restarts):
@@ -66,7 +69,8 @@ def snapshot(book, inputs, settings, state_problem, state_file, engine_restarts)
         measured_joints=inputs.measured_joints(), last_accepted=inputs.last_accepted,
         state_problem=state_problem, state_file=str(state_file),
         engine_restarts=engine_restarts, waiting_callers=b['waiting_callers'],
-        request_to_publish=b['request_to_publish'])
+        request_to_publish=b['request_to_publish'], publish_path=b['publish_path'],
+        fault_to_request=b['fault_to_request'], fault_sync=b['fault_sync'])
 
 
 def statuses(robot, snap, prefix=DEFAULT_PREFIX):
@@ -131,6 +135,11 @@ def _inputs_status(snap, hw, prefix):
     return status(prefix, dk.INPUTS, 'WARN' if recent else 'OK', message, hw, pairs)
 
 
+def _seconds(value, digits=4):
+    """Return a duration in seconds as text, '' if not measured yet."""
+    return '' if value is None else f'{value:.{digits}f}'
+
+
 def reconfiguration_status(snap, up_to_date, hw, prefix):
     """Return the ``reconfiguration`` status: the library published and how it was made."""
     current, running, failed = snap.current, snap.running, snap.failed
@@ -145,8 +154,10 @@ def reconfiguration_status(snap, up_to_date, hw, prefix):
                       pairs)
     pairs += [(dk.LIBRARY_ORIGIN, current.origin),
               (dk.WALL_TIME_SEC, f'{current.wall_time:.4f}'),
-              (dk.REQUEST_TO_PUBLISH_SEC, '' if snap.request_to_publish is None
-               else f'{snap.request_to_publish:.4f}'),
+              (dk.REQUEST_TO_PUBLISH_SEC, _seconds(snap.request_to_publish)),
+              (dk.PUBLISH_PATH_SEC, _seconds(snap.publish_path, 6)),
+              (dk.FAULT_TO_REQUEST_SEC, _seconds(snap.fault_to_request, 6)),
+              (dk.FAULT_SYNC_SEC, _seconds(snap.fault_sync, 6)),
               (dk.DEADLINE_MET, dk.flag(current.deadline_met)),
               (dk.SUCCESS, dk.flag(current.success)),
               (dk.FROZEN_ARMS, ' '.join(current.frozen_arms)),

@@ -12,6 +12,7 @@ library is published at once.
 
 import math
 import threading
+import time
 
 from .engine_process import EngineError
 from .restore import check_result
@@ -29,7 +30,9 @@ class Dispatcher:
         self._robot = robot
         self._library = library
         self._settings = settings          # callable: the current NodeSettings
-        self._publish = publish            # publish(generation, faults, result) -> callers
+        # publish(generation, faults, result, in_hand) -> callers; in_hand: the
+        # time.monotonic() the result became available (for ``publish_path_sec``)
+        self._publish = publish
         self._log = log                    # log(level, text)
         # publish_refined(generation, faults, result) -> True if published
         self._publish_refined = publish_refined
@@ -88,6 +91,7 @@ class Dispatcher:
                 finally:
                     if self._table is not None:
                         self._table.resume()
+        in_hand = time.monotonic()
         if not self._book.is_current(run.generation):
             return                                # superseded: a newer run answers
         problem = check_result(self._robot, self._library, result, run.faults)
@@ -95,7 +99,7 @@ class Dispatcher:
             self._fail(run, problem)
             return
         # Published if still current, then written to the state file off this path.
-        ready = self._publish(run.generation, run.faults, result)
+        ready = self._publish(run.generation, run.faults, result, in_hand)
         if ready is None:
             return
         self._book.notify(ready)

@@ -4,8 +4,9 @@ Fault intake: every accepted fault report is persisted before it is acknowledged
 Free of ROS.  The ``/actuator_fault`` callback only validates a report and queues it
 here, so that a burst is taken off the subscription as fast as it arrives.  One thread
 drains the queue in batches: it applies every queued report (and ``clear``) in order to
-the fault set, and ``commit`` writes the new fault set to the state file (atomically,
-synced) and only then hands it to the run book; then ``on_accepted`` runs (it logs
+the fault set, and ``commit`` hands the new fault set to the run book and returns only
+once it is in the state file (atomically, synced; the engine may start meanwhile, but
+nothing is published before the write ends); then ``on_accepted`` runs (it logs
 ``fault accepted``).  A crash at any moment therefore loses only reports that were never
 acknowledged, and a burst of N reports costs one file write per batch, not N.
 """
@@ -19,9 +20,15 @@ from .state_store import Fault
 
 @dataclass(frozen=True)
 class Report:
-    """One validated fault report: joint -> lock angle (rad) or None."""
+    """
+    One validated fault report: joint -> lock angle (rad) or None.
+
+    ``received`` is the ``time.monotonic()`` instant the message arrived, if known: the
+    commit is told the earliest of a batch (the node shows ``fault_to_request_sec``).
+    """
 
     joints: dict
+    received: float = None
 
 
 @dataclass(frozen=True)
@@ -44,7 +51,8 @@ class FaultIntake:
     def __init__(self, book, commit, on_accepted, measured=lambda: {}, max_queue=100_000,
                  on_error=None):
         self._book = book
-        self._commit = commit              # commit(faults): persist, then book.set_faults
+        # commit(faults[, received_at=]): book.set_faults, persisted before it returns
+        self._commit = commit
         self._on_accepted = on_accepted    # on_accepted(reports, cleared, faults)
         self._measured = measured          # latest measured angles (joint -> rad)
         self._queue = deque()
@@ -97,6 +105,8 @@ class FaultIntake:
         faults = dict(self._book.faults)
         measured = self._measured() if any(isinstance(i, Report) for i in batch) else {}
         reports, clears, afters = [], [], []
+        received = [i.received for i in batch
+                    if isinstance(i, Report) and i.received is not None]
         for item in batch:
             if isinstance(item, After):
                 afters.append(item)
@@ -112,7 +122,10 @@ class FaultIntake:
                 faults[joint] = Fault(angle, measured.get(joint) if old is None
                                       else old.measured)
             reports.append(item)
-        self._commit(faults)                     # persisted before it is acknowledged
+        if received:                             # persisted before it is acknowledged
+            self._commit(faults, received_at=min(received))
+        else:
+            self._commit(faults)
         self._on_accepted(reports, bool(clears), faults)
         for item, count in clears:
             item.done(count)

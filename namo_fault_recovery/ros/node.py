@@ -9,7 +9,6 @@ when needed), services answer from ``async`` callbacks that await the run book, 
 periodic work runs on a steady clock, independent of ``use_sim_time``.
 """
 
-import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -35,6 +34,7 @@ from .engine_process import EngineError, EngineProcess
 from .fault_intake import After, Clear, FaultIntake, Report
 from .input_monitor import InputMonitor
 from .inputs import BadInput, parse_fault
+from .latest_worker import LatestWorker
 from .parameters import (check_parameter, declare_parameters, DEFAULT_STATE_DIR, MARKER_PARAMS,
                          node_settings, one_line, parameter_specs, RERUN_PARAMS, shorten,
                          StartupError)
@@ -48,6 +48,7 @@ from ..recovery.result import reference_result, summary
 NODE_NAME = 'recovery_node'
 FAULT_QUEUE_DEPTH = 10_000        # reports the subscription holds while the intake catches up
 STATES_PARSE_PERIOD = 0.1         # s: the latest raw joint state is parsed at most this often
+MARKER_DELAY = 0.05               # s: markers are drawn this long after a publication
 
 
 class RecoveryNode(Node):
@@ -91,6 +92,7 @@ class RecoveryNode(Node):
         self._dispatcher = Dispatcher(self._book, self._engine, self._robot, self._library,
                                       lambda: self._settings, self._publish_and_persist,
                                       self._log, self._publish_refined, self._table)
+        self._markers = LatestWorker(self._publish_markers, MARKER_DELAY, name='markers')
         try:
             self._create_interfaces()
             self._restore()
@@ -99,6 +101,7 @@ class RecoveryNode(Node):
             raise
         self._answers = AnswerPacer(self._wake.trigger)
         self._answers.start()
+        self._markers.start()
         self._state.start()
         self._intake.start()
         self._dispatcher.start()
@@ -195,12 +198,13 @@ class RecoveryNode(Node):
         self._diag_dirty = True
 
     def _on_fault(self, msg):
+        received = time.monotonic()
         try:
             parsed = parse_fault(self._robot, msg.name, msg.position, msg.velocity, msg.effort)
         except BadInput as exc:
             self._inputs.reject('/actuator_fault', str(exc))
             return
-        if not self._intake.submit(Report(parsed)):
+        if not self._intake.submit(Report(parsed, received)):
             self._inputs.reject('/actuator_fault', 'the fault queue is full; report dropped')
 
     def _on_accepted(self, reports, cleared, faults):
@@ -274,9 +278,9 @@ class RecoveryNode(Node):
 
     # --- outputs, persistence, restore ----------------------------------------------
 
-    def _publish_and_persist(self, generation, faults, result):
+    def _publish_and_persist(self, generation, faults, result, in_hand=None):
         return self._state.publish_and_queue(generation, faults, result,
-                                             self._publish_library)
+                                             self._publish_library, in_hand)
 
     def _publish_refined(self, generation, faults, result):
         return self._state.publish_refined_and_queue(generation, faults, result,
@@ -290,8 +294,7 @@ class RecoveryNode(Node):
         for msg in conv.library_to_msgs(self._robot.joint_names, result, stamp):
             self._library_pub.publish(msg)
         self._diag_dirty = True
-        threading.Thread(target=self._publish_markers, args=(result, stamp),
-                         name='markers', daemon=True).start()
+        self._markers.submit(result, stamp)        # drawn a moment later, off this path
         return stamp_ns
 
     def _publish_markers(self, result, stamp):
@@ -379,3 +382,6 @@ class RecoveryNode(Node):
         answers = getattr(self, '_answers', None)
         if answers is not None:
             answers.stop()
+        markers = getattr(self, '_markers', None)
+        if markers is not None:
+            markers.stop()

@@ -1,15 +1,20 @@
 """
 The node's persistence: the state file, in the order the run book needs, off the hot paths.
 
-Free of ROS.  A new fault set is written (synced) *before* the run book sees it, under
+Free of ROS.  A new fault set is written (synced) before anything acknowledges it, under
 one lock with a sequence number; a published library is queued for a background writer
 under the same lock, so the numbers say which of a library and a newer fault set came
-last and a slow write never overwrites a newer state.  A write failure is reported once
-and kept for ``/diagnostics``, never fatal.
+last and a slow write never overwrites a newer state.  The run book gets the new fault
+set just before the write (the engine starts while the disk syncs, which takes 3-15 ms,
+more than the rest of the node's share of the latency), but every publication and
+every answer waits for it: publishing takes the same lock, and the fault intake tells
+its callers only after :meth:`Persistence.commit_faults` returns.  A write failure is
+reported once and kept for ``/diagnostics``, never fatal.
 """
 
 import itertools
 import threading
+import time
 
 from .parameters import shorten
 from .restore import plan_restart
@@ -35,20 +40,30 @@ class Persistence:
         """Start the background writer."""
         self._writer.start()
 
-    def commit_faults(self, faults):
-        """Write a new fault set (synced), then hand it to the run book: one step."""
-        with self._lock:
-            self._save(faults, self._book.current, next(self._seq))
-            self._book.set_faults(faults)
+    def commit_faults(self, faults, received_at=None):
+        """
+        Hand a new fault set to the run book and write it (synced): one step.
 
-    def publish_and_queue(self, generation, faults, result, publish):
+        The run book may start its run at once, but nothing is published before the
+        write ends (publication takes this lock), and this returns only after it.
+        ``received_at`` is when its first report arrived (``time.monotonic()``).
+        """
+        with self._lock:
+            library = self._book.current
+            self._book.set_faults(faults, durable=False, received_at=received_at)
+            began = time.monotonic()
+            self._save(faults, library, next(self._seq))
+            self._book.faults_durable(time.monotonic() - began)
+
+    def publish_and_queue(self, generation, faults, result, publish, in_hand=None):
         """
         Publish a run's library with ``publish`` if still current; queue it for the file.
 
         Returns the run book's callers to tell, or None if the run went stale.
+        ``in_hand``: when the result became available (see :meth:`RunBook.publish`).
         """
         with self._lock:
-            ready = self._book.publish(generation, result, publish)
+            ready = self._book.publish(generation, result, publish, in_hand)
             if ready is not None:
                 self._writer.submit(faults, result, next(self._seq))
         return ready

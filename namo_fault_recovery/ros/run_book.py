@@ -53,18 +53,43 @@ class RunBook:
         self.version = 0             # library version number
         self.stamp_ns = 0
         self.request_to_publish = None   # s from the request to the publication, last run
+        self.publish_path = None     # s from the result in hand to its last message published
+        self.fault_to_request = None     # s from the first report of a batch to its request
+        self.fault_sync = None       # s the last fault set took to reach the disk (synced)
+        self._durable = ({}, 0)      # (faults, fault_version) on disk: what others are shown
         self._waiters = []           # (generation, callback)
         self.stopping = False
 
     # --- requests -------------------------------------------------------------------
 
-    def set_faults(self, faults, request=True):
-        """Replace the fault set (already persisted) and request a new library."""
+    def set_faults(self, faults, request=True, durable=True, received_at=None):
+        """
+        Replace the fault set and request a new library.
+
+        ``durable=False`` says the fault set is still being written: the dispatcher may
+        start computing its library at once (the write overlaps the engine run), but the
+        fault set is shown (:meth:`snapshot`) only once :meth:`faults_durable` says it is
+        on disk.  The caller keeps anything from acknowledging it until then (the node's
+        :class:`~.persistence.Persistence` holds its lock over the write, and every
+        publication takes that lock).  ``received_at`` (``time.monotonic()`` of the
+        first fault report that led here) gives ``fault_to_request``.
+        """
         with self._cond:
             self.faults = dict(faults)
             self.fault_version += 1
+            if received_at is not None:
+                self.fault_to_request = time.monotonic() - received_at
+            if durable:
+                self._durable = (self.faults, self.fault_version)
             if request:
                 self._request_locked()
+
+    def faults_durable(self, sync_sec=None):
+        """Record that the current fault set is on disk (``sync_sec``: the write's span)."""
+        with self._cond:
+            self._durable = (self.faults, self.fault_version)
+            if sync_sec is not None:
+                self.fault_sync = sync_sec
 
     def request(self):
         """Request a new library for the current fault set and settings."""
@@ -123,9 +148,13 @@ class RunBook:
         """Return True while ``generation`` is the newest request (not yet superseded)."""
         return not self.stopping and generation == self._requested
 
-    def publish(self, generation, result, publish):
+    def publish(self, generation, result, publish, in_hand=None):
         """
         Publish ``result`` of ``generation`` if it is still the newest request.
+
+        ``in_hand`` is the ``time.monotonic()`` instant the result was available (the
+        engine's answer received): ``publish_path`` is measured from it to the moment
+        ``publish`` returned, its last message sent.
 
         ``publish(result)`` returns the stamp (ns) and runs under the book's lock, so no
         newer request can slip in between
@@ -136,7 +165,10 @@ class RunBook:
             self._running = None
             if generation != self._requested or self.stopping:
                 return None
-            return self._published_locked(generation, result, publish(result))
+            stamp_ns = publish(result)
+            if in_hand is not None:
+                self.publish_path = time.monotonic() - in_hand
+            return self._published_locked(generation, result, stamp_ns)
 
     def refining(self, generation):
         """
@@ -222,11 +254,14 @@ class RunBook:
     def snapshot(self):
         """Return a consistent dict of the state, for diagnostics."""
         with self._cond:
+            faults, fault_version = self._durable
             return {
-                'faults': dict(self.faults), 'fault_version': self.fault_version,
+                'faults': dict(faults), 'fault_version': fault_version,
                 'current': self.current, 'version': self.version, 'stamp_ns': self.stamp_ns,
                 'pending': self._requested > self._published,
                 'running': self._running is not None, 'failed': self._failed,
                 'waiting_callers': len(self._waiters),
                 'request_to_publish': self.request_to_publish,
+                'publish_path': self.publish_path,
+                'fault_to_request': self.fault_to_request, 'fault_sync': self.fault_sync,
             }

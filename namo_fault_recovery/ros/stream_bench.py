@@ -160,7 +160,7 @@ def stream_main(argv=None):
     return 0
 
 
-class _StreamProcess:
+class StreamProcess:
     """The stream publisher as a child process (a robot's drivers are other processes)."""
 
     def __init__(self, rate, domain_id):
@@ -510,7 +510,7 @@ def run_stream_bench(out, rates=DEFAULT_RATES, burner=True, faults=DEFAULT_FAULT
         last = max(client.versions)
         idle_score = None
         for name, rate, burning in _conditions(rates, burner):
-            stream = _StreamProcess(rate, domain_id) if rate > 0 else None
+            stream = StreamProcess(rate, domain_id) if rate > 0 else None
             runs = []
             try:
                 with (CpuBurner() if burning else contextlib.nullcontext()) as ctx:
