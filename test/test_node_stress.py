@@ -106,7 +106,9 @@ def test_500_hz_joint_state_stream_keeps_every_reconfiguration_in_deadline(
     """
     names, positions = reference_pose()
     problems = []
-    with Running(tmp_path, 0) as (node, client):
+    # Without the contingency table every call is a live search against the deadline
+    # (a table hit is not searched at all; test_contingency_node covers it).
+    with Running(tmp_path, 0, args=['-p', 'contingency_table:=false']) as (node, client):
         client.wait_library(timeout=LONG, what='the reference library')
         stream = JointStateStream(client.node, STREAM_HZ, names, positions, nan_every)
         with stream:
