@@ -166,7 +166,12 @@ _VERSION_TAG = re.compile(r'\[library version (\d+), stamp (\d+\.\d{9})\]\s*$')
 
 def version_tag(version, stamp_ns):
     """Return the tag the node appends to a /reconfigure_gestures answer."""
-    return f'[library version {version}, stamp {format_stamp(stamp_ns)}]'
+    return f'[{version_text(version, stamp_ns)}]'
+
+
+def version_text(version, stamp_ns):
+    """Return the words of :func:`version_tag`, without the brackets."""
+    return f'library version {version}, stamp {format_stamp(stamp_ns)}'
 
 
 def parse_version_tag(message):

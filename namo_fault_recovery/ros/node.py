@@ -274,7 +274,7 @@ class RecoveryNode(Node):
 
     @staticmethod
     def _version_text(outcome):
-        return dk.version_tag(outcome.version, outcome.stamp_ns)[1:-1]
+        return dk.version_text(outcome.version, outcome.stamp_ns)
 
     # --- outputs, persistence, restore ----------------------------------------------
 
