@@ -179,23 +179,9 @@ class EngineProcess:
         :class:`EngineError` if the run fails, or if the child dies or does not answer
         within the deadline plus ``hang_margin`` (the child is then replaced).
         """
-        try:
-            self._ensure_ready(time.monotonic() + self._start_timeout)
-            self._current.value = run_id
-            self._conn.send((run_id, faults, settings, seed, start, measured))
-            end = start + settings.deadline_sec
-            limit = max(end - time.monotonic(), 0.0) + hang_margin
-            if not self._conn.poll(limit):
-                raise EngineError(f'the engine process did not answer within '
-                                  f'{limit:.1f} s; it was restarted')
-            answer = self._conn.recv()
-        except (EOFError, OSError, BrokenPipeError) as exc:
-            self._restart()
-            raise EngineError(f'the engine process died ({type(exc).__name__}); it was '
-                              f'restarted') from None
-        except EngineError:
-            self._restart()
-            raise
+        end = start + settings.deadline_sec + hang_margin
+        answer = self._exchange(run_id, (run_id, faults, settings, seed, start, measured),
+                                end, lambda answer: answer)
         if answer[0] == 'ok':
             return answer[2], answer[3]
         raise EngineError(answer[2])
@@ -207,22 +193,37 @@ class EngineProcess:
         Calls ``on_improved(result)`` for each better library as it arrives.  A newer run
         cancels it (:meth:`cancel`).  Raises :class:`EngineError` as :meth:`run` does.
         """
+        def handle(answer):
+            if answer[0] == 'improved':
+                on_improved(answer[2])
+                return None
+            return answer[2]
+        end = time.monotonic() + budget + hang_margin
+        return self._exchange(run_id, (_REFINE, run_id, published, settings, budget), end,
+                              handle)
+
+    def _exchange(self, run_id, request, end, handle):
+        """
+        Send ``request``; give each answer of ``run_id`` to ``handle`` until it returns one.
+
+        Answers of an earlier run (e.g. a refinement's last message) are skipped.  A child
+        that dies, or is silent until ``end`` (monotonic s), is replaced: EngineError.
+        """
         try:
             self._ensure_ready(time.monotonic() + self._start_timeout)
             self._current.value = run_id
-            self._conn.send((_REFINE, run_id, published, settings, budget))
-            end = time.monotonic() + budget + hang_margin
+            self._conn.send(request)
             while True:
-                if not self._conn.poll(max(end - time.monotonic(), 0.0)):
-                    raise EngineError('the engine process did not end a refinement in '
-                                      'time; it was restarted')
+                limit = max(end - time.monotonic(), 0.0)
+                if not self._conn.poll(limit):
+                    raise EngineError('the engine process did not answer in time; it was '
+                                      'restarted')
                 answer = self._conn.recv()
                 if answer[1] != run_id:
                     continue
-                if answer[0] == 'improved':
-                    on_improved(answer[2])
-                else:
-                    return answer[2]
+                done = handle(answer)
+                if done is not None:
+                    return done
         except (EOFError, OSError, BrokenPipeError) as exc:
             self._restart()
             raise EngineError(f'the engine process died ({type(exc).__name__}); it was '
