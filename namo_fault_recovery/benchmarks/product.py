@@ -31,7 +31,8 @@ import numpy as np
 from . import common
 from .deadline import CpuBurner
 from ..model.gestures import load_library
-from ..model.robot import load_robot
+from ..model.robot import load_robot, N_JOINTS
+from ..objective.score import gesture_targets, SimilarityScore
 from ..recovery.contingency import (build_table, entry_key, fault_sets, measure_entry,
                                     table_fingerprint, table_locks)
 from ..recovery.engine import recover, RecoverySettings
@@ -76,6 +77,27 @@ def gap(score, best):
     if abs(best) <= ZERO:
         return 0.0 if score <= ZERO else float(score)
     return (score - best) / abs(best)
+
+
+def published_scores(robot, lib, joint_names, gestures, settings=None):
+    """
+    Return ``{gesture: score_after}`` recomputed from published positions.
+
+    ``gestures`` are :class:`GestureResult` s whose ``positions`` columns are
+    ``joint_names`` (as a client rebuilds them from ``/gesture_library``); the score is
+    the engine's (the worst keyframe of :class:`SimilarityScore` with the settings'
+    weights), so that a version whose ``/diagnostics`` never arrived is scored too.
+    """
+    settings = settings or node_settings()
+    order = [list(joint_names).index(j) for j in robot.joint_names]
+    out = {}
+    for g in gestures:
+        q = np.asarray(g.positions, dtype=float)[:, order]
+        scorer = SimilarityScore(robot, gesture_targets(lib[g.name]), settings.weights,
+                                 reference_robot=robot)
+        total = scorer.evaluate(q[:, :N_JOINTS], q[:, N_JOINTS:], np.arange(len(q)))
+        out[g.name] = float(np.max(total))
+    return out
 
 
 def worst_gap(scores, best):

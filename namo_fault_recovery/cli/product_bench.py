@@ -50,9 +50,9 @@ def _pct(values):
             'p95_ms': float(np.percentile(arr, 95)), 'max_ms': float(arr.max())}
 
 
-def _origin(client, stamp):
+def _origin(client, stamp, timeout=1.0):
     from ..ros import diagnostic_keys as keys
-    diag = client.latest_diagnostics(lambda d: d.describes(stamp), timeout=3.0)
+    diag = client.latest_diagnostics(lambda d: d.describes(stamp), timeout=timeout)
     return None if diag is None else diag.get(keys.RECONFIGURATION, keys.LIBRARY_ORIGIN)
 
 
@@ -68,14 +68,21 @@ def _clear(client, timeout):
 
 
 def _fault(client, joints, angles, timeout):
-    """Publish a fault; return (its first described library or None, publication time)."""
+    """
+    Publish a fault; return (its first library or None, publication time).
+
+    Called after the library of a clear arrived: the next version is the fault's.  A
+    version whose ``/diagnostics`` never came (superseded at once by a refined one) is
+    accepted, as ``bench latency`` does; a described one must lock the joints.
+    """
     stamp = client.inbox.newest_stamp()
     t0 = time.monotonic()
     client.publish_fault(joints, angles, timeout)
     while True:
-        library = client.next_library(stamp, max(t0 + timeout - time.monotonic(), 0.0))
-        if library is None or (library.described
-                               and set(joints) <= set(library.result.locks)):
+        library = client.next_library(stamp, max(t0 + timeout - time.monotonic(), 0.0),
+                                      diagnostics_timeout=1.0)
+        if library is None or not library.described or set(joints) <= set(
+                library.result.locks):
             return library, t0
         stamp = library.stamp
 
@@ -139,6 +146,7 @@ def _latency_summary(samples, target_ms, expect):
 def _refine_case(client, name, best, timeout, window):
     """Fault one refinement set; return the versions the node published in ``window``."""
     from ..benchmarks import product
+    robot, lib = product.load_models()
     faults = product.refine_faults(name)
     joints = list(faults)
     angles = None
@@ -150,17 +158,16 @@ def _refine_case(client, name, best, timeout, window):
     time.sleep(0.2)
     library, t0 = _fault(client, joints, angles, timeout)
     versions = []
-    while library is not None:
-        if library.described:
-            scores = {g.name: g.score_after for g in library.result.gestures}
-            versions.append({'t_s': library.received - t0,
-                             'origin': _origin(client, library.stamp),
-                             'scores': scores,
-                             'worst_gap': product.worst_gap(scores, best)})
-        left = t0 + window - time.monotonic()
-        if left <= 0:
-            break
-        library = client.next_library(library.stamp, left)
+    while library is not None and library.received - t0 <= window:
+        # Scored from the published positions: every version counts, described or not.
+        scores = product.published_scores(robot, lib, library.joint_names,
+                                          library.result.gestures)
+        versions.append({'t_s': library.received - t0,
+                         'origin': _origin(client, library.stamp, 0.5),
+                         'described': library.described, 'scores': scores,
+                         'worst_gap': product.worst_gap(scores, best)})
+        left = max(t0 + window - time.monotonic(), 0.0)
+        library = client.next_library(library.stamp, left, diagnostics_timeout=0.5)
     within = [v['t_s'] for v in versions if v['worst_gap'] <= REFINE_WITHIN]
     first = min(within) if within else None
     return {'set': name, 'faults_deg': product.REFINE_SETS[name], 'versions': versions,
