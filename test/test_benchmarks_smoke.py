@@ -239,7 +239,7 @@ def test_product_bench_node_parts(tmp_path):
     code, text = run_cli(['bench', 'product', '--update-optima', '--optima-file', str(optima),
                           '--optima-seeds', '1', '--demo-optima-seeds', '1', '--jobs', '1',
                           '--parts', 'latency,refine', '--joints', 'right_arm_joint2',
-                          '--no-burner', '--refine-window', '1',
+                          '--no-burner', '--refine-window', '1', '--refine-reps', '1',
                           '--out', str(tmp_path / 'out'), '--quiet'])
     assert code == 0, text
     summary = json.loads((tmp_path / 'out' / 'summary.json').read_text())
@@ -248,4 +248,5 @@ def test_product_bench_node_parts(tmp_path):
     assert summary['latency_miss']['conditions']['idle']['origins'] == {'deadline': 1}
     cases = summary['refine']['cases']
     assert len(cases) == 3 and all(c['versions'] for c in cases)
+    assert set(summary['refine']['sets']) == {'right2+right4', 'right1+left3', 'right2@-20deg'}
     assert cases[0]['versions'][0]['origin'] == 'deadline'
