@@ -13,6 +13,7 @@ from namo_fault_recovery.objective.score import gesture_targets, SimilarityScore
 from namo_fault_recovery.recovery.keyframes import reconfigure_library
 import numpy as np
 import pytest
+import yaml
 
 PNG_MAGIC = b'\x89PNG\r\n\x1a\n'
 
@@ -208,3 +209,44 @@ def test_motion_bench_compares_both_methods_on_the_wave(tmp_path, demo_library):
         for row in (kriging, per_point):
             assert _finite(row['tip_error_mean_mm']) and _finite(row['jump_before_deg'])
             assert row['tip_error_mean_mm'] <= row['tip_error_max_mm'] + 1e-9
+
+
+def test_product_bench_offline_parts(tmp_path):
+    optima = tmp_path / 'optima.yaml'
+    code, text = run_cli(['bench', 'product', '--update-optima', '--optima-file', str(optima),
+                          '--optima-seeds', '1', '--demo-optima-seeds', '1', '--jobs', '1',
+                          '--parts', 'quality,table,demo', '--joints', 'right_arm_joint2',
+                          '--seeds', '1', '--demo-seeds', '1', '--no-burner',
+                          '--out', str(tmp_path / 'out'), '--quiet'])
+    assert code == 0, text
+    for part in ('quality at the deadline', 'contingency table', 'demo library'):
+        assert part in text
+    doc = yaml.safe_load(optima.read_text())
+    product_sets = doc['libraries']['product']['fault_sets']
+    assert len(product_sets) == 1 + 3          # the fault asked for + the refinement sets
+    assert doc['made']['commit'] and doc['libraries']['demo']['seeds'] == 1
+    summary = json.loads((tmp_path / 'out' / 'summary.json').read_text())
+    assert summary['quality']['conditions']['idle']['runs'] == 1
+    assert len(summary['table']['entries']) == 1
+    assert 'circle' in summary['demo']['runs'][0]['scores']
+    # The seeds of the stored optimum, rerun, are at the optimum (gap 0).
+    assert all(math.isfinite(g) for g in summary['quality']['runs'][0]['gaps'].values())
+
+
+def test_product_bench_node_parts(tmp_path):
+    pytest.importorskip('rclpy')
+    optima = tmp_path / 'optima.yaml'
+    code, text = run_cli(['bench', 'product', '--update-optima', '--optima-file', str(optima),
+                          '--optima-seeds', '1', '--demo-optima-seeds', '1', '--jobs', '1',
+                          '--parts', 'latency,refine', '--joints', 'right_arm_joint2',
+                          '--no-burner', '--refine-window', '1', '--refine-reps', '1',
+                          '--out', str(tmp_path / 'out'), '--quiet'])
+    assert code == 0, text
+    summary = json.loads((tmp_path / 'out' / 'summary.json').read_text())
+    hit = summary['latency_hit']['conditions']['idle']
+    assert hit['n'] == 1 and hit['origins'] == {'table': 1}
+    assert summary['latency_miss']['conditions']['idle']['origins'] == {'deadline': 1}
+    cases = summary['refine']['cases']
+    assert len(cases) == 3 and all(c['versions'] for c in cases)
+    assert set(summary['refine']['sets']) == {'right2+right4', 'right1+left3', 'right2@-20deg'}
+    assert cases[0]['versions'][0]['origin'] == 'deadline'

@@ -14,6 +14,8 @@ These are commands, not timed tests (``namo-recovery bench ...``).  Each module 
 - :mod:`.detection`: stuck-joint detection and recovery on the simulated Namo;
 - :mod:`.lock_compare`: ``average`` against ``optimal`` lock angles, every single fault;
 - :mod:`.detection`: stuck-joint detection and recovery on the simulator's physics;
+- :mod:`.product`: the served problem (packaged library, node settings): best-known
+  optima, quality at the deadline, the contingency table (``bench product``);
 - :mod:`.common`: models, cases, statistics and output files shared by the above;
 - :mod:`.paper_data`: the paper's published tables, to print beside ours;
 - :mod:`.plotting`: the figures (matplotlib, optional).

@@ -8,6 +8,8 @@ The ``namo-recovery`` command line, one module per command group.
   running node (rclpy imported lazily, as in every ROS command);
 - :mod:`.demo`: ``demo``, a private node driven end to end;
 - :mod:`.latency_bench`: ``bench latency``;
+- :mod:`.product_bench`: ``bench product``, the served problem (offline parts in
+  ``benchmarks/product.py``, the DDS parts here);
 - :mod:`.stream_bench_command`: ``bench stream`` (the measurement is in ``ros/``);
 - :mod:`.export`: ``export --format play_motion2`` (from the running node or a solve);
 - :mod:`.player_commands`: ``play``, ``demo-play`` and ``bench detection``, around

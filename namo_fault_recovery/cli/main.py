@@ -274,13 +274,14 @@ def build_parser():
 
     add_solve_parser(sub)
     from . import (bench, beyond, demo, export, latency_bench, node_commands,
-                   player_commands, stream_bench_command)
+                   player_commands, product_bench, stream_bench_command)
     bench_sub = bench.register(sub)
     beyond.register(bench_sub)
     node_commands.register(sub, parser)      # fault, clear, reconfigure, library; --namespace
     demo.register(sub)                       # demo
     latency_bench.register_bench(bench_sub)  # bench latency
     stream_bench_command.register(bench_sub)   # bench stream
+    product_bench.register_bench(bench_sub)    # bench product
     export.register(sub)                     # export --format play_motion2
     player_commands.register(sub, bench_sub)   # play, demo-play, bench detection
     from . import urdf as urdf_cli

@@ -1,8 +1,9 @@
 """
-A private ``recovery_node`` process for ``demo`` and ``bench latency --start-node``.
+A private ``recovery_node`` process for ``demo`` and the node benchmarks.
 
-It runs in its own domain (``70 + pid % 30`` unless one is given) and, with a namespace,
-under ``--ros-args -r __ns:=NS``; its state goes to a temporary directory and its output
+``bench latency --start-node`` and ``bench product`` start one too.  It runs in its own
+domain (``70 + pid % 30`` unless one is given) and, with a namespace, under
+``--ros-args -r __ns:=NS``; its state goes to a temporary directory and its output
 to a log that is shown when it does not stop cleanly.
 """
 
@@ -34,7 +35,7 @@ def private_domain():
 class PrivateNode:
     """The node as a subprocess with a temporary state directory; a context manager."""
 
-    def __init__(self, args, domain_id, namespace='/', out=None):
+    def __init__(self, args, domain_id, namespace='/', out=None, extra_ros_args=()):
         self.domain_id = domain_id
         self.workdir = tempfile.mkdtemp(prefix='namo_node_')
         ros_args = ['-p', f'state_dir:={self.workdir}']
@@ -46,6 +47,7 @@ class PrivateNode:
                 ros_args += ['-p', f'{option}:={os.path.abspath(value)}']
         for param in getattr(args, 'node_params', None) or ():
             ros_args += ['-p', param]
+        ros_args += list(extra_ros_args)          # e.g. ('-p', 'contingency_table:=false')
         env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED='1')
         self._log = open(os.path.join(self.workdir, 'node.log'), 'w+b')
         cmd = node_command() + ['--ros-args'] + ros_args

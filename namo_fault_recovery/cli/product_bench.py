@@ -1,0 +1,410 @@
+"""
+``namo-recovery bench product``: one benchmark of the served problem.
+
+The packaged library under the node's settings.  Parts (``--parts``, default all):
+
+- ``quality``: every single fault x ``--seeds`` through the engine's entry point at the
+  1 s deadline, idle and with a CPU burner on the other core: each gesture's gap to the
+  best-known optimum; target every gesture within 1% in >= 99% of the runs;
+- ``table``: the contingency table as the node builds it; target every gesture of
+  every entry within 0.5%;
+- ``latency``: a real ``recovery_node`` (private domain, temporary ``state_dir``) over
+  DDS, fault -> full library received: table hits once its table is built (p95 <= 15
+  ms, idle and with the burner), and misses with ``contingency_table:=false`` (p95 <=
+  200 ms);
+- ``refine``: double faults and a measured lock on the node without a table: the gap of
+  each library version it publishes (scored from its positions) against time, over
+  ``--refine-reps`` faults per set; target within 0.5% by 10 s;
+- ``demo``: ``quality`` on the demo library (``config/demo_motions.yaml``, the circle).
+
+The best-known optima come from ``config/product_best_known.yaml``;
+``--update-optima`` regenerates them first (many seeds without a deadline).  Figures
+on stdout, progress on stderr, ``summary.json`` in ``--out`` (default
+``bench_out/product``).
+"""
+
+import json
+import math
+from pathlib import Path
+import time
+from types import SimpleNamespace
+
+import numpy as np
+
+from .private_node import private_domain, PrivateNode
+from .ros_common import CommandError, EXIT_USAGE, wrap
+
+PARTS = ('quality', 'table', 'latency', 'refine', 'demo')
+HIT_P95_MS = 15.0
+MISS_P95_MS = 200.0
+REFINE_WITHIN = 0.005
+REFINE_BY_SEC = 10.0
+OPTIMA_SEEDS = 256            # benchmarks.product.OPTIMA_SEEDS (not imported: heavy)
+DEMO_OPTIMA_SEEDS = 32        # benchmarks.product.DEMO_OPTIMA_SEEDS
+
+
+def _pct(values):
+    arr = np.asarray(values, dtype=float) * 1000.0
+    if arr.size == 0:
+        return {'n': 0, 'p50_ms': math.nan, 'p95_ms': math.nan, 'max_ms': math.nan}
+    return {'n': int(arr.size), 'p50_ms': float(np.percentile(arr, 50)),
+            'p95_ms': float(np.percentile(arr, 95)), 'max_ms': float(arr.max())}
+
+
+def _origin(client, stamp, timeout=1.0):
+    from ..ros import diagnostic_keys as keys
+    diag = client.latest_diagnostics(lambda d: d.describes(stamp), timeout=timeout)
+    return None if diag is None else diag.get(keys.RECONFIGURATION, keys.LIBRARY_ORIGIN)
+
+
+def _clear(client, timeout):
+    """Clear the faults; return once the library of the answer arrived."""
+    stamp = client.inbox.newest_stamp()
+    answer = client.clear_faults(timeout)
+    if not answer.success:
+        raise CommandError(f'clear_faults failed: {answer.message}')
+    after = stamp if answer.library_stamp is None else answer.library_stamp - 1
+    if client.next_library(after, timeout, diagnostics_timeout=0.0) is None:
+        raise CommandError(f'no library within {timeout:g} s of clear_faults')
+
+
+def _fault(client, joints, angles, timeout):
+    """
+    Publish a fault; return (its first library or None, publication time).
+
+    Called after the library of a clear arrived: the next version is the fault's.  A
+    version whose ``/diagnostics`` never came (superseded at once by a refined one) is
+    accepted, as ``bench latency`` does; a described one must lock the joints.
+    """
+    stamp = client.inbox.newest_stamp()
+    t0 = time.monotonic()
+    client.publish_fault(joints, angles, timeout)
+    while True:
+        library = client.next_library(stamp, max(t0 + timeout - time.monotonic(), 0.0),
+                                      diagnostics_timeout=1.0)
+        if library is None or not library.described or set(joints) <= set(
+                library.result.locks):
+            return library, t0
+        stamp = library.stamp
+
+
+def _start(out, extra=()):
+    domain = private_domain()
+    node = PrivateNode(SimpleNamespace(robot_file=None, gesture_file=None), domain, '/',
+                       out, extra_ros_args=extra)
+    return node, domain
+
+
+def _wait_table(node, count, timeout, out, t0):
+    """Wait until the node's table file holds ``count`` entries; return seconds since t0."""
+    path = Path(node.workdir) / 'contingency_table.json'
+
+    while time.monotonic() - t0 < timeout:
+        try:
+            entries = len(json.loads(path.read_text())['entries'])
+        except (OSError, ValueError, KeyError, TypeError):
+            entries = 0
+        if entries >= count:
+            out.write(f'node table: {entries} entries {time.monotonic() - t0:.1f} s after '
+                      f'the node was started\n')
+            return time.monotonic() - t0
+        if node.proc.poll() is not None:
+            raise CommandError('the node ended before its table was built')
+        time.sleep(0.25)
+    raise CommandError(f'the node table did not reach {count} entries in {timeout:g} s')
+
+
+def _latency_rounds(client, joints, timeout, burner):
+    """Fault each joint in turn (clearing between); return the samples."""
+    from ..benchmarks.deadline import CpuBurner
+    import contextlib
+    samples = []
+    with (CpuBurner() if burner else contextlib.nullcontext()):
+        for joint in joints:
+            _clear(client, timeout)
+            time.sleep(0.2)
+            library, t0 = _fault(client, [joint], None, timeout)
+            if library is None:
+                samples.append({'joint': joint, 'latency_s': None, 'origin': None})
+                continue
+            samples.append({'joint': joint, 'latency_s': library.received - t0,
+                            'origin': _origin(client, library.stamp),
+                            'engine_wall_s': library.result.wall_time})
+    return samples
+
+
+def _latency_summary(samples, target_ms, expect):
+    ok = [s['latency_s'] for s in samples if s['latency_s'] is not None]
+    stats = _pct(ok)
+    stats.update(failures=len(samples) - len(ok), target_p95_ms=target_ms,
+                 expected_origin=expect,
+                 origins={o: sum(str(s['origin']) == o for s in samples)
+                          for o in sorted({str(s['origin']) for s in samples})},
+                 met=bool(ok) and len(ok) == len(samples) and stats['p95_ms'] <= target_ms)
+    return stats
+
+
+def _refine_case(client, name, best, timeout, window):
+    """Fault one refinement set; return the versions the node published in ``window``."""
+    from ..benchmarks import product
+    robot, lib = product.load_models()
+    faults = product.refine_faults(name)
+    joints = list(faults)
+    angles = None
+    if any(a is not None for a in faults.values()):
+        if not all(a is not None for a in faults.values()):
+            raise CommandError(f'{name}: give every angle or none')
+        angles = [faults[j] for j in joints]
+    _clear(client, timeout)
+    time.sleep(0.2)
+    library, t0 = _fault(client, joints, angles, timeout)
+    versions = []
+    while library is not None and library.received - t0 <= window:
+        # Scored from the published positions: every version counts, described or not.
+        scores = product.published_scores(robot, lib, library.joint_names,
+                                          library.result.gestures)
+        versions.append({'t_s': library.received - t0,
+                         'origin': _origin(client, library.stamp, 0.5),
+                         'described': library.described, 'scores': scores,
+                         'worst_gap': product.worst_gap(scores, best)})
+        left = max(t0 + window - time.monotonic(), 0.0)
+        library = client.next_library(library.stamp, left, diagnostics_timeout=0.5)
+    within = [v['t_s'] for v in versions if v['worst_gap'] <= REFINE_WITHIN]
+    first = min(within) if within else None
+    return {'set': name, 'faults_deg': product.REFINE_SETS[name], 'versions': versions,
+            'first_within_s': first,
+            'met': first is not None and first <= REFINE_BY_SEC,
+            'final_gap': versions[-1]['worst_gap'] if versions else None}
+
+
+def _refine_sets(cases):
+    """Return per fault set: runs, share met, median and worst time to within 0.5%."""
+    sets = {}
+    for c in cases:
+        sets.setdefault(c['set'], []).append(c)
+    out = {}
+    for name, cs in sets.items():
+        firsts = [c['first_within_s'] for c in cs]
+        reached = [f for f in firsts if f is not None]
+        out[name] = {'runs': len(cs), 'share_met': float(np.mean([c['met'] for c in cs])),
+                     'median_first_within_s': (float(np.median(reached)) if reached
+                                               else None),
+                     'final_gaps': [c['final_gap'] for c in cs],
+                     'met': all(c['met'] for c in cs)}
+    return out
+
+
+def run_dds(args, out, best_doc, parts, joints):
+    """Run the latency and refine parts against private nodes; return their results."""
+    from ..benchmarks import product
+    from ..recovery.contingency import entry_key, table_locks
+    from ..ros.client import RecoveryClient
+    results = {}
+    conditions = [False] + ([] if args.no_burner else [True])
+    if 'latency' in parts:
+        started = time.monotonic()
+        node, domain = _start(out)
+        try:
+            with RecoveryClient('/', domain) as client:
+                client.current_library(args.timeout, diagnostics_timeout=0.0)
+                waited = _wait_table(node, len(product.load_models()[0].joint_names),
+                                     args.table_timeout, out, started)
+                hit = {}
+                for burner in conditions:
+                    cond = 'cpu burner' if burner else 'idle'
+                    samples = _latency_rounds(client, joints, args.timeout, burner)
+                    hit[cond] = dict(_latency_summary(samples, HIT_P95_MS, 'table'),
+                                     samples=samples)
+                results['latency_hit'] = {'table_wait_s': waited, 'conditions': hit}
+        finally:
+            node.stop()
+    if 'latency' in parts or 'refine' in parts:
+        node, domain = _start(out, ('-p', 'contingency_table:=false'))
+        try:
+            with RecoveryClient('/', domain) as client:
+                client.current_library(args.timeout, diagnostics_timeout=0.0)
+                if 'latency' in parts:
+                    miss = {}
+                    for burner in conditions:
+                        cond = 'cpu burner' if burner else 'idle'
+                        samples = _latency_rounds(client, joints, args.timeout, burner)
+                        miss[cond] = dict(_latency_summary(samples, MISS_P95_MS, 'deadline'),
+                                          samples=samples)
+                    results['latency_miss'] = {'conditions': miss}
+                if 'refine' in parts:
+                    robot, lib = product.load_models()
+                    settings = product.node_settings()
+                    cases = []
+                    for name in product.REFINE_SETS:
+                        locks = table_locks(robot, lib, product.refine_faults(name), settings)
+                        best = product.best_of(best_doc, 'product', entry_key(locks))
+                        if best is None:
+                            raise CommandError(f'no best-known stored for {name}; run with '
+                                               f'--update-optima')
+                        for rep in range(args.refine_reps):
+                            case = _refine_case(client, name, best, args.timeout,
+                                                args.refine_window)
+                            cases.append(dict(case, rep=rep))
+                    results['refine'] = {'window_s': args.refine_window,
+                                         'reps': args.refine_reps, 'cases': cases,
+                                         'sets': _refine_sets(cases)}
+        finally:
+            node.stop()
+    return results
+
+
+def print_dds(out, results):
+    """Print the latency and refinement tables."""
+    from ..benchmarks import common
+    rows = []
+    for label, key in (('table hit', 'latency_hit'), ('miss (no table)', 'latency_miss')):
+        for cond, s in results.get(key, {}).get('conditions', {}).items():
+            origins = ' '.join(f'{o}:{n}' for o, n in s['origins'].items())
+            rows.append([label, cond, s['n'], s['failures'], origins,
+                         f"{s['p50_ms']:.1f}", f"{s['p95_ms']:.1f}", f"{s['max_ms']:.1f}",
+                         f"<= {s['target_p95_ms']:g}", 'met' if s['met'] else 'MISSED'])
+    if rows:
+        out.write('\n== node latency over DDS: fault published -> full library received '
+                  '(ms) ==\n')
+        if 'latency_hit' in results:
+            out.write(f"table of 14 entries ready {results['latency_hit']['table_wait_s']:.1f} "
+                      f's after the node was started\n')
+        out.write(common.text_table(['path', 'condition', 'n', 'failed', 'origins', 'p50',
+                                     'p95', 'max', 'target p95', 'verdict'], rows))
+    if 'refine' in results:
+        out.write('\n== refinement curve (node without table; worst gesture gap to '
+                  'best-known, % at t s after the fault; window '
+                  f"{results['refine']['window_s']:g} s) ==\n")
+        rows = []
+        for c in results['refine']['cases']:
+            curve = ' '.join(f"{v['t_s']:.2f}s:{v['origin'] or '?'}:"
+                             f"{100 * v['worst_gap']:.2f}%" for v in c['versions'])
+            first = c['first_within_s']
+            rows.append([c['set'], c['rep'], len(c['versions']), curve,
+                         '-' if first is None else f'{first:.2f}',
+                         f'<= {REFINE_BY_SEC:g}', 'met' if c['met'] else 'MISSED'])
+        out.write(common.text_table(['fault set', 'rep', 'versions', 't:origin:gap',
+                                     'within 0.5% at s', 'target s', 'verdict'], rows))
+
+
+def bench_product(args, out):
+    """Run the served problem's benchmark (see the module docstring)."""
+    from ..benchmarks import common, product
+    parts = [p.strip() for p in args.parts.split(',') if p.strip()]
+    unknown = [p for p in parts if p not in PARTS]
+    if unknown:
+        raise CommandError(f'--parts: unknown part {unknown[0]!r}; expected some of '
+                           f'{",".join(PARTS)}', EXIT_USAGE)
+    for option in ('seeds', 'demo_seeds', 'jobs', 'optima_seeds', 'demo_optima_seeds',
+                   'refine_reps'):
+        if getattr(args, option) < 1:
+            raise CommandError(f"--{option.replace('_', '-')}: expected an integer >= 1",
+                               EXIT_USAGE)
+    robot = product.load_models()[0]
+    joints = list(args.joints) if args.joints else list(robot.joint_names)
+    unknown = [j for j in joints if j not in robot.joint_names]
+    if unknown:
+        raise CommandError(f'--joints: unknown joint {unknown[0]!r}', EXIT_USAGE)
+    out_dir = Path(args.out) if args.out else Path(common.DEFAULT_OUT_ROOT) / 'product'
+    optima_file = Path(args.optima_file) if args.optima_file else product.best_known_path()
+    summary = {'machine': common.machine_info(), 'parts': parts, 'joints': joints}
+    out.write(common.format_machine(summary['machine']) + '\n')
+    if args.update_optima:
+        doc = product.generate_optima(out, args.optima_seeds, args.demo_optima_seeds,
+                                      args.jobs, joints=args.joints, progress=not args.quiet)
+        product.write_product_optima(optima_file, doc)
+        out.write(f'written: {optima_file}\n')
+    try:
+        best_doc = product.load_product_best_known(optima_file)
+    except FileNotFoundError:
+        raise CommandError(f'{optima_file}: no best-known optima; run with --update-optima',
+                           EXIT_USAGE) from None
+    made = best_doc.get('made', {})
+    out.write(f"best-known optima: {best_doc['source']} (made {made.get('date')}, commit "
+              f"{made.get('commit')}, {best_doc['libraries']['product']['seeds']} seeds per "
+              f'fault set)\n')
+    summary['optima'] = {'file': best_doc['source'], 'made': made}
+    seeds_given = args.joints or None
+    try:
+        if 'quality' in parts:
+            summary['quality'] = product.run_quality(
+                out, best_doc, 'product', args.seeds, not args.no_burner, seeds_given,
+                progress=not args.quiet)
+        if 'table' in parts:
+            summary['table'] = product.run_table(out, best_doc, args.jobs, seeds_given)
+        if 'latency' in parts or 'refine' in parts:
+            dds = run_dds(args, out, best_doc, parts, joints)
+            summary.update(dds)
+            print_dds(out, dds)
+        if 'demo' in parts:
+            summary['demo'] = product.run_quality(
+                out, best_doc, 'demo', args.demo_seeds, not args.no_burner, seeds_given,
+                progress=not args.quiet)
+    except KeyError as exc:
+        raise CommandError(str(exc.args[0]), EXIT_USAGE) from None
+    common.write_json(out_dir / 'summary.json', summary)
+    out.write(f"\n{_verdicts(summary)}written: {out_dir / 'summary.json'}\n")
+    return 0
+
+
+def _verdicts(s):
+    """Return the one-line verdicts of every part run."""
+    lines = []
+    for key, label in (('quality', 'quality at the deadline'), ('demo', 'demo library')):
+        for cond, c in s.get(key, {}).get('conditions', {}).items():
+            lines.append(f"{label} ({cond}): {100 * c['share_all_within']:.1f}% of runs all "
+                         f"within 1% (target 99%): {'met' if c['met'] else 'MISSED'}")
+    if 'table' in s:
+        lines.append(f"table: {100 * s['table']['share_within']:.1f}% of entries within "
+                     f"0.5% (target 100%): {'met' if s['table']['met'] else 'MISSED'}")
+    for key, label in (('latency_hit', 'table hit'), ('latency_miss', 'miss')):
+        for cond, c in s.get(key, {}).get('conditions', {}).items():
+            lines.append(f"latency {label} ({cond}): p95 {c['p95_ms']:.1f} ms (target "
+                         f"<= {c['target_p95_ms']:g}): {'met' if c['met'] else 'MISSED'}")
+    for name, c in s.get('refine', {}).get('sets', {}).items():
+        gaps = ' '.join(f'{100 * g:.2f}%' for g in c['final_gaps'] if g is not None)
+        lines.append(f"refine {name}: within 0.5% by 10 s in {100 * c['share_met']:.0f}% of "
+                     f"{c['runs']} runs (final gaps {gaps}; target 100%): "
+                     f"{'met' if c['met'] else 'MISSED'}")
+    return ''.join(line + '\n' for line in lines)
+
+
+def register_bench(bench_subparsers):
+    """Add ``product`` to the subparsers of a ``bench`` command."""
+    p = bench_subparsers.add_parser(
+        'product', help='the served problem: optima, deadline quality, table, node '
+                        'latency, refinement, demo library')
+    p.add_argument('--parts', default=','.join(PARTS), metavar='LIST',
+                   help=f'comma-separated parts to run (default: {",".join(PARTS)})')
+    p.add_argument('--seeds', type=int, default=10,
+                   help='seeds per single fault for quality (default 10)')
+    p.add_argument('--demo-seeds', type=int, default=3,
+                   help='seeds per single fault for the demo library (default 3)')
+    p.add_argument('--joints', nargs='+', default=None, metavar='JOINT',
+                   help='single faults to run (default: all 14 joints)')
+    p.add_argument('--jobs', type=int, default=2,
+                   help='worker processes for the optima and the table (default 2)')
+    p.add_argument('--no-burner', action='store_true', help='skip the CPU-burner passes')
+    p.add_argument('--update-optima', action='store_true',
+                   help='regenerate the best-known optima first (see --optima-file)')
+    p.add_argument('--optima-seeds', type=int, default=OPTIMA_SEEDS,
+                   help=f'seeds per fault set for --update-optima (default {OPTIMA_SEEDS})')
+    p.add_argument('--demo-optima-seeds', type=int, default=DEMO_OPTIMA_SEEDS,
+                   help=f'seeds per fault set of the demo library (default '
+                        f'{DEMO_OPTIMA_SEEDS})')
+    p.add_argument('--optima-file', default=None, metavar='FILE',
+                   help='optima to read (and write) (default: the package config '
+                        'product_best_known.yaml)')
+    p.add_argument('--refine-window', type=float, default=12.0, metavar='SEC',
+                   help='how long to collect refined versions after a fault (default 12)')
+    p.add_argument('--refine-reps', type=int, default=3, metavar='N',
+                   help='faults per refinement set (default 3)')
+    p.add_argument('--table-timeout', type=float, default=600.0, metavar='SEC',
+                   help="how long to wait for the node's table (default 600)")
+    p.add_argument('--timeout', type=float, default=30.0, metavar='SEC',
+                   help='how long to wait for the node per step (default 30)')
+    p.add_argument('--out', default=None, metavar='DIR',
+                   help='output directory (default: bench_out/product)')
+    p.add_argument('--quiet', action='store_true', help='no progress lines on stderr')
+    p.set_defaults(func=wrap(bench_product))
+    return p
