@@ -363,6 +363,7 @@ class RecoveryClient:
         self.node.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC,
                                       self.inbox.add_diagnostics, 50)
         self._fault_pub = self.node.create_publisher(JointState, FAULT_TOPIC, 10)
+        self._service_clients = {}             # service name -> rclpy client, kept
         self._executor = SingleThreadedExecutor(context=self.context)
         self._executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, daemon=True)
@@ -490,20 +491,23 @@ class RecoveryClient:
 
     def _trigger(self, service, timeout):
         from std_srvs.srv import Trigger
-        client = self.node.create_client(Trigger, service)
-        try:
-            if not client.wait_for_service(timeout_sec=timeout):
-                raise NodeUnreachable(
-                    f'no recovery_node found: service {client.service_name} is not available '
-                    f'within {timeout:g} s ({self.where()}); is the node running?')
-            done = threading.Event()
-            future = client.call_async(Trigger.Request())
-            future.add_done_callback(lambda _: done.set())
-            if not done.wait(timeout):
-                raise ClientError(f'no answer from {client.service_name} within {timeout:g} s')
-            return TriggerAnswer.from_response(future.result())
-        finally:
-            self.node.destroy_client(client)
+        # One service client per service, kept: a call then costs one round trip, not a
+        # discovery of the service each time.
+        client = self._service_clients.get(service)
+        if client is None:
+            client = self._service_clients[service] = self.node.create_client(Trigger,
+                                                                              service)
+        if not client.wait_for_service(timeout_sec=timeout):
+            raise NodeUnreachable(
+                f'no recovery_node found: service {client.service_name} is not available '
+                f'within {timeout:g} s ({self.where()}); is the node running?')
+        done = threading.Event()
+        future = client.call_async(Trigger.Request())
+        future.add_done_callback(lambda _: done.set())
+        if not done.wait(timeout):
+            client.remove_pending_request(future)
+            raise ClientError(f'no answer from {client.service_name} within {timeout:g} s')
+        return TriggerAnswer.from_response(future.result())
 
     def reconfigure(self, timeout=15.0):
         """Call reconfigure_gestures (what the gesture player does); return the answer."""

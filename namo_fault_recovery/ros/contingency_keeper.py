@@ -199,6 +199,7 @@ class ContingencyKeeper:
     def _receive(self, conn, proc):
         began = time.monotonic()
         built = 0
+        cpu_total = 0.0
         while True:
             try:
                 kind, locks, result, cpu = conn.recv()
@@ -209,13 +210,15 @@ class ContingencyKeeper:
                     if self._proc is proc:
                         self.building = False
                 self._log('info', f'contingency table: {built} entries built in '
-                                  f'{time.monotonic() - began:.1f} s')
+                                  f'{time.monotonic() - began:.1f} s ({cpu_total:.1f} s of '
+                                  f'CPU)')
                 return
             with self._lock:
                 if self._proc is not proc or self._table is None:
                     return
                 self._table.add(result, locks)
                 self.build_cpu_sec += cpu
+                cpu_total += cpu
                 table = self._table
             built += 1
             self._save(table)
