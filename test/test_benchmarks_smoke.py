@@ -250,3 +250,15 @@ def test_product_bench_node_parts(tmp_path):
     assert len(cases) == 3 and all(c['versions'] for c in cases)
     assert set(summary['refine']['sets']) == {'right2+right4', 'right1+left3', 'right2@-20deg'}
     assert cases[0]['versions'][0]['origin'] == 'deadline'
+
+
+def test_a_wave_that_flips_the_wrist_too_fast_is_not_playable(robot, product_library):
+    from dataclasses import replace
+
+    from namo_fault_recovery.benchmarks.product import playable
+    from namo_fault_recovery.recovery.result import reference_result
+    bye = reference_result(product_library)['bye']
+    assert playable(robot, bye)                      # the design respects the limits
+    positions = [list(q) for q in bye.positions]
+    positions[1][5] -= 3.0                           # right joint 6 swings 172 deg and back
+    assert not playable(robot, replace(bye, positions=tuple(map(tuple, positions))))

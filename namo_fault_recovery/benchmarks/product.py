@@ -152,12 +152,31 @@ def _init_worker(settings):
         _WORKER[which] = (robot, lib, typical_points(robot, lib, settings.vq_distortion_mm))
 
 
+def playable(robot, gesture):
+    """
+    Return True if a GestureResult's keyframes respect the joints' velocity limits.
+
+    Between successive keyframes no joint may need more than its limit
+    (``robot.velocity_limits``, per arm joint); the approach to the first keyframe is
+    the player's to plan.  A gesture that breaks it is not played as designed (the
+    player stretches it), so it cannot be a best-known optimum.
+    """
+    limits = np.tile(np.asarray(robot.velocity_limits, dtype=float), 2)
+    q = np.asarray(gesture.positions, dtype=float)
+    t = np.asarray(gesture.times, dtype=float)
+    if len(t) < 2:
+        return True
+    speed = np.abs(np.diff(q, axis=0)) / np.maximum(np.diff(t), 1e-9)[:, None]
+    return bool(np.all(speed <= limits * (1 + 1e-9)))
+
+
 def _optimum_task(task):
     which, key, faults, seed = task
     robot, lib, quant = _WORKER[which]
     built = measure_entry(robot, lib, faults, _WORKER['settings'], seeds=(seed,),
                           quantisations=quant)
-    return which, key, seed, {g.name: g.score_after for g in built.result.gestures}
+    return which, key, seed, {g.name: (g.score_after, playable(robot, g))
+                              for g in built.result.gestures}
 
 
 def optima_plan(settings, seeds=OPTIMA_SEEDS, demo_seeds=DEMO_OPTIMA_SEEDS, joints=None):
@@ -206,7 +225,9 @@ def generate_optima(out, seeds=OPTIMA_SEEDS, demo_seeds=DEMO_OPTIMA_SEEDS, jobs=
                         f'--demo-optima-seeds {demo_seeds} --jobs {jobs}',
         'method': 'per fault set, recover() without a deadline (measure_entry, one seed '
                   'each, seeds 0..N-1, the node settings and preset); per gesture the '
-                  'lowest score_after over the seeds',
+                  'lowest score_after over the seeds whose keyframes respect the joint '
+                  'velocity limits (a wave that flips the wrist faster than the joint '
+                  'can move is not an optimum a robot can play)',
         'made': {'date': datetime.now(timezone.utc).strftime('%Y-%m-%dT%H:%M:%SZ'),
                  'commit': git_commit(), 'wall_sec': round(wall, 1), 'jobs': int(jobs),
                  'machine': common.machine_info()},
@@ -220,12 +241,19 @@ def generate_optima(out, seeds=OPTIMA_SEEDS, demo_seeds=DEMO_OPTIMA_SEEDS, jobs=
                  'fingerprint': table_fingerprint(robot, lib, settings), 'fault_sets': {}}
         for key, faults in sets.items():
             runs = sorted(found[(which, key)])
-            best = {g: min(sc[g] for _, sc in runs) for g in lib.names}
+            best, best_seed, unplayable = {}, {}, {}
+            for g in lib.names:
+                ok = [(sc[g][0], seed) for seed, sc in runs if sc[g][1]] or \
+                    [(sc[g][0], seed) for seed, sc in runs]
+                best[g], best_seed[g] = min(ok)
+                unplayable[g] = sum(1 for _, sc in runs if not sc[g][1])
+            scores = [{g: v[0] for g, v in sc.items()} for _, sc in runs]
             entry['fault_sets'][key] = {
                 'best': {g: float(v) for g, v in best.items()},
-                'best_seed': {g: int(min(runs, key=lambda r: r[1][g])[0]) for g in lib.names},
+                'best_seed': {g: int(v) for g, v in best_seed.items()},
+                'unplayable_seeds': {g: n for g, n in unplayable.items() if n},
                 'seeds_within_1pct': round(float(np.mean(
-                    [worst_gap(sc, best) <= QUALITY_WITHIN for _, sc in runs])), 4)}
+                    [worst_gap(sc, best) <= QUALITY_WITHIN for sc in scores])), 4)}
         doc['libraries'][which] = entry
     out.write(f'optima: {len(tasks)} runs in {wall:.0f} s ({jobs} jobs)\n')
     return doc
