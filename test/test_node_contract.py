@@ -282,7 +282,7 @@ def test_tool_length_set_at_run_time_re_adapts_the_motions(client, robot):
         assert recon['tool_arm'] == 'right'
         response = client.trigger('/reconfigure_gestures')
         assert response.success, response.message
-        assert 'for a 50 mm tool in the right hand:' in response.message
+        assert 'for a 50 mm tool in the right hand' in response.message
         assert 'no faults' not in response.message
         # The dense circle goes through its typical points and Kriging, and its
         # fingertip comes back towards the designed path (unadapted: 50 mm off).
