@@ -127,14 +127,19 @@ def _wait_table(node, count, timeout, out, t0, client=None):
     raise CommandError(f'the node table did not reach {count} entries in {timeout:g} s')
 
 
-def _build_cpu(node):
-    """Return the table build's CPU seconds from the node's log (None if not logged)."""
-    try:
-        text = Path(node.workdir, 'node.log').read_text(errors='replace')
-    except OSError:
-        return None
-    found = re.findall(r'entries built in [0-9.]+ s \(([0-9.]+) s of CPU', text)
-    return float(found[0]) if found else None
+def _build_cpu(node, timeout=10.0):
+    """Return the table builder process's CPU seconds from the node's log (None if not)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        try:
+            text = Path(node.workdir, 'node.log').read_text(errors='replace')
+        except OSError:
+            text = ''
+        found = re.findall(r'entries built in [0-9.]+ s \(([0-9.]+) s of CPU', text)
+        if found:
+            return float(found[0])
+        time.sleep(0.1)
+    return None
 
 
 def _latency_rounds(client, joints, timeout, burner):
