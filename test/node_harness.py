@@ -21,10 +21,8 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray
 from namo_fault_recovery import load_library, load_robot
 from namo_fault_recovery.cli.private_node import node_command
+from namo_fault_recovery.ros.spun_node import SpunNode
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -218,9 +216,8 @@ class RosClient:
         if gestures is None:   # the node's default: the packaged library
             gestures = len(load_library(load_robot()))
         self.gestures = gestures
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=domain)
-        self.node = rclpy.create_node(name, context=self.context)
+        self._spun = SpunNode(name, domain)
+        self.node = self._spun.node
         self._lock = threading.Condition()
         self.versions = {}            # stamp ns -> LibraryVersion
         self.order = []               # stamps in order of first arrival
@@ -237,23 +234,11 @@ class RosClient:
         self.fault_pub = self.node.create_publisher(JointState, '/actuator_fault', 10)
         self.state_pub = self.node.create_publisher(JointState, '/joint_states', 10)
         self._clients = {}
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
-
-    def _spin(self):
-        try:
-            self.executor.spin()
-        except Exception:  # noqa: B902 - the context is shut down at the end of a test
-            pass
+        self._spun.start()
 
     def close(self):
         """Shut the client down."""
-        self.executor.shutdown(timeout_sec=2.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-        self._thread.join(timeout=5.0)
+        self._spun.close()
 
     # --- callbacks ---
 
@@ -432,9 +417,8 @@ class DiagnosticsProbe:
         from rclpy.serialization import deserialize_message
         self._deserialize = deserialize_message
         self.value_chars = value_chars
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=domain)
-        self.node = rclpy.create_node(name, context=self.context)
+        self._spun = SpunNode(name, domain)
+        self.node = self._spun.node
         self._lock = threading.Condition()
         self.sizes = []           # byte size of every /diagnostics message, in arrival order
         self.statuses = []        # (index, {name: {key: value cut at value_chars}})
@@ -445,23 +429,11 @@ class DiagnosticsProbe:
                               durability=DurabilityPolicy.VOLATILE)
         self.fault_pub = self.node.create_publisher(JointState, '/actuator_fault', keep_all)
         self._trigger_clients = {}
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
-
-    def _spin(self):
-        try:
-            self.executor.spin()
-        except Exception:  # noqa: B902 - the context is shut down at the end of a test
-            pass
+        self._spun.start()
 
     def close(self):
         """Shut the probe down."""
-        self.executor.shutdown(timeout_sec=2.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-        self._thread.join(timeout=5.0)
+        self._spun.close()
 
     def _on_diag(self, data):
         msg = self._deserialize(data, DiagnosticArray)

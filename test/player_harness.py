@@ -14,10 +14,8 @@ from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from namo_fault_recovery import load_library, load_robot
 from namo_fault_recovery.resources import config_path, DEMO_MOTION_FILE
+from namo_fault_recovery.ros.spun_node import SpunNode
 import numpy as np
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
@@ -39,9 +37,8 @@ class Recorder:
     """Watches the player and the arms; publishes a library and diagnostics on request."""
 
     def __init__(self, domain, name='play_recorder'):
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=domain)
-        self.node = rclpy.create_node(name, context=self.context)
+        self._spun = SpunNode(name, domain)
+        self.node = self._spun.node
         self.lock = threading.Lock()
         self.q = np.zeros(14)          # the latest /joint_states, in NAMES order
         self.states = 0
@@ -65,25 +62,13 @@ class Recorder:
                                                       latched)
         self.diag_pub = self.node.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.setup()
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
+        self._spun.start()
 
     def setup(self):
         """Create further entities before spinning starts (subclasses)."""
 
-    def _spin(self):
-        try:
-            self.executor.spin()
-        except Exception:  # noqa: B902 - the context is shut down at the end
-            pass
-
     def close(self):
-        self.executor.shutdown(timeout_sec=2.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-        self.thread.join(timeout=5.0)
+        self._spun.close()
 
     def _on_command(self, controller, msg):
         with self.lock:

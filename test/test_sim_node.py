@@ -15,13 +15,11 @@ from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticArray
 from namo_fault_recovery import load_library, load_robot
 from namo_fault_recovery.ros.sim_node import sim_command
+from namo_fault_recovery.ros.spun_node import SpunNode
 from namo_fault_recovery.sim.trajectory import ActiveTrajectory, Command, Point
 from node_harness import NodeProcess, session_domain
 import numpy as np
 import pytest
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -64,9 +62,8 @@ class SimClient:
     """Publishers to the two controllers; recorders of /joint_states and ~/contacts."""
 
     def __init__(self):
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=DOMAIN)
-        self.node = rclpy.create_node('namo_sim_test_client', context=self.context)
+        self._spun = SpunNode('namo_sim_test_client', DOMAIN)
+        self.node = self._spun.node
         self.lock = threading.RLock()
         self.states = []          # (stamp s, positions by name)
         self.reports = []
@@ -79,22 +76,10 @@ class SimClient:
         self.node.create_subscription(DiagnosticArray, '/namo_sim/contacts',
                                       self._on_report, 10)
         self.reset_client = self.node.create_client(Trigger, '/namo_sim/reset_contacts')
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _spin(self):
-        try:
-            self.executor.spin()
-        except Exception:  # noqa: B902 - the context is shut down at the end
-            pass
+        self._spun.start()
 
     def close(self):
-        self.executor.shutdown(timeout_sec=2.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-        self.thread.join(timeout=5.0)
+        self._spun.close()
 
     def _on_state(self, msg):
         with self.lock:

@@ -190,19 +190,15 @@ class _LoopWatcher:
     """An rclpy node that records what the loop does (commands, states, faults, library)."""
 
     def __init__(self, domain_id, controllers):
-        import rclpy
-        from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         from diagnostic_msgs.msg import DiagnosticArray
         from sensor_msgs.msg import JointState
         from trajectory_msgs.msg import JointTrajectory
         import threading
 
-        self._rclpy = rclpy
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=domain_id)
-        self.node = rclpy.create_node('namo_recovery_demo_play', context=self.context)
+        from ..ros.spun_node import SpunNode
+        self._spun = SpunNode('namo_recovery_demo_play', domain_id)
+        self.node = self._spun.node
         self.lock = threading.Lock()
         self.commands, self.states, self.faults = [], [], []
         self.versions, self.diagnostics = {}, []
@@ -220,16 +216,7 @@ class _LoopWatcher:
                                       self._on_library, latched)
         self.node.create_subscription(DiagnosticArray, '/diagnostics',
                                       lambda m: self._add(self.diagnostics, m), 50)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
-
-    def _spin(self):
-        try:
-            self.executor.spin()
-        except Exception:  # noqa: B902 - the context is shut down when the demo ends
-            pass
+        self._spun.start()
 
     def _add(self, where, item):
         with self.lock:
@@ -242,10 +229,7 @@ class _LoopWatcher:
 
     def close(self):
         """Shut the watcher down."""
-        self.executor.shutdown(timeout_sec=2.0)
-        self.node.destroy_node()
-        self._rclpy.try_shutdown(context=self.context)
-        self._thread.join(timeout=5.0)
+        self._spun.close()
 
     def wait(self, predicate, timeout):
         """Wait until ``predicate()`` is truthy; return it, or None on timeout."""

@@ -332,29 +332,21 @@ class RecoveryClient:
     """A client of the ``recovery_node`` in ``namespace``, in its own rclpy Context."""
 
     def __init__(self, namespace='/', domain_id=None, node_name=keys.NODE_NAME):
-        import rclpy
-        from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
         from diagnostic_msgs.msg import DiagnosticArray
         from sensor_msgs.msg import JointState
         from trajectory_msgs.msg import JointTrajectory
 
+        from .spun_node import SpunNode
+
         self.namespace = normalise_namespace(namespace)
         self.node_fqn = keys.node_fqn(self.namespace, node_name)
         self.inbox = Inbox(keys.status_prefix(self.node_fqn))
         self.domain_id = domain_id
-        self._rclpy = rclpy
         self._joint_state = JointState
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=domain_id)
-        try:
-            self.node = rclpy.create_node(
-                f'namo_recovery_client_{os.getpid()}_{next(_COUNTER)}',
-                namespace=self.namespace, context=self.context)
-        except Exception:
-            rclpy.try_shutdown(context=self.context)
-            raise
+        self._spun = SpunNode(f'namo_recovery_client_{os.getpid()}_{next(_COUNTER)}',
+                              domain_id, self.namespace)
+        self.context, self.node = self._spun.context, self._spun.node
         latched = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
                              reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -364,25 +356,13 @@ class RecoveryClient:
                                       self.inbox.add_diagnostics, 50)
         self._fault_pub = self.node.create_publisher(JointState, FAULT_TOPIC, 10)
         self._service_clients = {}             # service name -> rclpy client, kept
-        self._executor = SingleThreadedExecutor(context=self.context)
-        self._executor.add_node(self.node)
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
+        self._spun.start()
 
     # --- life cycle and names ---------------------------------------------------------
 
-    def _spin(self):
-        try:
-            self._executor.spin()
-        except Exception:  # noqa: B902 - the context is shut down when the client closes
-            pass
-
     def close(self):
         """Stop spinning and shut the client's context down."""
-        self._executor.shutdown(timeout_sec=2.0)
-        self.node.destroy_node()
-        self._rclpy.try_shutdown(context=self.context)
-        self._thread.join(timeout=5.0)
+        self._spun.close()
 
     def __enter__(self):
         return self

@@ -30,6 +30,8 @@ import tempfile
 import threading
 import time
 
+from .spun_node import SpunNode
+
 DEFAULT_RATES = (0, 100, 500)
 DEFAULT_FAULTS = tuple(f'right_arm_joint{i}' for i in range(1, 8))
 NODE_PREFIX = 'recovery_node: '
@@ -189,21 +191,16 @@ class _Client:
     """An rclpy client of the node in its own context, spun in a background thread."""
 
     def __init__(self, domain_id):
-        import rclpy
-        from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
         from diagnostic_msgs.msg import DiagnosticArray
         from sensor_msgs.msg import JointState
         from std_srvs.srv import Trigger
         from trajectory_msgs.msg import JointTrajectory
 
-        self._rclpy = rclpy
         self._joint_state = JointState
         self._trigger = Trigger
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=domain_id)
-        self.node = rclpy.create_node(f'namo_stream_bench_{os.getpid()}', context=self.context)
+        self._spun = SpunNode(f'namo_stream_bench_{os.getpid()}', domain_id)
+        self.node = self._spun.node
         self._cond = threading.Condition()
         self.versions = {}       # stamp ns -> {gesture: arrival time}
         self.diagnostics = []    # {status name: {key: value}}
@@ -215,22 +212,11 @@ class _Client:
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 50)
         self.fault_pub = self.node.create_publisher(JointState, '/actuator_fault', 10)
         self._clients = {}
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
-
-    def _spin(self):
-        try:
-            self.executor.spin()
-        except Exception:  # noqa: B902 - the context is shut down at the end
-            pass
+        self._spun.start()
 
     def close(self):
-        self.executor.shutdown(timeout_sec=2.0)
-        self.node.destroy_node()
-        self._rclpy.try_shutdown(context=self.context)
-        self._thread.join(timeout=5.0)
+        """Stop spinning and shut the probe's context down."""
+        self._spun.close()
 
     def _on_library(self, msg):
         now = time.monotonic()
