@@ -369,16 +369,24 @@ def _adapt(job, locks, seed, search):
             # Every point at once, from the Kriging result; each dense motion left gets
             # an equal share of the time left (unused time rolls over).
             n_left -= 1
-            out = optimise_motion(model, scorer, ids, q_r, q_l, layout,
-                                  design, search.child(share=1.0 / (n_left + 1)),
-                                  smoothness=job.smoothness, collision=checker)
-            if out.value < out.value_start:
-                q_r, q_l, how = out.q_right, out.q_left, 'trajectory'
-            nfev += out.nfev
-            if out.status in ('deadline', 'cancelled'):
-                notes.append(f'{gesture.name}: the whole-trajectory pass was cut short '
-                             f'({out.status}) after {out.nfev} evaluations; the best '
-                             f'trajectory so far is used')
+            budget = search.child(share=1.0 / (n_left + 1))
+            passes = expansion_layouts(robot, gesture, locked, faulted, free, stage)
+            for k, (level, lay) in enumerate(passes):
+                if k and budget.expired():
+                    break
+                out = optimise_motion(model, scorer, ids, q_r, q_l, lay, design, budget,
+                                      smoothness=job.smoothness, collision=checker)
+                if out.value < out.value_start:
+                    q_r, q_l, how = out.q_right, out.q_left, 'trajectory'
+                    if k:
+                        stage, free = level, tuple(robot.arms[s].joint_names[j]
+                                                   for s, j in lay)
+                nfev += out.nfev
+                if out.status in ('deadline', 'cancelled'):
+                    notes.append(f'{gesture.name}: the whole-trajectory pass was cut short '
+                                 f'({out.status}) after {out.nfev} evaluations; the best '
+                                 f'trajectory so far is used')
+                    break
         if affected and method == 'per_point':
             designed = joint_set(robot, gesture.joints) if gesture.joints else None
             layouts = [free_layout(robot, gesture.arms, locked, faulted, designed)]
@@ -409,6 +417,28 @@ def _adapt(job, locks, seed, search):
     total = sum(g.nfev for g in results)
     return MotionAdaptation(results, locks, method, 0.0, int(total), seed, None,
                             float(job.tool_mm), job.tool_arm, typical_res, notes)
+
+
+def expansion_layouts(robot, gesture, locked, faulted, free, stage):
+    """
+    Return ``[(expansion stage, free-joint layout)]``: a motion's trajectory passes.
+
+    The first is the layout the typical points were solved with (``free``, joint names,
+    at expansion ``stage``); each further one adds the gesture's next ``expand`` stage.
+    The typical points' search expands only while one of *them* misses the fingertip
+    threshold, which on a motion whose worst point is set by the posture terms (the
+    circle, right joint 2 locked) was a coin toss of the seed: the passes at the later
+    stages, warm-started from the previous pass and kept only if they lower its
+    objective, make the joints the motion may use independent of the seed.
+    """
+    allowed = joint_set(robot, free)
+    out = [(stage, free_layout(robot, gesture.arms, locked, faulted, allowed))]
+    for level, extra in enumerate(gesture.expand[stage:], start=stage + 1):
+        allowed = allowed | joint_set(robot, extra)
+        lay = free_layout(robot, gesture.arms, locked, faulted, allowed)
+        if lay != out[-1][1]:
+            out.append((level, lay))
+    return out
 
 
 def _cols(side):
