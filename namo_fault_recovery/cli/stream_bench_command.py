@@ -31,6 +31,7 @@ def cmd_stream(args, out):
             out, rates=args.rates, burner=args.burner, faults=args.faults, reps=args.reps,
             start_node=args.start_node, gesture_file=args.gesture_file,
             robot_file=args.robot_file, domain_id=args.domain_id, out_dir=args.out,
+            node_params=args.node_params,
             timeout=args.timeout, verbose=args.verbose)
     except BenchError as exc:
         sys.stderr.write(f'namo-recovery: error: {exc}\n')
@@ -55,6 +56,10 @@ def register(bench_subparsers):
                         '(default: the packaged one)')
     p.add_argument('--robot-file', metavar='F', default=None,
                    help='with --start-node: the robot model the node loads')
+    p.add_argument('--node-param', dest='node_params', action='append', default=[],
+                   metavar='NAME:=VALUE',
+                   help='with --start-node: a parameter of the node (repeatable), e.g. '
+                        'contingency_table:=false so that every run is a live search')
     p.add_argument('--rates', type=_rates, default=[0.0, 100.0, 500.0], metavar='HZ,...',
                    help='/joint_states rates, 0 = idle (default 0,100,500)')
     p.add_argument('--burner', action=argparse.BooleanOptionalAction, default=True,

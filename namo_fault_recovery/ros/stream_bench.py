@@ -407,9 +407,11 @@ def _conditions(rates, burner):
     return conditions
 
 
-def _start_node(domain_id, state_dir, gesture_file, robot_file, out):
+def _start_node(domain_id, state_dir, gesture_file, robot_file, out, node_params=()):
     from namo_fault_recovery.cli.private_node import node_command
     ros_args = ['-p', f'state_dir:={state_dir}']
+    for param in node_params:
+        ros_args += ['-p', param]
     if gesture_file:
         ros_args += ['-p', f'gesture_file:={os.path.abspath(gesture_file)}']
     if robot_file:
@@ -458,6 +460,7 @@ def _table(name, summary, deadline, out):
 
 def run_stream_bench(out, rates=DEFAULT_RATES, burner=True, faults=DEFAULT_FAULTS, reps=1,
                      start_node=False, gesture_file=None, robot_file=None, domain_id=None,
+                     node_params=(),
                      out_dir=None, timeout=60.0, verbose=False):
     """
     Run every condition against the node; print one table each; return the report dict.
@@ -477,7 +480,8 @@ def run_stream_bench(out, rates=DEFAULT_RATES, burner=True, faults=DEFAULT_FAULT
         if domain_id is None:
             domain_id = 70 + os.getpid() % 30
         workdir = tempfile.mkdtemp(prefix='namo_stream_bench_')
-        proc, log = _start_node(domain_id, workdir, gesture_file, robot_file, out)
+        proc, log = _start_node(domain_id, workdir, gesture_file, robot_file, out,
+                                node_params)
     report = {'machine': machine_info(), 'gesture_file': gesture_file or '(node default)',
               'faults': list(faults), 'reps': reps, 'slack_sec': SLACK_SEC,
               'conditions': {}}
