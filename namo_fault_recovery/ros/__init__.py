@@ -27,6 +27,8 @@ The node and its parts (the parts are free of DDS, with fast unit tests):
 Clients and benchmarks of a running node:
 
 - :mod:`.client`: the typed rclpy client of a running node, used by the ROS commands;
+- :mod:`.spin`: ``spin_until_shutdown``, the nodes' spin loop that a lost shutdown
+  wake-up cannot hang;
 - :mod:`.spun_node`: an rclpy node in a context of its own, spun by a background thread
   (the client, the benchmarks, the demos and the tests each use one);
 - :mod:`.stream_bench`: the deadline under a ``/joint_states`` stream and a CPU burner.

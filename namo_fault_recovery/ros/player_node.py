@@ -37,6 +37,7 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from .messages import duration_msg, stamp_key, status_values, trajectory_angles
+from .spin import spin_until_shutdown
 from ..model.robot import load_robot
 from ..playback.book import GestureTrack, parse_lock_angle, PlayerBook
 from ..playback.monitor import MonitorSettings, Outcome, Playback
@@ -306,7 +307,7 @@ def main(args=None):
             sys.stderr.write(f'{NODE_NAME}: error: {exc}\n')
             return 1
         executor.add_node(node)
-        executor.spin()
+        spin_until_shutdown(executor, node.context)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:  # noqa: B902

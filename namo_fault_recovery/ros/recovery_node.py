@@ -90,6 +90,7 @@ def _run(args):
 
     from .node import RecoveryNode
     from .parameters import StartupError
+    from .spin import spin_until_shutdown
     # A /joint_states stream keeps the executor's threads busy with short Python work;
     # the default 5 ms interpreter-lock switch interval then makes the dispatcher and
     # intake threads wait in a convoy (measured: runs starting up to 1.9 s late at
@@ -121,7 +122,7 @@ def _run(args):
         node = RecoveryNode()
         executor.add_node(node)
         if not _SIGNALS:
-            executor.spin()
+            spin_until_shutdown(executor, node.context)
     except StartupError as exc:
         if not _SIGNALS:                 # not a start-up cut short by Ctrl-C or SIGTERM
             sys.stderr.write(f'{NODE_NAME}: error: {exc}\n')

@@ -40,6 +40,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
+from .spin import spin_until_shutdown
 from ..model.gestures import load_library
 from ..model.robot import load_robot
 from ..sim.physics import designed_allowances, NamoSim
@@ -348,7 +349,7 @@ def main(args=None):
         # One executor thread: every callback is short, and the physics has its own.
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        executor.spin()
+        spin_until_shutdown(executor, node.context)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ValueError, KeyError, OSError) as exc:

@@ -28,7 +28,9 @@ class SpunNode:
 
         self._rclpy = rclpy
         self.context = Context()
-        rclpy.init(context=self.context, domain_id=domain_id)
+        # args=[]: the caller's command line is its own (e.g. namo-recovery's
+        # '--node-param x:=y' would otherwise be read as a ROS remap rule).
+        rclpy.init(args=[], context=self.context, domain_id=domain_id)
         try:
             self.node = rclpy.create_node(name, namespace=namespace, context=self.context)
         except Exception:
