@@ -29,8 +29,9 @@ NAN = float('nan')
 
 @pytest.fixture(scope='module')
 def ros(tmp_path_factory):
+    # A short refinement budget: each test waits until the library has settled.
     node = NodeProcess(DOMAIN, state_dir=tmp_path_factory.mktemp('state'),
-                       args=['-p', f'gesture_file:={DEMO}'])
+                       args=['-p', f'gesture_file:={DEMO}', '-p', 'refine_budget_sec:=3.0'])
     client = RosClient(DOMAIN, gestures=len(GESTURES))
     try:
         client.wait_library(what='the reference library')
@@ -76,13 +77,21 @@ def inject(client, names, positions=()):
 
 
 def wait_settled(client, failed):
-    """Wait for diagnostics saying the library is up to date for exactly ``failed``."""
+    """
+    Wait for diagnostics saying the library is up to date for exactly ``failed``.
+
+    Also that nothing runs (``running`` false): after a deadline result the node refines
+    in the background and may publish better versions, so the library is settled only
+    once that ended.
+    """
     return client.wait_diag(
         lambda s: (values(s, 'faults')['failed_joints'].split() == list(failed)
                    and values(s, 'reconfiguration')['up_to_date'] == 'true'
+                   and values(s, 'reconfiguration')['running'] == 'false'
                    and stamp_of(values(s, 'reconfiguration')['library_stamp'])
                    == client.latest().stamp),
-        what=f'diagnostics for faults {failed} describing the latest library')
+        timeout=40.0,
+        what=f'diagnostics for faults {failed} describing the latest, settled library')
 
 
 def file_reference():
