@@ -42,15 +42,27 @@ def loop(tmp_path_factory):
             assert 'Traceback' not in proc.stderr + proc.stdout, proc.describe()
 
 
-def _library_score(arms, gesture):
-    """Return ``<gesture>.score_after`` of the node's newest up-to-date diagnostics."""
+def _reconfiguration(arms):
+    """Return the node's latest ``reconfiguration`` values, or {} if none yet."""
     for msg in reversed(list(arms.diagnostics)):
         for status in msg.status:
             if status.name == 'recovery_node: reconfiguration':
-                values = {kv.key: kv.value for kv in status.values}
-                if values.get('up_to_date') == 'true':
-                    return float(values[f'{gesture}.score_after'])
+                return {kv.key: kv.value for kv in status.values}
+    return {}
+
+
+def _library_score(arms, gesture):
+    """Return ``<gesture>.score_after`` of the node's newest up-to-date diagnostics."""
+    values = _reconfiguration(arms)
+    if values.get('up_to_date') == 'true':
+        return float(values[f'{gesture}.score_after'])
     return None
+
+
+def _settled(arms):
+    """Return True once the node neither runs nor refines: the library stays as it is."""
+    values = _reconfiguration(arms)
+    return values.get('up_to_date') == 'true' and values.get('running') == 'false'
 
 
 def _stick_and_recover(arms, joint, angle, locked):
@@ -70,6 +82,9 @@ def _stick_and_recover(arms, joint, angle, locked):
         return lib and all(np.allclose(lib['wai'][:, NAMES.index(j)], a, atol=1e-9)
                            for j, a in locked.items())
     arms.wait(reconfigured, TIMEOUT, f'a library with {", ".join(locked)} locked')
+    # The node refines that library in the background (better versions may follow):
+    # play the one it settles on, so that the executed pose can be compared with it.
+    arms.wait(lambda: _settled(arms), 30.0, 'the end of the refinement')
     before = len(arms.commands)
     response = arms.play('wai')
     assert response.success, response.message
