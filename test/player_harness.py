@@ -112,6 +112,26 @@ class Recorder:
             time.sleep(0.02)
         raise AssertionError(f'timed out after {timeout} s waiting for {what}')
 
+    def reconfiguration(self):
+        """Return recovery_node's latest ``reconfiguration`` values, or {} if none yet."""
+        for msg in reversed(list(self.diagnostics)):
+            for status in msg.status:
+                if status.name == 'recovery_node: reconfiguration':
+                    return {kv.key: kv.value for kv in status.values}
+        return {}
+
+    def library_score(self, gesture):
+        """Return ``<gesture>.score_after`` of the node's newest up-to-date diagnostics."""
+        values = self.reconfiguration()
+        if values.get('up_to_date') == 'true':
+            return float(values[f'{gesture}.score_after'])
+        return None
+
+    def library_settled(self):
+        """Return True once the node neither runs nor refines: the library stays as it is."""
+        values = self.reconfiguration()
+        return values.get('up_to_date') == 'true' and values.get('running') == 'false'
+
     def newest_library(self):
         """Return {gesture: positions (keyframes, 14) in NAMES order} of the newest stamp."""
         with self.lock:

@@ -42,29 +42,6 @@ def loop(tmp_path_factory):
             assert 'Traceback' not in proc.stderr + proc.stdout, proc.describe()
 
 
-def _reconfiguration(arms):
-    """Return the node's latest ``reconfiguration`` values, or {} if none yet."""
-    for msg in reversed(list(arms.diagnostics)):
-        for status in msg.status:
-            if status.name == 'recovery_node: reconfiguration':
-                return {kv.key: kv.value for kv in status.values}
-    return {}
-
-
-def _library_score(arms, gesture):
-    """Return ``<gesture>.score_after`` of the node's newest up-to-date diagnostics."""
-    values = _reconfiguration(arms)
-    if values.get('up_to_date') == 'true':
-        return float(values[f'{gesture}.score_after'])
-    return None
-
-
-def _settled(arms):
-    """Return True once the node neither runs nor refines: the library stays as it is."""
-    values = _reconfiguration(arms)
-    return values.get('up_to_date') == 'true' and values.get('running') == 'false'
-
-
 def _stick_and_recover(arms, joint, angle, locked):
     """Stick ``joint`` at ``angle``; play wai twice; check detection, lock and score."""
     with arms.lock:
@@ -84,7 +61,7 @@ def _stick_and_recover(arms, joint, angle, locked):
     arms.wait(reconfigured, TIMEOUT, f'a library with {", ".join(locked)} locked')
     # The node refines that library in the background (better versions may follow):
     # play the one it settles on, so that the executed pose can be compared with it.
-    arms.wait(lambda: _settled(arms), 30.0, 'the end of the refinement')
+    arms.wait(arms.library_settled, 30.0, 'the end of the refinement')
     before = len(arms.commands)
     response = arms.play('wai')
     assert response.success, response.message
@@ -93,7 +70,7 @@ def _stick_and_recover(arms, joint, angle, locked):
         assert commanded.size > 10 and np.all(commanded == a), (j, commanded)
     q = arms.settled()      # the final pose, once the arm came to rest
     executed = float(WAI(q[:7], q[7:])[0])
-    library = arms.wait(lambda: _library_score(arms, 'wai'), TIMEOUT, 'the diagnostics')
+    library = arms.wait(lambda: arms.library_score('wai'), TIMEOUT, 'the diagnostics')
     planned = float(WAI(*np.split(arms.newest_library()['wai'][-1], 2))[0])
     assert planned == pytest.approx(library, rel=1e-4)
     assert executed == pytest.approx(library, abs=SCORE_TOL)

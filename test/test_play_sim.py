@@ -84,28 +84,6 @@ def loop(tmp_path_factory):
             assert 'Traceback' not in proc.stderr + proc.stdout, proc.describe()
 
 
-def _reconfiguration(arms):
-    """Return the node's latest ``reconfiguration`` values, or {} if none yet."""
-    for msg in reversed(list(arms.diagnostics)):
-        for status in msg.status:
-            if status.name == 'recovery_node: reconfiguration':
-                return {kv.key: kv.value for kv in status.values}
-    return {}
-
-
-def _library_score(arms, gesture):
-    values = _reconfiguration(arms)
-    if values.get('up_to_date') == 'true':
-        return float(values[f'{gesture}.score_after'])
-    return None
-
-
-def _settled(arms):
-    """Return True once the node neither runs nor refines: the library stays as it is."""
-    values = _reconfiguration(arms)
-    return values.get('up_to_date') == 'true' and values.get('running') == 'false'
-
-
 def _stick_and_recover(arms, joint, angle, locked):
     """Play wai with ``joint`` stuck at ``angle``; check detection, recovery, replay."""
     faults = len(arms.faults)
@@ -123,7 +101,7 @@ def _stick_and_recover(arms, joint, angle, locked):
     arms.wait(reconfigured, TIMEOUT, f'a library with {", ".join(locked)} locked')
     # The node refines that library in the background (better versions may follow):
     # play the one it settles on, so that the executed pose can be compared with it.
-    arms.wait(lambda: _settled(arms), 30.0, 'the end of the refinement')
+    arms.wait(arms.library_settled, 30.0, 'the end of the refinement')
     assert arms.trigger('/namo_sim/reset_contacts').success
     before, reports = len(arms.commands), len(arms.contacts)
     response = arms.play('wai', timeout=60.0)
@@ -134,7 +112,7 @@ def _stick_and_recover(arms, joint, angle, locked):
         assert abs(a - angle) <= HELD_TOL or j != joint
     q = arms.settled()      # the final pose, once the arm came to rest
     executed = float(WAI(q[:7], q[7:])[0])
-    library = arms.wait(lambda: _library_score(arms, 'wai'), TIMEOUT, 'the diagnostics')
+    library = arms.wait(lambda: arms.library_score('wai'), TIMEOUT, 'the diagnostics')
     assert executed == pytest.approx(library, abs=SCORE_TOL), (executed, library)
     after = arms.wait(lambda: arms.contacts[reports + 1:], TIMEOUT, 'a contact report')
     assert after[-1]['contact_events'] == '0', after[-1]

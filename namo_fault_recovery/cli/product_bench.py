@@ -161,6 +161,16 @@ def _latency_rounds(client, joints, timeout, burner):
     return samples
 
 
+def _latency_conditions(client, joints, timeout, conditions, target_ms, expect):
+    """Run the latency rounds idle (and with the burner); return {condition: summary}."""
+    out = {}
+    for burner in conditions:
+        samples = _latency_rounds(client, joints, timeout, burner)
+        out['cpu burner' if burner else 'idle'] = dict(
+            _latency_summary(samples, target_ms, expect), samples=samples)
+    return out
+
+
 def _latency_summary(samples, target_ms, expect):
     ok = [s['latency_s'] for s in samples if s['latency_s'] is not None]
     stats = _pct(ok)
@@ -243,12 +253,8 @@ def run_dds(args, out, best_doc, parts, joints):
                           f'during the build over {rtt["n"]} calls: p50 '
                           f'{rtt["p50_ms"]:.1f} / p95 {rtt["p95_ms"]:.1f} ms (targets: '
                           f'<= 60 s of CPU, p95 <= 50 ms)\n')
-                hit = {}
-                for burner in conditions:
-                    cond = 'cpu burner' if burner else 'idle'
-                    samples = _latency_rounds(client, joints, args.timeout, burner)
-                    hit[cond] = dict(_latency_summary(samples, HIT_P95_MS, 'table'),
-                                     samples=samples)
+                hit = _latency_conditions(client, joints, args.timeout, conditions,
+                                          HIT_P95_MS, 'table')
                 results['latency_hit'] = {'table_wait_s': waited, 'build': build,
                                           'conditions': hit}
         finally:
@@ -259,12 +265,8 @@ def run_dds(args, out, best_doc, parts, joints):
             with RecoveryClient('/', domain) as client:
                 client.current_library(args.timeout, diagnostics_timeout=0.0)
                 if 'latency' in parts:
-                    miss = {}
-                    for burner in conditions:
-                        cond = 'cpu burner' if burner else 'idle'
-                        samples = _latency_rounds(client, joints, args.timeout, burner)
-                        miss[cond] = dict(_latency_summary(samples, MISS_P95_MS, 'deadline'),
-                                          samples=samples)
+                    miss = _latency_conditions(client, joints, args.timeout, conditions,
+                                               MISS_P95_MS, 'deadline')
                     results['latency_miss'] = {'conditions': miss}
                 if 'refine' in parts:
                     robot, lib = product.load_models()
