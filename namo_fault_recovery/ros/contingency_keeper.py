@@ -70,7 +70,6 @@ class ContingencyKeeper:
         self._conn = None
         self._reader = None
         self._paused = False
-        self.build_cpu_sec = 0.0              # CPU seconds of the entries built so far
         self.building = False
 
     # --- lookup ---------------------------------------------------------------------
@@ -95,11 +94,6 @@ class ContingencyKeeper:
         """Return the number of entries of the table in use."""
         with self._lock:
             return 0 if self._table is None else len(self._table)
-
-    @property
-    def path(self):
-        """Return the table file in ``state_dir``."""
-        return self._path
 
     # --- configuration and build ----------------------------------------------------
 
@@ -217,7 +211,6 @@ class ContingencyKeeper:
                 if self._proc is not proc or self._table is None:
                     return
                 self._table.add(result, locks)
-                self.build_cpu_sec += cpu
                 cpu_total += cpu
                 table = self._table
             built += 1

@@ -39,7 +39,6 @@ class Dispatcher:
         self._table = table                # a ContingencyKeeper, or None
         self._thread = threading.Thread(target=self._loop, name='dispatcher', daemon=True)
         self.last_engine_time = 0.0
-        self.last_refinement = ''           # why the last refinement ended
 
     def start(self):
         """Start the dispatcher thread."""
@@ -130,11 +129,9 @@ class Dispatcher:
                 self._log('info', f'refined: {summary(better)}')
 
         try:
-            reason = self._engine.refine(run.generation, result, settings.engine,
-                                         settings.refine_budget_sec, improved)
-            self.last_refinement = reason
+            self._engine.refine(run.generation, result, settings.engine,
+                                settings.refine_budget_sec, improved)
         except EngineError as exc:
-            self.last_refinement = f'failed: {exc}'
             self._log('warning', f'refinement stopped: {exc}; the published library stays')
         finally:
             self._book.refined(run.generation)
