@@ -1,4 +1,6 @@
-"""Exceptions raised by the numerical core, kept free of ROS."""
+"""Exceptions raised by the numerical core, and the bounded text of a bad value; free of ROS."""
+
+MAX_REASON = 200           # characters of a rejected value kept in a reason
 
 
 class ConfigError(ValueError):
@@ -15,3 +17,11 @@ class ConfigError(ValueError):
         self.problem = problem
         where = f"{self.file}: key '{key}'" if key else self.file
         super().__init__(f'{where}: {problem}')
+
+
+def shorten(value, limit=MAX_REASON):
+    """Return ``repr``-free text of at most ``limit`` characters (a bad value stays bounded)."""
+    text = str(value)
+    if len(text) <= limit:
+        return text
+    return f'{text[:limit]}... ({len(text)} characters)'

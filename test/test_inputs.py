@@ -3,7 +3,7 @@
 import math
 
 from namo_fault_recovery.recovery.locks import frozen_arms
-from namo_fault_recovery.ros.inputs import BadInput, parse_fault, parse_joint_state
+from namo_fault_recovery.runtime.inputs import BadInput, parse_fault, parse_joint_state
 import pytest
 
 NAN = float('nan')

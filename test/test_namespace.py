@@ -14,8 +14,8 @@ import math
 import time
 
 from namo_fault_recovery.cli.main import main
-from namo_fault_recovery.ros import diagnostic_keys as keys
 from namo_fault_recovery.ros.client import RecoveryClient
+from namo_fault_recovery.runtime import diagnostic_keys as keys
 from node_harness import NodeProcess, session_domain
 import pytest
 

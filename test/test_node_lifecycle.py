@@ -14,7 +14,7 @@ import signal
 import time
 
 from namo_fault_recovery import load_library, load_robot
-from namo_fault_recovery.ros.state_store import decode_state
+from namo_fault_recovery.runtime.state_store import decode_state
 from node_harness import NodeProcess, RosClient, session_domain, statuses_values
 import pytest
 

@@ -7,12 +7,12 @@ import threading
 from namo_fault_recovery.recovery.engine import RecoverySettings
 from namo_fault_recovery.recovery.result import reference_result
 from namo_fault_recovery.ros import diagnostics
-from namo_fault_recovery.ros.fault_intake import Clear, FaultIntake, Report
-from namo_fault_recovery.ros.inputs import BadInput, MAX_REASON, parse_fault
 from namo_fault_recovery.ros.parameters import check_parameter, node_settings, parameter_specs
-from namo_fault_recovery.ros.restore import check_result, restore_decision
-from namo_fault_recovery.ros.run_book import RunBook
-from namo_fault_recovery.ros.state_store import Fault, PersistedState
+from namo_fault_recovery.runtime.fault_intake import Clear, FaultIntake, Report
+from namo_fault_recovery.runtime.inputs import BadInput, MAX_REASON, parse_fault
+from namo_fault_recovery.runtime.restore import check_result, restore_decision
+from namo_fault_recovery.runtime.run_book import RunBook
+from namo_fault_recovery.runtime.state_store import Fault, PersistedState
 import pytest
 
 
@@ -209,7 +209,7 @@ def test_diagnostics_from_a_snapshot(robot, library):
 # --- answer pacer -----------------------------------------------------------------------------
 
 def test_answer_pacer_releases_every_answer_in_order_and_a_few_at_a_time():
-    from namo_fault_recovery.ros.answer_pacer import AnswerPacer
+    from namo_fault_recovery.runtime.answer_pacer import AnswerPacer
     released, wakes = [], []
     pacer = AnswerPacer(lambda: wakes.append(len(released)), batch=4, gap=0.001)
     for k in range(50):
@@ -229,7 +229,7 @@ def test_answer_pacer_releases_every_answer_in_order_and_a_few_at_a_time():
 # --- background state writer ------------------------------------------------------------------
 
 def test_background_writer_never_writes_an_older_snapshot_over_a_newer_one(tmp_path):
-    from namo_fault_recovery.ros.state_store import BackgroundWriter, decode_state, StateStore
+    from namo_fault_recovery.runtime.state_store import BackgroundWriter, decode_state, StateStore
     store = StateStore(tmp_path)
     store.save({'right_arm_joint1': Fault(0.1)}, None, 'fp', seq=5)     # a fault commit
     writer = BackgroundWriter(lambda faults, library, seq: store.save(faults, library,
@@ -247,8 +247,8 @@ def test_background_writer_never_writes_an_older_snapshot_over_a_newer_one(tmp_p
 
 def test_a_fault_set_being_written_starts_the_run_but_is_published_only_once_on_disk(
         tmp_path, robot, library):
-    from namo_fault_recovery.ros.persistence import Persistence
-    from namo_fault_recovery.ros.state_store import decode_state
+    from namo_fault_recovery.runtime.persistence import Persistence
+    from namo_fault_recovery.runtime.state_store import decode_state
     book = RunBook()
     state = Persistence(tmp_path, robot, library, book, on_error=lambda text: None)
     saving, release, order = threading.Event(), threading.Event(), []
@@ -298,7 +298,7 @@ def test_diagnostics_show_the_publish_path_figures(robot, library):
 
 
 def test_latest_worker_runs_the_newest_item_and_drops_the_superseded():
-    from namo_fault_recovery.ros.latest_worker import LatestWorker
+    from namo_fault_recovery.runtime.latest_worker import LatestWorker
     done, seen = threading.Event(), []
     worker = LatestWorker(lambda *item: (seen.append(item), done.set()), delay=0.0)
     for k in range(3):

@@ -7,9 +7,9 @@ import time
 from namo_fault_recovery.optimize.base import Clock
 from namo_fault_recovery.recovery.engine import recover, RecoverySettings
 from namo_fault_recovery.recovery.refine import refinement_faults, refinements
-from namo_fault_recovery.ros.contingency_keeper import ContingencyKeeper, TABLE_FILE
-from namo_fault_recovery.ros.run_book import RunBook
-from namo_fault_recovery.ros.state_store import Fault
+from namo_fault_recovery.runtime.contingency_keeper import ContingencyKeeper, TABLE_FILE
+from namo_fault_recovery.runtime.run_book import RunBook
+from namo_fault_recovery.runtime.state_store import Fault
 
 SETTINGS = RecoverySettings(deadline_sec=0.02)
 FAULT = {'right_arm_joint1': None}

@@ -17,13 +17,13 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from namo_fault_recovery.cli.main import build_parser, main
 from namo_fault_recovery.recovery.engine import recover, RecoverySettings
-from namo_fault_recovery.ros import diagnostic_keys as keys
 from namo_fault_recovery.ros.client import (BadNamespace, Inbox, node_diagnostics,
                                             normalise_namespace, rebuild_library,
                                             TriggerAnswer)
 from namo_fault_recovery.ros.diagnostics import Snapshot, statuses
 from namo_fault_recovery.ros.messages import library_to_msgs
-from namo_fault_recovery.ros.state_store import Fault
+from namo_fault_recovery.runtime import diagnostic_keys as keys
+from namo_fault_recovery.runtime.state_store import Fault
 import pytest
 from std_srvs.srv import Trigger
 

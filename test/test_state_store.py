@@ -5,9 +5,9 @@ import os
 import threading
 
 from namo_fault_recovery.recovery.result import GestureResult, LibraryResult
-from namo_fault_recovery.ros import state_store
-from namo_fault_recovery.ros.state_store import (decode_state, encode_state, Fault, StateFileError,
-                                                 StateStore)
+from namo_fault_recovery.runtime import state_store
+from namo_fault_recovery.runtime.state_store import (decode_state, encode_state, Fault,
+                                                     StateFileError, StateStore)
 import pytest
 
 

@@ -392,7 +392,7 @@ def print_quality(out, s):
 
 def run_table(out, best_doc, jobs=2, joints=None, seeds=None):
     """Build the table as the node does and check every entry; return the summary."""
-    from ..ros.contingency_keeper import BUILD_SEEDS
+    from ..runtime.contingency_keeper import BUILD_SEEDS
     seeds = tuple(BUILD_SEEDS if seeds is None else seeds)
     settings = node_settings()
     robot, lib = load_models('product')

@@ -20,7 +20,7 @@ import numpy as np
 from .private_node import private_domain, PrivateNode
 from .ros_common import (add_connection_arguments, CommandError, domain_id, EXIT_FAILURE,
                          EXIT_USAGE, namespace, open_client, wrap)
-from ..ros import diagnostic_keys as keys
+from ..runtime import diagnostic_keys as keys
 
 
 def percentiles(values):

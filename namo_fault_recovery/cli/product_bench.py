@@ -53,7 +53,7 @@ def _pct(values):
 
 
 def _origin(client, stamp, timeout=1.0):
-    from ..ros import diagnostic_keys as keys
+    from ..runtime import diagnostic_keys as keys
     diag = client.latest_diagnostics(lambda d: d.describes(stamp), timeout=timeout)
     return None if diag is None else diag.get(keys.RECONFIGURATION, keys.LIBRARY_ORIGIN)
 

@@ -1,27 +1,14 @@
 """
-The ROS 2 side: the node and everything that touches rclpy or a message package.
+The ROS 2 side: the modules that import rclpy or a message package, and only those.
 
-The node and its parts (the parts are free of DDS, with fast unit tests):
+The node (its ROS-free parts, the run book, dispatcher, engine process and the rest, are
+the node's runtime, ``runtime/``):
 
 - :mod:`.recovery_node`: ``main()``, light, with the signal handling of start-up;
-- :mod:`.node`: ``RecoveryNode``, which wires the interfaces to the parts below;
+- :mod:`.node`: ``RecoveryNode``, which wires the interfaces to the runtime's parts;
 - :mod:`.parameters`: the parameter table, its validator and the node's settings;
-- :mod:`.run_book`: the run bookkeeping (requested, running, published, who waits);
-- :mod:`.fault_intake`: fault reports persisted before they are acknowledged;
 - :mod:`.input_monitor`: the latest joint state, measured angles and rejected inputs;
-- :mod:`.inputs`: validation of fault reports and joint states (no ROS types);
-- :mod:`.dispatcher`: the thread that runs the newest request and publishes it;
-- :mod:`.engine_process`: the engine in its own process (no shared interpreter lock),
-  which also refines a published library in the background;
-- :mod:`.contingency_keeper`: the contingency table looked up before a live run, built
-  by a low-priority background process and kept in ``state_dir``;
-- :mod:`.answer_pacer`: service answers released a few at a time;
-- :mod:`.latest_worker`: one delayed thread for the newest item (the RViz markers);
-- :mod:`.persistence`: the state file in the order the run book needs, off the hot paths;
-- :mod:`.restore`: the checks before publishing, and the restore decision;
-- :mod:`.state_store`: the persisted fault set and library (no ROS types);
 - :mod:`.diagnostics`: ``/diagnostics`` built from a snapshot;
-- :mod:`.diagnostic_keys`: the ``/diagnostics`` names and keys shared by writer and readers;
 - :mod:`.messages`: results to and from ROS messages, and the RViz markers.
 
 Clients and benchmarks of a running node:

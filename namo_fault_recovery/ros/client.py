@@ -28,8 +28,8 @@ import os
 import threading
 import time
 
-from . import diagnostic_keys as keys
 from ..recovery.result import GestureResult, LibraryResult
+from ..runtime import diagnostic_keys as keys
 
 # The node's names, relative: resolved in the client's namespace.
 LIBRARY_TOPIC = 'gesture_library'

@@ -13,10 +13,10 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
-from . import diagnostic_keys as dk
 from .messages import fmt_angle
 from ..recovery.locks import frozen_arms
 from ..recovery.result import summary
+from ..runtime import diagnostic_keys as dk
 
 DEFAULT_PREFIX = dk.status_prefix(dk.node_fqn())
 status_prefix = dk.status_prefix

@@ -15,8 +15,8 @@ import time
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
-from .inputs import BadInput, parse_joint_state
-from .parameters import shorten
+from ..errors import shorten
+from ..runtime.inputs import BadInput, parse_joint_state
 
 MAX_REJECTIONS_SHOWN = 10
 MAX_REASON = 300

@@ -24,26 +24,25 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
-from . import diagnostic_keys as dk
 from . import diagnostics
 from . import messages as conv
-from .answer_pacer import AnswerPacer
-from .contingency_keeper import ContingencyKeeper
-from .dispatcher import Dispatcher
-from .engine_process import EngineError, EngineProcess
-from .fault_intake import After, Clear, FaultIntake, Report
 from .input_monitor import InputMonitor
-from .inputs import BadInput, parse_fault
-from .latest_worker import LatestWorker
 from .parameters import (check_parameter, declare_parameters, DEFAULT_STATE_DIR, MARKER_PARAMS,
-                         node_settings, one_line, parameter_specs, RERUN_PARAMS, shorten,
-                         StartupError)
-from .persistence import Persistence
-from .run_book import Outcome, RunBook
-from ..errors import ConfigError
+                         node_settings, one_line, parameter_specs, RERUN_PARAMS, StartupError)
+from ..errors import ConfigError, shorten
 from ..model.gestures import load_library
 from ..model.robot import load_robot
 from ..recovery.result import reference_result, summary
+from ..runtime import diagnostic_keys as dk
+from ..runtime.answer_pacer import AnswerPacer
+from ..runtime.contingency_keeper import ContingencyKeeper
+from ..runtime.dispatcher import Dispatcher
+from ..runtime.engine_process import EngineError, EngineProcess
+from ..runtime.fault_intake import After, Clear, FaultIntake, Report
+from ..runtime.inputs import BadInput, parse_fault
+from ..runtime.latest_worker import LatestWorker
+from ..runtime.persistence import Persistence
+from ..runtime.run_book import Outcome, RunBook
 
 NODE_NAME = 'recovery_node'
 FAULT_QUEUE_DEPTH = 10_000        # reports the subscription holds while the intake catches up

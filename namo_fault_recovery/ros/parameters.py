@@ -13,6 +13,7 @@ import math
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
+from ..errors import shorten
 from ..model.robot import ARMS
 from ..objective.score import COMPONENTS, ScoreWeights
 from ..optimize import ALGORITHMS, PRESETS
@@ -22,7 +23,6 @@ from ..recovery.locks import LOCK_STRATEGIES
 from ..recovery.motion import DEFAULT_CONTINUITY, DEFAULT_DISTORTION_MM, METHODS
 
 DEFAULT_STATE_DIR = '~/.ros/namo_fault_recovery'
-MAX_REASON = 200           # characters of a rejected value kept in a reason
 WEIGHT_PARAMS = tuple(f'weights.{c}' for c in COMPONENTS)
 CHOICES = {
     'lock_strategy': LOCK_STRATEGIES,
@@ -40,14 +40,6 @@ RERUN_PARAMS = frozenset(('deadline_sec', 'lock_strategy', 'optimizer', 'optimiz
 MARKER_PARAMS = frozenset(('marker_frame_id', 'marker_spacing'))
 TYPE_NAMES = {str: 'a string', float: 'a floating-point number', int: 'an integer',
               bool: 'true or false'}
-
-
-def shorten(value, limit=MAX_REASON):
-    """Return ``repr``-free text of at most ``limit`` characters (a bad value stays bounded)."""
-    text = str(value)
-    if len(text) <= limit:
-        return text
-    return f'{text[:limit]}... ({len(text)} characters)'
 
 
 @dataclass(frozen=True)

@@ -16,9 +16,9 @@ import itertools
 import threading
 import time
 
-from .parameters import shorten
 from .restore import plan_restart
 from .state_store import BackgroundWriter, fingerprint, StateStore
+from ..errors import shorten
 
 
 class Persistence:

@@ -1,0 +1,21 @@
+"""
+The node's runtime: the recovery node's logic, free of ROS (plain threads and processes).
+
+``ros/node.py`` wires these parts to the topics, services and parameters; each part has
+fast unit tests that need no DDS.
+
+- :mod:`.run_book`: the run bookkeeping (requested, running, published, who waits);
+- :mod:`.fault_intake`: fault reports persisted before they are acknowledged;
+- :mod:`.inputs`: validation of fault reports and joint states (no ROS types);
+- :mod:`.dispatcher`: the thread that runs the newest request and publishes it;
+- :mod:`.engine_process`: the engine in its own process (no shared interpreter lock),
+  which also refines a published library in the background;
+- :mod:`.contingency_keeper`: the contingency table looked up before a live run, built
+  by a low-priority background process and kept in ``state_dir``;
+- :mod:`.answer_pacer`: service answers released a few at a time;
+- :mod:`.latest_worker`: one delayed thread for the newest item (the RViz markers);
+- :mod:`.persistence`: the state file in the order the run book needs, off the hot paths;
+- :mod:`.restore`: the checks before publishing, and the restore decision;
+- :mod:`.state_store`: the persisted fault set and library (no ROS types);
+- :mod:`.diagnostic_keys`: the ``/diagnostics`` names and keys shared by writer and readers.
+"""
