@@ -1,8 +1,9 @@
 """
 The words of ``/diagnostics`` and of the Trigger answers, shared by writer and readers.
 
-The node writes its statuses with these names and keys; :mod:`.client` (and so every
-``namo-recovery`` ROS command) reads them back.  One definition for both sides means a
+The node writes its statuses with these names and keys; the client,
+:mod:`~namo_fault_recovery.ros.client` (and so every ``namo-recovery`` ROS command),
+reads them back.  One definition for both sides means a
 renamed key breaks loudly in one place instead of silently in a parser.
 
 Every status name starts with :func:`status_prefix` of the node's fully qualified name,
