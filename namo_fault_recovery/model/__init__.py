@@ -6,6 +6,7 @@ The robot and its gestures, free of ROS: what Namo is and what it should do.
 - :mod:`.kinematics`: forward kinematics and its Jacobian, batched over N configurations;
 - :mod:`.capsules`: the capsule geometry of the arms and torso;
 - :mod:`.gestures`: the reference gesture library (keyframes, weights, expansion stages);
+- :mod:`.weights`: ``ScoreWeights``, the similarity components a gesture's score weighs;
 - :mod:`.trajectory_csv`: dense recorded motions stored as CSV files;
 - :mod:`.circle_design`: how the demo circle motion was designed;
 - :mod:`.urdf`: Namo's URDF generated from the robot file (robot_state_publisher, RViz,

@@ -16,8 +16,8 @@ import numpy as np
 from . import yaml_checks as chk
 from .robot import ARMS, N_JOINTS
 from .trajectory_csv import load_trajectory_csv
+from .weights import ScoreWeights
 from ..errors import ConfigError
-from ..objective.score import ScoreWeights
 from ..resources import config_path, DEFAULT_GESTURE_FILE
 
 _NAME_RE = re.compile(r'^[a-z][a-z0-9_]*$')

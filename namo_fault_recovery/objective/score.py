@@ -9,7 +9,6 @@ left-right wrist and fingertip distances, ``|d_LR - d_LR_ref|`` [reading: d_offs
 reference pose's own distance, so the reference scores exactly 0].
 """
 
-from dataclasses import dataclass, fields
 import math
 from typing import NamedTuple
 
@@ -17,60 +16,9 @@ import numpy as np
 
 from ..model.kinematics import (ArmLandmarks, as_joint_array, batch_forward,
                                 batch_forward_jacobian, forward_kinematics, take_landmarks)
+from ..model.weights import ARM_COMPONENTS, COMPONENTS, ScoreWeights  # noqa: F401 (re-export)
 
-COMPONENTS = ('elbow', 'wrist', 'tip', 'palm', 'wrist_lr', 'tip_lr')
-_ARM_COMPONENTS = 4
 _FROB_TO_ANGLE = 1.0 / (2.0 * math.sqrt(2.0))
-
-
-@dataclass(frozen=True)
-class ScoreWeights:
-    """
-    Relative component weights; by default equal and normalised to sum to 1.
-
-    With ``normalise`` the weights of the components a gesture uses are scaled to sum
-    to 1: 1/4 each for a one-arm gesture and 1/6 each for a two-handed one (the paper's
-    "equal weight values for all components").
-    """
-
-    elbow: float = 1.0
-    wrist: float = 1.0
-    tip: float = 1.0
-    palm: float = 1.0
-    wrist_lr: float = 1.0
-    tip_lr: float = 1.0
-    normalise: bool = True
-
-    def __post_init__(self):
-        for f in fields(self):
-            if f.name == 'normalise':
-                continue
-            value = getattr(self, f.name)
-            if (isinstance(value, bool) or not isinstance(value, (int, float))
-                    or not math.isfinite(value) or value < 0):
-                raise ValueError(f'score weight {f.name}: expected a finite number >= 0, '
-                                 f'got {value!r}')
-        if sum(getattr(self, c) for c in COMPONENTS[:_ARM_COMPONENTS]) <= 0:
-            raise ValueError('score weights: at least one of elbow, wrist, tip, palm '
-                             'must be > 0')
-
-    @classmethod
-    def from_mapping(cls, mapping):
-        """Build weights from a dict, naming any unknown key."""
-        unknown = set(mapping) - set(COMPONENTS) - {'normalise'}
-        if unknown:
-            raise ValueError(f'score weights: unknown component {sorted(unknown)[0]!r}; '
-                             f'expected some of {", ".join(COMPONENTS)}')
-        return cls(**mapping)
-
-    def vector(self, two_handed):
-        """Return the 6 weights of a gesture (the left-right ones are 0 if one-handed)."""
-        w = np.array([getattr(self, c) for c in COMPONENTS], dtype=float)
-        if not two_handed:
-            w[_ARM_COMPONENTS:] = 0.0
-        if self.normalise:
-            w /= w.sum()
-        return w
 
 
 class Target(NamedTuple):
@@ -216,7 +164,7 @@ class SimilarityScore:
                 else batch_forward(self.robot, q_right, 'right'))
         comps = np.zeros((n, len(COMPONENTS)))
         right = self._arm_terms(lm_r, 'right', target)
-        comps[:, :_ARM_COMPONENTS] += right * self._arm_mask[target, 0:1]
+        comps[:, :ARM_COMPONENTS] += right * self._arm_mask[target, 0:1]
         left = np.zeros_like(right)
         if self._uses_left:
             if q_left is None:
@@ -226,7 +174,7 @@ class SimilarityScore:
             else:
                 lm_l = batch_forward(self.robot, q_left, 'left')
             left = self._arm_terms(lm_l, 'left', target)
-            comps[:, :_ARM_COMPONENTS] += left * self._arm_mask[target, 1:2]
+            comps[:, :ARM_COMPONENTS] += left * self._arm_mask[target, 1:2]
             two = self._two[target]
             if np.any(two):
                 dw = lm_r.wrist - lm_l.wrist
@@ -279,10 +227,10 @@ class SimilarityScore:
                 if d_terms is not None:
                     d_terms = d_terms * (terms / soft)[..., None]
                 terms = soft - smooth
-            total += mask * np.einsum('nc,nc->n', terms, w[:, :_ARM_COMPONENTS])
+            total += mask * np.einsum('nc,nc->n', terms, w[:, :ARM_COMPONENTS])
             if d_terms is not None:
                 grads[side] += (mask[:, None]
-                                * np.einsum('nc,nci->ni', w[:, :_ARM_COMPONENTS], d_terms))
+                                * np.einsum('nc,nci->ni', w[:, :ARM_COMPONENTS], d_terms))
         two = self._two[target]
         if self._uses_left and np.any(two):
             for c, attr, ref in ((4, 'wrist', self._ref_wlr), (5, 'tip', self._ref_tlr)):
@@ -311,12 +259,12 @@ class SimilarityScore:
         rdiff = lm.palm - ref_rot[target]
         frob = np.sqrt(np.einsum('nij,nij->n', rdiff, rdiff))
         half = np.minimum(frob * _FROB_TO_ANGLE, 1.0)
-        terms = np.empty((target.shape[0], _ARM_COMPONENTS))
+        terms = np.empty((target.shape[0], ARM_COMPONENTS))
         terms[:, :3] = dist
         terms[:, 3] = np.degrees(2.0 * np.arcsin(half))
         if jac is None:
             return terms, None
-        d_terms = np.empty((target.shape[0], _ARM_COMPONENTS, 7))
+        d_terms = np.empty((target.shape[0], ARM_COMPONENTS, 7))
         unit = diff / np.where(dist > 0, dist, 1.0)[..., None]
         d_terms[:, :3] = np.einsum('nlc,nlic->nli', unit, jac.positions)
         # d|R - Rr|_F / dq_i = -tr([z_i]x R Rr^T) / |R - Rr|_F = -z_i . v / |R - Rr|_F.
