@@ -5,6 +5,8 @@ The node (its ROS-free parts, the run book, dispatcher, engine process and the r
 the node's runtime, ``runtime/``):
 
 - :mod:`.recovery_node`: ``main()``, light, with the signal handling of start-up;
+- :mod:`.spin`: ``run_node``, the one ``main()`` body of the three nodes, and
+  ``spin_until_shutdown``, their spin loop that a lost shutdown wake-up cannot hang;
 - :mod:`.node`: ``RecoveryNode``, which wires the interfaces to the runtime's parts;
 - :mod:`.parameters`: the parameter table, its validator and the node's settings;
 - :mod:`.input_monitor`: the latest joint state, measured angles and rejected inputs;
@@ -14,8 +16,6 @@ the node's runtime, ``runtime/``):
 Clients and benchmarks of a running node:
 
 - :mod:`.client`: the typed rclpy client of a running node, used by the ROS commands;
-- :mod:`.spin`: ``spin_until_shutdown``, the nodes' spin loop that a lost shutdown
-  wake-up cannot hang;
 - :mod:`.spun_node`: an rclpy node in a context of its own, spun by a background thread
   (the client, the benchmarks, the demos and the tests each use one);
 - :mod:`.stream_bench`: the deadline under a ``/joint_states`` stream and a CPU burner.

@@ -24,10 +24,8 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
-import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -37,7 +35,7 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from .messages import duration_msg, stamp_key, status_values, trajectory_angles
-from .spin import spin_until_shutdown
+from .spin import run_node
 from ..model.robot import load_robot
 from ..playback.book import GestureTrack, parse_lock_angle, PlayerBook
 from ..playback.monitor import MonitorSettings, Outcome, Playback
@@ -294,33 +292,8 @@ class GesturePlayer(Node):
 
 def main(args=None):
     """Run the player until Ctrl-C or SIGTERM; return the exit code."""
-    rclpy.init(args=args)      # rclpy's handlers turn SIGINT and SIGTERM into a shutdown
-    node = executor = None
-    try:
-        # One thread: no callback blocks, and Jazzy's executors resume every pending
-        # ``async`` play at each wake-up; with a thread pool those resumptions competed
-        # for the interpreter lock with /joint_states, which then stalled for seconds.
-        executor = SingleThreadedExecutor()
-        try:
-            node = GesturePlayer()
-        except (ValueError, ParameterException) as exc:   # a bad parameter or robot file
-            sys.stderr.write(f'{NODE_NAME}: error: {exc}\n')
-            return 1
-        executor.add_node(node)
-        spin_until_shutdown(executor, node.context)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:  # noqa: B902
-        if rclpy.ok():
-            raise          # a genuine error: let it be seen
-        # Otherwise a signal shut ROS down during start-up or while a thread waited.
-    finally:
-        if executor is not None:
-            executor.shutdown(timeout_sec=2.0)
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(NODE_NAME, GesturePlayer, args,
+                    config_errors=(ValueError, ParameterException))   # a parameter, robot file
 
 
 if __name__ == '__main__':

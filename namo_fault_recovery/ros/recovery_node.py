@@ -85,12 +85,9 @@ def _run(args):
     if problem:
         sys.stderr.write(f'{NODE_NAME}: error: {_one_line(problem)}\n')
         return EXIT_CONFIG
-    import rclpy
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-
     from .node import RecoveryNode
     from .parameters import StartupError
-    from .spin import spin_until_shutdown
+    from .spin import run_node
     # A /joint_states stream keeps the executor's threads busy with short Python work;
     # the default 5 ms interpreter-lock switch interval then makes the dispatcher and
     # intake threads wait in a convoy (measured: runs starting up to 1.9 s late at
@@ -99,49 +96,8 @@ def _run(args):
     # From here rclpy's handlers shut ROS down (spin then ends) and chain to ours, which
     # no longer raises: an exception at an arbitrary point could leave a thread behind.
     _BEFORE_ROS[0] = False
-    try:
-        rclpy.init(args=args)
-    except Exception as exc:  # noqa: B902 - e.g. a malformed --params-file
-        if _SIGNALS:
-            return 0
-        sys.stderr.write(f'{NODE_NAME}: error: cannot initialise ROS: {_one_line(exc)}\n')
-        return EXIT_CONFIG
-    node = None
-    executor = None
-    code = 0
-    try:
-        # One executor thread: every callback is non-blocking (the work runs in the
-        # node's own threads), and with a thread pool the executor's threads, woken for
-        # each /joint_states sample and re-running the pending service coroutines at
-        # every wake-up, fought the dispatcher and intake threads for the interpreter
-        # lock (/joint_states at 500 Hz, 4 threads: a fault's report took p50 5 ms, p95
-        # 27 ms to reach its callback and the fault set's write 21 ms, 89 ms).
-        executor = SingleThreadedExecutor()
-        if _SIGNALS:
-            raise ExternalShutdownException()
-        node = RecoveryNode()
-        executor.add_node(node)
-        if not _SIGNALS:
-            spin_until_shutdown(executor, node.context)
-    except StartupError as exc:
-        if not _SIGNALS:                 # not a start-up cut short by Ctrl-C or SIGTERM
-            sys.stderr.write(f'{NODE_NAME}: error: {exc}\n')
-            code = EXIT_CONFIG
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:  # noqa: B902
-        if rclpy.ok() and not _SIGNALS:
-            raise          # a genuine error: let it be seen
-        # Otherwise Ctrl-C or SIGTERM shut ROS down while the node was starting.
-    finally:
-        if node is not None:
-            node.stop()
-        if executor is not None:
-            executor.shutdown(timeout_sec=2.0)
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    return run_node(NODE_NAME, RecoveryNode, args, config_errors=(StartupError,),
+                    interrupted=lambda: bool(_SIGNALS))
 
 
 if __name__ == '__main__':

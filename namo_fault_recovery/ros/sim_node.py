@@ -33,21 +33,18 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from .spin import spin_until_shutdown
+from .spin import run_node
 from ..model.gestures import load_library
 from ..model.robot import load_robot
 from ..sim.physics import designed_allowances, NamoSim
 from ..sim.trajectory import ActiveTrajectory, Command, Point, Rejected, validate
 
 NODE_NAME = 'namo_sim'
-EXIT_CONFIG = 1
 _MAX_LAG = 1.0      # s behind real time before the physics lets time go
 
 
@@ -335,36 +332,7 @@ class SimNode(Node):
 
 def main(args=None):
     """Run the simulator until Ctrl-C or SIGTERM; return the exit code."""
-    try:
-        rclpy.init(args=args)
-    except Exception as exc:  # noqa: B902 - e.g. malformed --ros-args
-        sys.stderr.write(f'{NODE_NAME}: error: cannot initialise ROS: '
-                         f'{" ".join(str(exc).split())}\n')
-        return EXIT_CONFIG
-    node = None
-    executor = None
-    code = 0
-    try:
-        node = SimNode()
-        # One executor thread: every callback is short, and the physics has its own.
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        spin_until_shutdown(executor, node.context)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, KeyError, OSError) as exc:
-        text = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
-        sys.stderr.write(f'{NODE_NAME}: error: {" ".join(str(text).split())}\n')
-        code = EXIT_CONFIG
-    finally:
-        if node is not None:
-            node.stop()
-        if executor is not None:
-            executor.shutdown(timeout_sec=2.0)
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    return run_node(NODE_NAME, SimNode, args, config_errors=(ValueError, KeyError, OSError))
 
 
 if __name__ == '__main__':
