@@ -6,15 +6,17 @@ A gesture is a motion: a few keyframes written in the file, or a dense recorded
 trajectory read from a CSV file (:mod:`.trajectory_csv`).
 """
 
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 import math
+import os
 from pathlib import Path
 import re
 
 import numpy as np
 
 from . import yaml_checks as chk
-from .robot import ARMS, N_JOINTS
+from .robot import ARMS, N_JOINTS, RobotModel
 from .trajectory_csv import load_trajectory_csv
 from .weights import ScoreWeights
 from ..errors import ConfigError
@@ -31,11 +33,11 @@ class Keyframe:
     right: np.ndarray
     left: np.ndarray
 
-    def arm(self, side):
+    def arm(self, side: str) -> np.ndarray:
         """Return the angles of one arm."""
         return self.right if side == 'right' else self.left
 
-    def positions(self):
+    def positions(self) -> np.ndarray:
         """All 14 angles, right arm first (the order of RobotModel.joint_names)."""
         return np.concatenate((self.right, self.left))
 
@@ -59,20 +61,20 @@ class Gesture:
     two_handed: bool
     keyframes: tuple
     description: str = ''
-    weights: object = None
+    weights: ScoreWeights | None = None
     joints: tuple = ()
     expand: tuple = ()
 
     @property
-    def times(self):
+    def times(self) -> np.ndarray:
         """Return the keyframes' times from start (s) as an array."""
         return np.array([kf.time_from_start for kf in self.keyframes])
 
-    def joint_matrix(self):
+    def joint_matrix(self) -> np.ndarray:
         """Return every keyframe's 14 joint angles (rad) stacked, right arm first: (T, 14)."""
         return np.array([kf.positions() for kf in self.keyframes])
 
-    def with_keyframes(self, keyframes):
+    def with_keyframes(self, keyframes: Iterable[Keyframe]) -> 'Gesture':
         """Return a copy of this gesture with other keyframes."""
         return Gesture(self.name, self.arms, self.two_handed, tuple(keyframes),
                        self.description, self.weights, self.joints, self.expand)
@@ -86,23 +88,23 @@ class GestureLibrary:
     source: str = '<memory>'
 
     @property
-    def names(self):
+    def names(self) -> tuple:
         """Gesture names in library order."""
         return tuple(g.name for g in self.gestures)
 
-    def __len__(self):
+    def __len__(self) -> int:
         return len(self.gestures)
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[Gesture]:
         return iter(self.gestures)
 
-    def __getitem__(self, name):
+    def __getitem__(self, name: str) -> Gesture:
         for gesture in self.gestures:
             if gesture.name == name:
                 return gesture
         raise KeyError(f'unknown gesture {name!r}; expected one of {", ".join(self.names)}')
 
-    def lock_averages(self, side):
+    def lock_averages(self, side: str) -> np.ndarray:
         """
         Return the paper's lock angles (rad) for one arm.
 
@@ -150,7 +152,8 @@ def _arm_angles(value, side, robot, scale, file, key, right_angles):
     return q
 
 
-def load_library(robot, path=None):
+def load_library(robot: RobotModel,
+                 path: str | os.PathLike | None = None) -> GestureLibrary:
     """Load and validate a gesture file against ``robot``; the packaged library if None."""
     path = Path(path) if path is not None else config_path(DEFAULT_GESTURE_FILE)
     data = chk.load_yaml(path)
@@ -162,61 +165,68 @@ def load_library(robot, path=None):
     gestures = []
     seen = set()
     for gi, entry in enumerate(entries):
-        where = f'gestures[{gi}]'
-        name = chk.require(entry, 'name', path, where)
-        if not isinstance(name, str) or not _NAME_RE.match(name):
-            raise ConfigError(path, f'{where}.name',
-                              f'expected a lower_snake_case name, got {name!r}')
-        if name in seen:
-            raise ConfigError(path, f'{where}.name', f'duplicate gesture name {name!r}')
-        seen.add(name)
-        arms = chk.require(entry, 'arms', path, where)
-        if (not isinstance(arms, list) or not arms or any(a not in ARMS for a in arms)
-                or len(set(arms)) != len(arms)):
-            raise ConfigError(path, f'{where}.arms',
-                              f'expected a list of distinct arms from {list(ARMS)}, '
-                              f'got {arms!r}')
-        two_handed = chk.require(entry, 'two_handed', path, where)
-        if not isinstance(two_handed, bool):
-            raise ConfigError(path, f'{where}.two_handed', f'expected true or false, '
-                              f'got {two_handed!r}')
-        if two_handed and len(arms) != 2:
-            raise ConfigError(path, f'{where}.two_handed',
-                              f'a two-handed gesture must use both arms, got arms {arms!r}')
-        if ('keyframes' in entry) == ('trajectory' in entry):
-            raise ConfigError(path, f'{where}.keyframes',
-                              "expected exactly one of 'keyframes' (a list) and "
-                              "'trajectory' (a CSV file)")
-        options = _gesture_options(entry, robot, arms, path, where)
-        if 'trajectory' in entry:
-            keyframes = _csv_keyframes(entry['trajectory'], robot, scale, path,
-                                       f'{where}.trajectory')
-            gestures.append(Gesture(name, tuple(arms), two_handed, keyframes,
-                                    str(entry.get('description', '')), *options))
-            continue
-        frames = entry['keyframes']
-        if not isinstance(frames, list) or not frames:
-            raise ConfigError(path, f'{where}.keyframes',
-                              f'expected a non-empty list of keyframes, got {frames!r}')
-        keyframes = []
-        last_time = -math.inf
-        for ki, frame in enumerate(frames):
-            fwhere = f'{where}.keyframes[{ki}]'
-            t = chk.as_number(chk.require(frame, 'time_from_start', path, fwhere), path,
-                              f'{fwhere}.time_from_start')
-            if t <= last_time or t < 0:
-                raise ConfigError(path, f'{fwhere}.time_from_start',
-                                  f'times must be non-negative and strictly increasing; '
-                                  f'got {t:g} after {last_time:g}')
-            last_time = t
-            right = _arm_angles(chk.require(frame, 'right', path, fwhere), 'right', robot,
-                                scale, path, f'{fwhere}.right', None)
-            left = _arm_angles(chk.require(frame, 'left', path, fwhere), 'left', robot,
-                               scale, path, f'{fwhere}.left', right)
-            keyframes.append(Keyframe(t, right, left))
-        gestures.append(Gesture(name, tuple(arms), two_handed, tuple(keyframes),
-                                str(entry.get('description', '')), *options))
+        gestures.append(_parse_gesture(entry, robot, scale, path, f'gestures[{gi}]', seen))
     return GestureLibrary(tuple(gestures), str(path))
+
+
+def _parse_gesture(entry, robot, scale, path, where, seen):
+    """Parse one entry of ``gestures``; ``seen`` holds the names of those before it."""
+    name = chk.require(entry, 'name', path, where)
+    if not isinstance(name, str) or not _NAME_RE.match(name):
+        raise ConfigError(path, f'{where}.name',
+                          f'expected a lower_snake_case name, got {name!r}')
+    if name in seen:
+        raise ConfigError(path, f'{where}.name', f'duplicate gesture name {name!r}')
+    seen.add(name)
+    arms = chk.require(entry, 'arms', path, where)
+    if (not isinstance(arms, list) or not arms or any(a not in ARMS for a in arms)
+            or len(set(arms)) != len(arms)):
+        raise ConfigError(path, f'{where}.arms',
+                          f'expected a list of distinct arms from {list(ARMS)}, '
+                          f'got {arms!r}')
+    two_handed = chk.require(entry, 'two_handed', path, where)
+    if not isinstance(two_handed, bool):
+        raise ConfigError(path, f'{where}.two_handed', f'expected true or false, '
+                          f'got {two_handed!r}')
+    if two_handed and len(arms) != 2:
+        raise ConfigError(path, f'{where}.two_handed',
+                          f'a two-handed gesture must use both arms, got arms {arms!r}')
+    if ('keyframes' in entry) == ('trajectory' in entry):
+        raise ConfigError(path, f'{where}.keyframes',
+                          "expected exactly one of 'keyframes' (a list) and "
+                          "'trajectory' (a CSV file)")
+    options = _gesture_options(entry, robot, arms, path, where)
+    if 'trajectory' in entry:
+        keyframes = _csv_keyframes(entry['trajectory'], robot, scale, path,
+                                   f'{where}.trajectory')
+    else:
+        keyframes = _yaml_keyframes(entry['keyframes'], robot, scale, path, where)
+    return Gesture(name, tuple(arms), two_handed, keyframes,
+                   str(entry.get('description', '')), *options)
+
+
+def _yaml_keyframes(frames, robot, scale, path, where):
+    """Parse a gesture's ``keyframes`` list: increasing times, both arms' angles."""
+    if not isinstance(frames, list) or not frames:
+        raise ConfigError(path, f'{where}.keyframes',
+                          f'expected a non-empty list of keyframes, got {frames!r}')
+    keyframes = []
+    last_time = -math.inf
+    for ki, frame in enumerate(frames):
+        fwhere = f'{where}.keyframes[{ki}]'
+        t = chk.as_number(chk.require(frame, 'time_from_start', path, fwhere), path,
+                          f'{fwhere}.time_from_start')
+        if t <= last_time or t < 0:
+            raise ConfigError(path, f'{fwhere}.time_from_start',
+                              f'times must be non-negative and strictly increasing; '
+                              f'got {t:g} after {last_time:g}')
+        last_time = t
+        right = _arm_angles(chk.require(frame, 'right', path, fwhere), 'right', robot,
+                            scale, path, f'{fwhere}.right', None)
+        left = _arm_angles(chk.require(frame, 'left', path, fwhere), 'left', robot,
+                           scale, path, f'{fwhere}.left', right)
+        keyframes.append(Keyframe(t, right, left))
+    return tuple(keyframes)
 
 
 def _csv_keyframes(value, robot, scale, file, key):

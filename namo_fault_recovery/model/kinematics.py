@@ -9,8 +9,9 @@ over the 7 links of the chain.  Positions are in millimetres in the robot's base
 from typing import NamedTuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from .robot import ARMS, N_JOINTS
+from .robot import ARMS, N_JOINTS, RobotModel
 
 
 _PLANS = {}   # id(robot) -> (robot, link constants); robots are immutable
@@ -116,7 +117,7 @@ def mirror_landmarks(lm):
                         lm.palm * flip[:, None] * flip[None, :])
 
 
-def forward_kinematics(robot, q, arm='right'):
+def forward_kinematics(robot: RobotModel, q: ArrayLike, arm: str = 'right') -> ArmLandmarks:
     """
     Return the elbow, wrist, fingertip and palm rotation of ``arm`` for angles ``q``.
 

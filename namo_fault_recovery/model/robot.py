@@ -2,6 +2,7 @@
 
 from dataclasses import dataclass, replace
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +30,7 @@ class ArmModel:
     upper: np.ndarray
     mirrored: bool
 
-    def clip(self, q):
+    def clip(self, q: np.ndarray) -> np.ndarray:
         """Clip joint angles (rad) into this arm's limits."""
         return np.clip(q, self.lower, self.upper)
 
@@ -57,14 +58,14 @@ class RobotModel:
     # Speed limit (rad/s) of joints 1..7, the same for both arms; used to time playback.
     velocity_limits: tuple = tuple(math.radians(v) for v in DEFAULT_VELOCITY_LIMITS_DEG)
 
-    def tool_length(self, side):
+    def tool_length(self, side: str) -> float:
         """Return the length (mm) of the tool held by one arm's hand; 0 without one."""
         for arm, length in self.tools:
             if arm == side:
                 return length
         return 0.0
 
-    def with_tool(self, length_mm, arm='right'):
+    def with_tool(self, length_mm: float, arm: str = 'right') -> 'RobotModel':
         """
         Return this robot with a tool of ``length_mm`` in one hand (0 removes it).
 
@@ -84,11 +85,11 @@ class RobotModel:
         return replace(self, tools=tools)
 
     @property
-    def joint_names(self):
+    def joint_names(self) -> tuple:
         """All 14 joint names, right arm first."""
         return self.arms['right'].joint_names + self.arms['left'].joint_names
 
-    def locate_joint(self, name):
+    def locate_joint(self, name: str) -> tuple[str, int]:
         """Return ``(arm, index)`` for a joint name, or raise KeyError naming the choices."""
         for side in ARMS:
             names = self.arms[side].joint_names
@@ -96,7 +97,7 @@ class RobotModel:
                 return side, names.index(name)
         raise KeyError(f'unknown joint {name!r}; expected one of {", ".join(self.joint_names)}')
 
-    def within_limits(self, side, index, angle, tol=1e-9):
+    def within_limits(self, side: str, index: int, angle: float, tol: float = 1e-9) -> bool:
         """Return True if ``angle`` (rad) lies within the limits of that joint."""
         arm = self.arms[side]
         return arm.lower[index] - tol <= angle <= arm.upper[index] + tol
@@ -120,21 +121,47 @@ def parse_velocity_limits(data, path, angle_scale):
     return tuple(v * angle_scale for v in row)
 
 
-def load_robot(path=None):
+def load_robot(path: str | os.PathLike | None = None) -> RobotModel:
     """Load and validate a robot file; the packaged Namo model when ``path`` is None."""
     path = Path(path) if path is not None else config_path(DEFAULT_ROBOT_FILE)
     data = chk.load_yaml(path)
     name = str(data.get('name', path.stem))
+    length_scale, angle_scale = _parse_units(data, path)
+    table, ee = _parse_dh(data, path)
+    frames = _parse_landmarks(data, path)
+    arms = _parse_arms(data, path, angle_scale)
+    capsules = _parse_capsules(data, path, length_scale)
+    return RobotModel(
+        name=name,
+        theta_offset=table[:, 0] * angle_scale,
+        d=table[:, 1] * length_scale,
+        a_prev=table[:, 2] * length_scale,
+        alpha_prev=table[:, 3] * angle_scale,
+        end_effector=np.array([ee[0] * angle_scale, ee[1] * length_scale,
+                               ee[2] * length_scale, ee[3] * angle_scale]),
+        elbow_frame=frames['elbow'],
+        wrist_frame=frames['wrist'],
+        arms=arms,
+        source=str(path),
+        capsules=capsules,
+        velocity_limits=parse_velocity_limits(data, path, angle_scale),
+    )
 
+
+def _parse_units(data, path):
+    """Return the ``units`` key as (mm per length unit, rad per angle unit)."""
     units = chk.require(data, 'units', path)
     length_unit = chk.require(units, 'length', path, 'units')
     if length_unit not in _LENGTH_SCALES:
         raise ConfigError(path, 'units.length',
                           f"unknown length unit {length_unit!r}; expected 'mm' or 'm'")
-    length_scale = _LENGTH_SCALES[length_unit]
     angle_scale = chk.as_angle_scale(chk.require(units, 'angle', path, 'units'),
                                      path, 'units.angle')
+    return _LENGTH_SCALES[length_unit], angle_scale
 
+
+def _parse_dh(data, path):
+    """Return the ``dh`` key as the (7, 4) joint table and the end-effector row (file units)."""
     dh = chk.require(data, 'dh', path)
     convention = chk.require(dh, 'convention', path, 'dh')
     if convention != 'modified':
@@ -151,7 +178,11 @@ def load_robot(path=None):
     table = np.array([chk.as_row(r, 4, path, f'dh.joints[{i}]') for i, r in enumerate(rows)])
     ee = np.array(chk.as_row(chk.require(dh, 'end_effector', path, 'dh'), 4, path,
                              'dh.end_effector'))
+    return table, ee
 
+
+def _parse_landmarks(data, path):
+    """Return the ``landmarks`` key: the DH frame numbers of the elbow and the wrist."""
     landmarks = chk.require(data, 'landmarks', path)
     frames = {}
     for key in ('elbow', 'wrist'):
@@ -160,83 +191,86 @@ def load_robot(path=None):
             raise ConfigError(path, f'landmarks.{key}',
                               f'expected a frame number 1..{N_JOINTS}, got {value!r}')
         frames[key] = value
+    return frames
 
+
+def _parse_arms(data, path, angle_scale):
+    """Return the ``arms`` key as {side: ArmModel}; joint names are unique over both arms."""
     arms_cfg = chk.require(data, 'arms', path)
     arms = {}
     seen = {}
     for side in ARMS:
         arm_cfg = chk.require(arms_cfg, side, path, 'arms')
-        where = f'arms.{side}'
-        names = chk.require(arm_cfg, 'joints', path, where)
-        if not isinstance(names, list) or len(names) != N_JOINTS:
-            raise ConfigError(path, f'{where}.joints',
-                              f'expected {N_JOINTS} joint names, got {names!r}')
-        for i, joint in enumerate(names):
-            if not isinstance(joint, str) or not joint:
-                raise ConfigError(path, f'{where}.joints[{i}]',
-                                  f'expected a joint name, got {joint!r}')
-            if joint in seen:
-                raise ConfigError(path, f'{where}.joints[{i}]',
-                                  f'duplicate joint name {joint!r} (also {seen[joint]})')
-            seen[joint] = f'{where}.joints[{i}]'
-        limits = chk.require(arm_cfg, 'limits', path, where)
-        if not isinstance(limits, list) or len(limits) != N_JOINTS:
-            raise ConfigError(path, f'{where}.limits',
-                              f'expected {N_JOINTS} [lower, upper] pairs, got {limits!r}')
-        lims = np.array([chk.as_row(lim, 2, path, f'{where}.limits[{i}]')
-                         for i, lim in enumerate(limits)]) * angle_scale
-        for i, (lo, hi) in enumerate(lims):
-            if lo > hi:
-                raise ConfigError(path, f'{where}.limits[{i}]',
-                                  f'lower limit {limits[i][0]} is above upper limit '
-                                  f'{limits[i][1]}')
-        mirror_of = arm_cfg.get('mirror_of')
-        if mirror_of not in (None, 'right') or (side == 'right' and mirror_of is not None):
-            raise ConfigError(path, f'{where}.mirror_of',
-                              f'only the left arm may mirror the right arm; got {mirror_of!r}')
-        arms[side] = ArmModel(side, tuple(names), lims[:, 0].copy(), lims[:, 1].copy(),
-                              mirrored=mirror_of == 'right')
+        arms[side] = _parse_arm(side, arm_cfg, path, angle_scale, seen)
     if not arms['left'].mirrored:
         raise ConfigError(path, 'arms.left.mirror_of',
                           "missing key: the left arm must be declared 'mirror_of: right'")
+    return arms
 
-    capsules = CapsuleModel()
-    if 'capsules' in data:
-        cap = data['capsules']
-        if not isinstance(cap, dict):
-            raise ConfigError(path, 'capsules', f'expected a mapping, got {cap!r}')
-        known = {'upper_arm', 'forearm', 'hand', 'torso_radius', 'torso_top', 'torso_bottom',
-                 'weight'}
-        for key in cap:
-            if key not in known:
-                raise ConfigError(path, f'capsules.{key}',
-                                  f'unknown key; expected some of {", ".join(sorted(known))}')
-        values = {}
-        for key, value in cap.items():
-            if key in ('torso_top', 'torso_bottom'):
-                values[key] = tuple(v * length_scale for v in
-                                    chk.as_row(value, 3, path, f'capsules.{key}'))
-            elif key == 'weight':
-                values[key] = chk.as_number(value, path, f'capsules.{key}')
-            else:
-                values[key] = chk.as_number(value, path, f'capsules.{key}') * length_scale
-        try:
-            capsules = CapsuleModel(**values)
-        except ValueError as exc:
-            raise ConfigError(path, 'capsules', str(exc)) from None
 
-    return RobotModel(
-        name=name,
-        theta_offset=table[:, 0] * angle_scale,
-        d=table[:, 1] * length_scale,
-        a_prev=table[:, 2] * length_scale,
-        alpha_prev=table[:, 3] * angle_scale,
-        end_effector=np.array([ee[0] * angle_scale, ee[1] * length_scale,
-                               ee[2] * length_scale, ee[3] * angle_scale]),
-        elbow_frame=frames['elbow'],
-        wrist_frame=frames['wrist'],
-        arms=arms,
-        source=str(path),
-        capsules=capsules,
-        velocity_limits=parse_velocity_limits(data, path, angle_scale),
-    )
+def _parse_joint_names(arm_cfg, path, where, seen):
+    """Return one arm's 7 joint names; ``seen`` maps the names met so far to their key."""
+    names = chk.require(arm_cfg, 'joints', path, where)
+    if not isinstance(names, list) or len(names) != N_JOINTS:
+        raise ConfigError(path, f'{where}.joints',
+                          f'expected {N_JOINTS} joint names, got {names!r}')
+    for i, joint in enumerate(names):
+        if not isinstance(joint, str) or not joint:
+            raise ConfigError(path, f'{where}.joints[{i}]',
+                              f'expected a joint name, got {joint!r}')
+        if joint in seen:
+            raise ConfigError(path, f'{where}.joints[{i}]',
+                              f'duplicate joint name {joint!r} (also {seen[joint]})')
+        seen[joint] = f'{where}.joints[{i}]'
+    return tuple(names)
+
+
+def _parse_arm(side, arm_cfg, path, angle_scale, seen):
+    """Return one arm of the ``arms`` key: joint names, limits (rad), mirroring."""
+    where = f'arms.{side}'
+    names = _parse_joint_names(arm_cfg, path, where, seen)
+    limits = chk.require(arm_cfg, 'limits', path, where)
+    if not isinstance(limits, list) or len(limits) != N_JOINTS:
+        raise ConfigError(path, f'{where}.limits',
+                          f'expected {N_JOINTS} [lower, upper] pairs, got {limits!r}')
+    lims = np.array([chk.as_row(lim, 2, path, f'{where}.limits[{i}]')
+                     for i, lim in enumerate(limits)]) * angle_scale
+    for i, (lo, hi) in enumerate(lims):
+        if lo > hi:
+            raise ConfigError(path, f'{where}.limits[{i}]',
+                              f'lower limit {limits[i][0]} is above upper limit '
+                              f'{limits[i][1]}')
+    mirror_of = arm_cfg.get('mirror_of')
+    if mirror_of not in (None, 'right') or (side == 'right' and mirror_of is not None):
+        raise ConfigError(path, f'{where}.mirror_of',
+                          f'only the left arm may mirror the right arm; got {mirror_of!r}')
+    return ArmModel(side, names, lims[:, 0].copy(), lims[:, 1].copy(),
+                    mirrored=mirror_of == 'right')
+
+
+def _parse_capsules(data, path, length_scale):
+    """Return the optional ``capsules`` key as a CapsuleModel (mm); the defaults if absent."""
+    if 'capsules' not in data:
+        return CapsuleModel()
+    cap = data['capsules']
+    if not isinstance(cap, dict):
+        raise ConfigError(path, 'capsules', f'expected a mapping, got {cap!r}')
+    known = {'upper_arm', 'forearm', 'hand', 'torso_radius', 'torso_top', 'torso_bottom',
+             'weight'}
+    for key in cap:
+        if key not in known:
+            raise ConfigError(path, f'capsules.{key}',
+                              f'unknown key; expected some of {", ".join(sorted(known))}')
+    values = {}
+    for key, value in cap.items():
+        if key in ('torso_top', 'torso_bottom'):
+            values[key] = tuple(v * length_scale for v in
+                                chk.as_row(value, 3, path, f'capsules.{key}'))
+        elif key == 'weight':
+            values[key] = chk.as_number(value, path, f'capsules.{key}')
+        else:
+            values[key] = chk.as_number(value, path, f'capsules.{key}') * length_scale
+    try:
+        return CapsuleModel(**values)
+    except ValueError as exc:
+        raise ConfigError(path, 'capsules', str(exc)) from None

@@ -26,36 +26,13 @@ def load_trajectory_csv(path, robot, scale):
     """
     path = Path(path)
     names = list(robot.joint_names)
-    try:
-        with path.open(newline='', encoding='utf-8') as stream:
-            rows = [(n, row) for n, row in enumerate(csv.reader(stream), start=1)
-                    if row and not row[0].lstrip().startswith('#')]
-    except OSError as exc:
-        raise ConfigError(path, None, f'cannot read file ({exc.strerror or exc})') from exc
-    except csv.Error as exc:
-        raise ConfigError(path, None, f'not a valid CSV file ({exc})') from exc
-    except UnicodeDecodeError as exc:
-        raise ConfigError(path, None, f'not a UTF-8 text file (byte {exc.start}: '
-                          f'{exc.reason})') from exc
+    rows = _read_rows(path)
     if not rows:
         raise ConfigError(path, None, f'no samples; expected rows of time and '
                           f'{len(names)} joint angles')
     order = list(range(len(names) + 1))
-    line, first = rows[0]
-    if not _is_number(first[0]):
-        header = [c.strip() for c in first]
-        expected = ['time'] + names
-        unknown = [c for c in header if c not in expected]
-        if unknown:
-            raise ConfigError(path, f'line {line}',
-                              f'unknown column {unknown[0]!r}; expected time and the joint '
-                              f'names {", ".join(names)}')
-        missing = [c for c in expected if c not in header]
-        if missing or len(header) != len(expected):
-            what = f'missing column {missing[0]!r}' if missing else 'a column repeats'
-            raise ConfigError(path, f'line {line}', f'{what}; expected time and the '
-                              f'{len(names)} joint names')
-        order = [header.index(c) for c in expected]
+    if not _is_number(rows[0][1][0]):
+        order = _header_order(path, *rows[0], names)
         rows = rows[1:]
         if not rows:
             raise ConfigError(path, None, 'a header but no samples')
@@ -64,18 +41,7 @@ def load_trajectory_csv(path, robot, scale):
     limits = np.concatenate([[robot.arms[s].lower, robot.arms[s].upper]
                              for s in ('right', 'left')], axis=1)
     for r, (line, row) in enumerate(rows):
-        if len(row) != len(names) + 1:
-            raise ConfigError(path, f'line {line}',
-                              f'expected {len(names) + 1} values (time and {len(names)} '
-                              f'joint angles), got {len(row)}')
-        values = []
-        for e, c in enumerate(order):
-            cell = row[c].strip()
-            column = 'time' if e == 0 else names[e - 1]
-            if not _is_number(cell) or not math.isfinite(float(cell)):
-                raise ConfigError(path, f'line {line}, column {column}',
-                                  f'expected a finite number, got {cell!r}')
-            values.append(float(cell))
+        values = _row_values(path, line, row, order, names)
         t = values[0]
         if t < 0 or (r and t <= times[r - 1]):
             raise ConfigError(path, f'line {line}, column time',
@@ -90,6 +56,55 @@ def load_trajectory_csv(path, robot, scale):
                               f'angle {values[1 + j]:g} is outside the joint limits '
                               f'[{limits[0, j] / scale:g}, {limits[1, j] / scale:g}]')
     return times, angles
+
+
+def _read_rows(path):
+    """Return the file's ``(line number, cells)`` rows, without comments and blank lines."""
+    try:
+        with path.open(newline='', encoding='utf-8') as stream:
+            return [(n, row) for n, row in enumerate(csv.reader(stream), start=1)
+                    if row and not row[0].lstrip().startswith('#')]
+    except OSError as exc:
+        raise ConfigError(path, None, f'cannot read file ({exc.strerror or exc})') from exc
+    except csv.Error as exc:
+        raise ConfigError(path, None, f'not a valid CSV file ({exc})') from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(path, None, f'not a UTF-8 text file (byte {exc.start}: '
+                          f'{exc.reason})') from exc
+
+
+def _header_order(path, line, first, names):
+    """Return the column of ``time`` and of each joint, named by the header row."""
+    header = [c.strip() for c in first]
+    expected = ['time'] + names
+    unknown = [c for c in header if c not in expected]
+    if unknown:
+        raise ConfigError(path, f'line {line}',
+                          f'unknown column {unknown[0]!r}; expected time and the joint '
+                          f'names {", ".join(names)}')
+    missing = [c for c in expected if c not in header]
+    if missing or len(header) != len(expected):
+        what = f'missing column {missing[0]!r}' if missing else 'a column repeats'
+        raise ConfigError(path, f'line {line}', f'{what}; expected time and the '
+                          f'{len(names)} joint names')
+    return [header.index(c) for c in expected]
+
+
+def _row_values(path, line, row, order, names):
+    """Return one sample row as floats, time first, then the joints in robot order."""
+    if len(row) != len(names) + 1:
+        raise ConfigError(path, f'line {line}',
+                          f'expected {len(names) + 1} values (time and {len(names)} '
+                          f'joint angles), got {len(row)}')
+    values = []
+    for e, c in enumerate(order):
+        cell = row[c].strip()
+        column = 'time' if e == 0 else names[e - 1]
+        if not _is_number(cell) or not math.isfinite(float(cell)):
+            raise ConfigError(path, f'line {line}, column {column}',
+                              f'expected a finite number, got {cell!r}')
+        values.append(float(cell))
+    return values
 
 
 def write_trajectory_csv(path, times, angles_deg, joint_names, comment=''):

@@ -5,6 +5,7 @@ Part of a gesture's description (``config/gestures.yaml`` may give a gesture its
 of the node's settings; :mod:`~namo_fault_recovery.objective.score` applies them.
 """
 
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
 import math
 
@@ -32,7 +33,7 @@ class ScoreWeights:
     tip_lr: float = 1.0
     normalise: bool = True
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for f in fields(self):
             if f.name == 'normalise':
                 continue
@@ -46,7 +47,7 @@ class ScoreWeights:
                              'must be > 0')
 
     @classmethod
-    def from_mapping(cls, mapping):
+    def from_mapping(cls, mapping: Mapping[str, float]) -> 'ScoreWeights':
         """Build weights from a dict, naming any unknown key."""
         unknown = set(mapping) - set(COMPONENTS) - {'normalise'}
         if unknown:
@@ -54,7 +55,7 @@ class ScoreWeights:
                              f'expected some of {", ".join(COMPONENTS)}')
         return cls(**mapping)
 
-    def vector(self, two_handed):
+    def vector(self, two_handed: bool) -> np.ndarray:
         """Return the 6 weights of a gesture (the left-right ones are 0 if one-handed)."""
         w = np.array([getattr(self, c) for c in COMPONENTS], dtype=float)
         if not two_handed:

@@ -9,14 +9,18 @@ left-right wrist and fingertip distances, ``|d_LR - d_LR_ref|`` [reading: d_offs
 reference pose's own distance, so the reference scores exactly 0].
 """
 
+from collections.abc import Iterable
 import math
 from typing import NamedTuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from ..model.gestures import Gesture
 from ..model.kinematics import (ArmLandmarks, as_joint_array, batch_forward,
                                 batch_forward_jacobian, forward_kinematics, take_landmarks)
-from ..model.weights import ARM_COMPONENTS, COMPONENTS, ScoreWeights  # noqa: F401 (re-export)
+from ..model.robot import RobotModel
+from ..model.weights import ARM_COMPONENTS, COMPONENTS, ScoreWeights
 
 _FROB_TO_ANGLE = 1.0 / (2.0 * math.sqrt(2.0))
 
@@ -29,10 +33,10 @@ class Target(NamedTuple):
     arms: tuple
     two_handed: bool
     label: str = ''
-    weights: object = None   # ScoreWeights of this target's gesture; None: the scorer's
+    weights: ScoreWeights | None = None   # this target's gesture's own; None: the scorer's
 
 
-def gesture_targets(gesture, indices=None):
+def gesture_targets(gesture: Gesture, indices: Iterable[int] | None = None) -> list[Target]:
     """One Target per keyframe of ``gesture`` (or per keyframe index in ``indices``)."""
     indices = range(len(gesture.keyframes)) if indices is None else indices
     return [Target(gesture.keyframes[i].right, gesture.keyframes[i].left, gesture.arms,
@@ -60,7 +64,9 @@ class SimilarityScore:
     ``target[k]``, so the poses of a whole library can be scored in one call.
     """
 
-    def __init__(self, robot, targets, weights=None, reference_robot=None):
+    def __init__(self, robot: RobotModel, targets: Iterable[Target],
+                 weights: ScoreWeights | None = None,
+                 reference_robot: RobotModel | None = None) -> None:
         targets = list(targets)
         if not targets:
             raise ValueError('SimilarityScore: expected at least one target, got none')
@@ -86,22 +92,24 @@ class SimilarityScore:
             for side, lm in (('right', self._ref_r), ('left', self._ref_l))}
         self._uses_left = bool(np.any(self._arm_mask[:, 1]) or np.any(self._two))
 
-    def target_weights(self, target):
+    def target_weights(self, target: int) -> ScoreWeights:
         """Return the ScoreWeights of one target: its gesture's own, else the scorer's."""
         own = self.targets[target].weights
         return own if own is not None else self.weights
 
     @classmethod
-    def for_gesture(cls, robot, gesture, keyframe=0, weights=None):
+    def for_gesture(cls, robot: RobotModel, gesture: Gesture, keyframe: int = 0,
+                    weights: ScoreWeights | None = None) -> 'SimilarityScore':
         """Score against one keyframe of one gesture."""
         return cls(robot, [gesture_targets(gesture)[keyframe]], weights)
 
-    def reference(self, target=0):
+    def reference(self, target: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Return the reference angles (right, left) of a target."""
         t = self.targets[target]
         return t.q_right, t.q_left
 
-    def tip_error(self, q_right, q_left, target):
+    def tip_error(self, q_right: np.ndarray, q_left: np.ndarray,
+                  target: ArrayLike) -> np.ndarray:
         """
         Return the fingertip distance (mm) from the reference, the worst of the arms used.
 
@@ -116,7 +124,9 @@ class SimilarityScore:
             err = np.maximum(err, d * self._arm_mask[target, i])
         return err
 
-    def __call__(self, q_right, q_left=None, target=0, breakdown=False):
+    def __call__(self, q_right: ArrayLike | ArmLandmarks,
+                 q_left: ArrayLike | ArmLandmarks | None = None, target: ArrayLike = 0,
+                 breakdown: bool = False) -> np.ndarray | tuple[np.ndarray, dict]:
         """
         Score candidates; return totals (N,) and, with ``breakdown``, the components.
 
@@ -151,7 +161,9 @@ class SimilarityScore:
             q_left = np.broadcast_to(q_left, (n, q_left.shape[-1]))
         return self.evaluate(q_right, q_left, target, breakdown)
 
-    def evaluate(self, q_right, q_left, target, breakdown=False):
+    def evaluate(self, q_right: np.ndarray | ArmLandmarks,
+                 q_left: np.ndarray | ArmLandmarks | None, target: np.ndarray,
+                 breakdown: bool = False) -> np.ndarray | tuple[np.ndarray, dict]:
         """
         Score without input checks: the hot path of the optimisers.
 
@@ -191,7 +203,8 @@ class SimilarityScore:
         parts['left'] = left
         return total, parts
 
-    def value_and_grad(self, q_right, q_left, target, smooth=0.0):
+    def value_and_grad(self, q_right, q_left, target: np.ndarray,
+                       smooth: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """
         Return totals (N,) and their gradients (N, 7) with respect to each arm's angles.
 
