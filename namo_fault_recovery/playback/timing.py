@@ -124,6 +124,20 @@ def _segment_ratios(spline, times, limits):
     return ratios
 
 
+def _stretch(times, points, limits):
+    """Stretch the segments too fast for ``limits``; return the times and their spline."""
+    for _ in range(_MAX_PASSES):
+        spline = _spline(times, points)
+        ratios = _segment_ratios(spline, times, limits)
+        if np.all(ratios <= 1.0):
+            return times, spline
+        scale = np.where(ratios > 1.0, ratios * _STRETCH_MARGIN, 1.0)
+        times = np.concatenate([[0.0], np.cumsum(np.diff(times) * scale)])
+    # The slopes of neighbouring segments interact; a last uniform stretch bounds all.
+    times = times * (np.max(ratios) * _STRETCH_MARGIN)
+    return times, _spline(times, points)
+
+
 def plan_motion(joint_names, start, keyframe_times, keyframes, velocity_limits,
                 locks=None, lower=None, upper=None, settings=TimingSettings()):
     """
@@ -164,18 +178,7 @@ def plan_motion(joint_names, start, keyframe_times, keyframes, velocity_limits,
     times, points = times[keep], points[keep]
 
     nominal = times[-1]
-    for _ in range(_MAX_PASSES):
-        spline = _spline(times, points)
-        ratios = _segment_ratios(spline, times, limits)
-        if np.all(ratios <= 1.0):
-            break
-        scale = np.where(ratios > 1.0, ratios * _STRETCH_MARGIN, 1.0)
-        times = np.concatenate([[0.0], np.cumsum(np.diff(times) * scale)])
-    else:
-        # The slopes of neighbouring segments interact; a last uniform stretch bounds all.
-        times = times * (np.max(ratios) * _STRETCH_MARGIN)
-        spline = _spline(times, points)
-
+    times, spline = _stretch(times, points, limits)
     grid = np.arange(0.0, times[-1], settings.sample_period)[1:]
     sample_t = np.union1d(grid, times)
     sample_t = sample_t[np.concatenate([[True], np.diff(sample_t) > 1e-6])]

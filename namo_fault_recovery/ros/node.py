@@ -48,6 +48,49 @@ NODE_NAME = 'recovery_node'
 FAULT_QUEUE_DEPTH = 10_000        # reports the subscription holds while the intake catches up
 STATES_PARSE_PERIOD = 0.1         # s: the latest raw joint state is parsed at most this often
 MARKER_DELAY = 0.05               # s: markers are drawn this long after a publication
+RELIABLE = {'reliability': ReliabilityPolicy.RELIABLE, 'history': HistoryPolicy.KEEP_LAST}
+LATCHED = dict(RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)     # late joiners too
+LATEST = {'reliability': ReliabilityPolicy.BEST_EFFORT, 'history': HistoryPolicy.KEEP_LAST}
+
+
+def log_at(logger, level, text):
+    """Log ``text`` at ``level`` ('error', 'warning', else info) with an rclpy logger."""
+    # One call site per severity: rclpy refuses a call site whose severity changes.
+    if level == 'error':
+        logger.error(text)
+    elif level == 'warning':
+        logger.warning(text)
+    else:
+        logger.info(text)
+
+
+def version_text(outcome):
+    """Return the ``[...]`` tag of an answer: the library version and its stamp."""
+    return dk.version_text(outcome.version, outcome.stamp_ns)
+
+
+def reconfigure_answer(outcome):
+    """Return the message of a ``reconfigure_gestures`` answer."""
+    if outcome.published:
+        return f'{summary(outcome.result)} [{version_text(outcome)}]'
+    return outcome.reason + (f' [{version_text(outcome)}]' if outcome.version else '')
+
+
+def cleared_text(gestures, tool_mm):
+    """Return what ``clear_faults`` published: the reference, or the tool's library."""
+    if tool_mm <= 0:
+        return f'the reference library is published ({gestures} gestures)'
+    return f'the library is adapted to the {tool_mm:g} mm tool alone (tool_length_mm)'
+
+
+def describe_reports(reports, lock_strategy):
+    """Return the accepted faults of ``reports`` as one text (each joint once, newest)."""
+    joints = {}
+    for report in reports:
+        joints.update(report.joints)
+    return ', '.join(f'{j} at {conv.fmt_angle(a)}' if a is not None else
+                     f'{j} (lock angle: {lock_strategy} strategy)'
+                     for j, a in joints.items())
 
 
 class RecoveryNode(Node):
@@ -99,11 +142,8 @@ class RecoveryNode(Node):
             self.stop()
             raise
         self._answers = AnswerPacer(self._wake.trigger)
-        self._answers.start()
-        self._markers.start()
-        self._state.start()
-        self._intake.start()
-        self._dispatcher.start()
+        for part in (self._answers, self._markers, self._state, self._intake, self._dispatcher):
+            part.start()
         if self._settings.contingency_table:
             self._table.configure(self._settings.engine,
                                   active={j: f.angle for j, f in self._book.faults.items()})
@@ -116,24 +156,19 @@ class RecoveryNode(Node):
     # --- interfaces -----------------------------------------------------------------
 
     def _create_interfaces(self):
-        reliable = {'reliability': ReliabilityPolicy.RELIABLE,
-                    'history': HistoryPolicy.KEEP_LAST}
-        latched = dict(reliable, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._library_pub = self.create_publisher(
-            JointTrajectory, 'gesture_library', QoSProfile(depth=len(self._library), **latched))
+            JointTrajectory, 'gesture_library', QoSProfile(depth=len(self._library), **LATCHED))
         self._marker_pub = self.create_publisher(MarkerArray, 'gesture_markers',
-                                                 QoSProfile(depth=1, **latched))
+                                                 QoSProfile(depth=1, **LATCHED))
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        inputs = MutuallyExclusiveCallbackGroup()
         self.create_subscription(JointState, 'actuator_fault', self._on_fault,
-                                 QoSProfile(depth=FAULT_QUEUE_DEPTH, **reliable),
-                                 callback_group=inputs)
+                                 QoSProfile(depth=FAULT_QUEUE_DEPTH, **RELIABLE),
+                                 callback_group=MutuallyExclusiveCallbackGroup())
         self.create_subscription(JointState, 'joint_states', self._inputs.joint_state,
-                                 QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
-                                            history=HistoryPolicy.KEEP_LAST),
+                                 QoSProfile(depth=1, **LATEST),
                                  callback_group=MutuallyExclusiveCallbackGroup(), raw=True)
         services = ReentrantCallbackGroup()
-        service_qos = QoSProfile(depth=1000, **reliable)
+        service_qos = QoSProfile(depth=1000, **RELIABLE)
         self.create_service(Trigger, 'reconfigure_gestures', self._on_reconfigure,
                             qos_profile=service_qos, callback_group=services)
         self.create_service(Trigger, 'clear_faults', self._on_clear,
@@ -210,13 +245,7 @@ class RecoveryNode(Node):
         self._inputs.accepted()
         self._diag_dirty = True
         if reports:
-            joints = {}
-            for report in reports:
-                joints.update(report.joints)
-            described = ', '.join(
-                f'{j} at {conv.fmt_angle(a)}' if a is not None else
-                f'{j} (lock angle: {self._settings.engine.lock_strategy} strategy)'
-                for j, a in joints.items())
+            described = describe_reports(reports, self._settings.engine.lock_strategy)
             self.get_logger().info(f'fault accepted: {shorten(described, 400)} '
                                    f'({len(reports)} report(s)); reconfiguring the library')
 
@@ -236,11 +265,7 @@ class RecoveryNode(Node):
         outcome = await self._await_outcome(
             lambda done: self._after_intake(lambda: self._book.call(done)))
         response.success = bool(outcome.published and outcome.result.success)
-        if outcome.published:
-            response.message = f'{summary(outcome.result)} [{self._version_text(outcome)}]'
-        else:
-            response.message = outcome.reason + (
-                f' [{self._version_text(outcome)}]' if outcome.version else '')
+        response.message = reconfigure_answer(outcome)
         return response
 
     async def _on_clear(self, request, response):
@@ -255,12 +280,9 @@ class RecoveryNode(Node):
 
         outcome = await self._await_outcome(register)
         count = counted[0] if counted else 0
-        tool = self._settings.engine.tool_length_mm
-        done = (f'the reference library is published ({len(self._library)} gestures)'
-                if tool <= 0 else f'the library is adapted to the {tool:g} mm tool alone '
-                                  f'(tool_length_mm)')
+        done = cleared_text(len(self._library), self._settings.engine.tool_length_mm)
         response.success = bool(outcome.published)
-        response.message = (f'cleared {count} fault(s); {done} [{self._version_text(outcome)}]'
+        response.message = (f'cleared {count} fault(s); {done} [{version_text(outcome)}]'
                             if outcome.published else f'cleared {count} fault(s); '
                                                       f'{outcome.reason}')
         self.get_logger().info(f'cleared {count} fault(s); {done}')
@@ -270,10 +292,6 @@ class RecoveryNode(Node):
         """Run ``then()`` after every queued fault report (at once if the queue is full)."""
         if not self._intake.submit(After(then)):
             then()
-
-    @staticmethod
-    def _version_text(outcome):
-        return dk.version_text(outcome.version, outcome.stamp_ns)
 
     # --- outputs, persistence, restore ----------------------------------------------
 
@@ -351,15 +369,8 @@ class RecoveryNode(Node):
                 self.get_logger().warning(f'could not publish /diagnostics: {exc}')
 
     def _log(self, level, text):
-        # One call site per severity: rclpy refuses a call site whose severity changes.
-        if not self._live():
-            return
-        if level == 'error':
-            self.get_logger().error(text)
-        elif level == 'warning':
-            self.get_logger().warning(text)
-        else:
-            self.get_logger().info(text)
+        if self._live():
+            log_at(self.get_logger(), level, text)
 
     def _live(self):
         """Return True unless ROS was shut down (e.g. SIGTERM)."""
@@ -372,15 +383,7 @@ class RecoveryNode(Node):
         self._intake.stop()
         self._dispatcher.join()
         self._engine.stop()
-        table = getattr(self, '_table', None)
-        if table is not None:
-            table.stop()
-        state = getattr(self, '_state', None)
-        if state is not None:
-            state.stop()
-        answers = getattr(self, '_answers', None)
-        if answers is not None:
-            answers.stop()
-        markers = getattr(self, '_markers', None)
-        if markers is not None:
-            markers.stop()
+        for name in ('_table', '_state', '_answers', '_markers'):   # those built so far
+            part = getattr(self, name, None)
+            if part is not None:
+                part.stop()

@@ -59,6 +59,43 @@ def sim_command():
     return [sys.executable, '-m', 'namo_fault_recovery.ros.sim_node']
 
 
+_T = ParameterType
+# The node's read-only parameters: name -> (default, description, type).
+PARAMETERS = {
+    'robot_file': ('', 'robot model YAML (empty: the packaged Namo model)',
+                   _T.PARAMETER_STRING),
+    'gesture_file': ('', 'gesture library whose two-handed gestures define '
+                     'the designed hand contact (empty: the packaged one)',
+                     _T.PARAMETER_STRING),
+    'right_controller': ('right_arm_controller', 'trajectory controller of the '
+                         'right arm', _T.PARAMETER_STRING),
+    'left_controller': ('left_arm_controller', 'trajectory controller of the '
+                        'left arm', _T.PARAMETER_STRING),
+    'timestep': (0.002, 'physics step (s), run in real time',
+                 _T.PARAMETER_DOUBLE),
+    'kp': (300.0, 'position actuator stiffness (N m/rad)', _T.PARAMETER_DOUBLE),
+    'kv': (30.0, 'position actuator damping (N m s/rad)', _T.PARAMETER_DOUBLE),
+    'gravity': (True, 'gravity on (the arms are gravity-compensated)',
+                _T.PARAMETER_BOOL),
+    'joint_state_rate': (100.0, '/joint_states rate (Hz)', _T.PARAMETER_DOUBLE),
+    'contact_report_rate': (10.0, '~/contacts rate (Hz)', _T.PARAMETER_DOUBLE),
+    'contact_tolerance_mm': (1.0, 'penetration (mm) below which a contact '
+                             'is not counted', _T.PARAMETER_DOUBLE),
+    'initial_positions': ([0.0] * 14, 'start angles (rad) of the 14 joints, '
+                          'right arm first', _T.PARAMETER_DOUBLE_ARRAY),
+    'stuck_joints': ([''], "joints stuck from the start: 'NAME' (where it "
+                     "is) or 'NAME:DEG'", _T.PARAMETER_STRING_ARRAY),
+    'allow_partial_joints_goal': (False, 'accept trajectories naming only '
+                                  'some of the joints of a controller',
+                                  _T.PARAMETER_BOOL),
+    'reject_past_start': (False, 'stricter than the real controller: reject any '
+                          'non-zero stamp before now, even if its trajectory '
+                          'still runs', _T.PARAMETER_BOOL),
+    'allow_nonzero_velocity_at_trajectory_end': (
+        False, 'accept a non-zero velocity at the last point', _T.PARAMETER_BOOL),
+}
+
+
 def _describe(text, kind, read_only=True):
     return ParameterDescriptor(description=text, type=kind, read_only=read_only)
 
@@ -68,45 +105,7 @@ class SimNode(Node):
 
     def __init__(self):
         super().__init__(NODE_NAME)
-        p = ParameterType
-        params = {
-            'robot_file': ('', 'robot model YAML (empty: the packaged Namo model)',
-                           p.PARAMETER_STRING),
-            'gesture_file': ('', 'gesture library whose two-handed gestures define '
-                             'the designed hand contact (empty: the packaged one)',
-                             p.PARAMETER_STRING),
-            'right_controller': ('right_arm_controller', 'trajectory controller of the '
-                                 'right arm', p.PARAMETER_STRING),
-            'left_controller': ('left_arm_controller', 'trajectory controller of the '
-                                'left arm', p.PARAMETER_STRING),
-            'timestep': (0.002, 'physics step (s), run in real time',
-                         p.PARAMETER_DOUBLE),
-            'kp': (300.0, 'position actuator stiffness (N m/rad)', p.PARAMETER_DOUBLE),
-            'kv': (30.0, 'position actuator damping (N m s/rad)', p.PARAMETER_DOUBLE),
-            'gravity': (True, 'gravity on (the arms are gravity-compensated)',
-                        p.PARAMETER_BOOL),
-            'joint_state_rate': (100.0, '/joint_states rate (Hz)', p.PARAMETER_DOUBLE),
-            'contact_report_rate': (10.0, '~/contacts rate (Hz)', p.PARAMETER_DOUBLE),
-            'contact_tolerance_mm': (1.0, 'penetration (mm) below which a contact '
-                                     'is not counted', p.PARAMETER_DOUBLE),
-            'initial_positions': ([0.0] * 14, 'start angles (rad) of the 14 joints, '
-                                  'right arm first', p.PARAMETER_DOUBLE_ARRAY),
-            'stuck_joints': ([''], "joints stuck from the start: 'NAME' (where it "
-                             "is) or 'NAME:DEG'", p.PARAMETER_STRING_ARRAY),
-            'allow_partial_joints_goal': (False, 'accept trajectories naming only '
-                                          'some of the joints of a controller',
-                                          p.PARAMETER_BOOL),
-            'reject_past_start': (False, 'stricter than the real controller: reject any '
-                                  'non-zero stamp before now, even if its trajectory '
-                                  'still runs', p.PARAMETER_BOOL),
-            'allow_nonzero_velocity_at_trajectory_end': (
-                False, 'accept a non-zero velocity at the last point', p.PARAMETER_BOOL),
-        }
-        self.p = {}
-        for name, (default, text, kind) in params.items():
-            self.declare_parameter(name, default, _describe(text, kind))
-            value = self.get_parameter(name).value
-            self.p[name] = value
+        self.p = self._declare_parameters()
         self.robot = load_robot(self.p['robot_file'] or None)
         library = load_library(self.robot, self.p['gesture_file'] or None)
         for name in ('timestep', 'kp', 'joint_state_rate', 'contact_report_rate'):
@@ -116,28 +115,9 @@ class SimNode(Node):
                            kv=self.p['kv'], gravity=self.p['gravity'],
                            allowances=designed_allowances(self.robot, library),
                            tolerance=self.p['contact_tolerance_mm'] * 1e-3)
-        q0 = list(self.p['initial_positions'])
-        if len(q0) != len(self.sim.joint_names):
-            raise ValueError(f'initial_positions: expected {len(self.sim.joint_names)} '
-                             f'angles, got {len(q0)}')
-        self.sim.set_positions(q0)
-        self.desired = (np.array(q0, dtype=float), np.zeros(len(q0)))
-        for spec in self.p['stuck_joints']:
-            if spec:
-                name, _, deg = spec.partition(':')
-                angle = math.radians(float(deg)) if deg.strip() else None
-                self.sim.stick(name.strip(), angle)
+        self.desired = self._initial_state()
         self.lock = threading.Lock()
-        self.controllers = {}
-        for side in ('right', 'left'):
-            controller = self.p[f'{side}_controller']
-            joints = tuple(self.robot.arms[side].joint_names)
-            self.controllers[controller] = {
-                'joints': joints, 'index': [self.sim.index(j) for j in joints],
-                'active': None}
-            self.create_subscription(
-                JointTrajectory, f'/{controller}/joint_trajectory',
-                lambda msg, c=controller: self._on_trajectory(c, msg), 10)
+        self.controllers = self._create_controllers()
         self.state_pub = self.create_publisher(JointState, '/joint_states', 10)
         self.contact_pub = self.create_publisher(DiagnosticArray, '~/contacts', 10)
         self.create_subscription(JointState, '~/stick', self._on_stick, 10)
@@ -151,6 +131,44 @@ class SimNode(Node):
         self.get_logger().info(
             f'simulating {self.robot.name}: controllers {", ".join(self.controllers)}; '
             f'stuck {self._stuck_text()}')
+
+    # --- start-up ---
+
+    def _declare_parameters(self):
+        """Declare the read-only parameters of PARAMETERS; return {name: value}."""
+        values = {}
+        for name, (default, text, kind) in PARAMETERS.items():
+            self.declare_parameter(name, default, _describe(text, kind))
+            values[name] = self.get_parameter(name).value
+        return values
+
+    def _initial_state(self):
+        """Set the start angles and the stuck joints; return the (q, qd) first desired."""
+        q0 = list(self.p['initial_positions'])
+        if len(q0) != len(self.sim.joint_names):
+            raise ValueError(f'initial_positions: expected {len(self.sim.joint_names)} '
+                             f'angles, got {len(q0)}')
+        self.sim.set_positions(q0)
+        for spec in self.p['stuck_joints']:
+            if spec:
+                name, _, deg = spec.partition(':')
+                angle = math.radians(float(deg)) if deg.strip() else None
+                self.sim.stick(name.strip(), angle)
+        return np.array(q0, dtype=float), np.zeros(len(q0))
+
+    def _create_controllers(self):
+        """Subscribe each arm's trajectory controller; return {controller: its state}."""
+        controllers = {}
+        for side in ('right', 'left'):
+            controller = self.p[f'{side}_controller']
+            joints = tuple(self.robot.arms[side].joint_names)
+            controllers[controller] = {
+                'joints': joints, 'index': [self.sim.index(j) for j in joints],
+                'active': None}
+            self.create_subscription(
+                JointTrajectory, f'/{controller}/joint_trajectory',
+                lambda msg, c=controller: self._on_trajectory(c, msg), 10)
+        return controllers
 
     # --- helpers ---
 
