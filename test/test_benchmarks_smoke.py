@@ -71,7 +71,8 @@ def test_run_gesture_matches_reconfigure_library(robot, library):
         spec = common.lookup_spec(key)
         run = common.run_gesture(spec, robot, library, 'bye', 'right_arm_joint2', 3)
         report = reconfigure_library(robot, library, {'right_arm_joint2': None},
-                                     PAPER.with_changes(optimizer=spec.algorithm, optimizer_preset=spec.preset),
+                                     PAPER.with_changes(optimizer=spec.algorithm,
+                                                        optimizer_preset=spec.preset),
                                      clock=Clock(None), seed=3, gestures=['bye'])
         assert run['score_engine'] == pytest.approx(report['bye'].score_after, rel=1e-12)
         assert run['score_before'] == pytest.approx(report['bye'].score_before, rel=1e-12)

@@ -212,7 +212,7 @@ class Algorithm:
         raise NotImplementedError
 
     def options(self) -> dict:
-        """Return the options (the constructor's arguments) as a plain dict, for reports."""
+        """Return the constructor's arguments as a plain dict (for reports)."""
         return {k: v for k, v in vars(self).items() if not k.startswith('_')}
 
 

@@ -117,11 +117,12 @@ class _Job:
 
     def engine_options(self):
         """Return the keyword arguments of the typical points' keyframe search."""
-        return dict(optimizer_overrides=self.optimizer_overrides, stay_close=self.stay_close,
-                    # A motion explored at its typical points is made consistent by
-                    # _consistent; one explored at every keyframe shares its branches.
-                    share_branches=tuple(g.name for g in self.library
-                                         if self.quantisations.get(g.name) is None))
+        return {'optimizer_overrides': self.optimizer_overrides,
+                'stay_close': self.stay_close,
+                # A motion explored at its typical points is made consistent by
+                # _consistent; one explored at every keyframe shares its branches.
+                'share_branches': tuple(g.name for g in self.library
+                                        if self.quantisations.get(g.name) is None)}
 
 
 def adapt_library(robot, library, faults, settings: 'RecoverySettings', *,
