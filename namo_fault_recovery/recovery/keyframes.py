@@ -22,7 +22,7 @@ top of the paper's method:
 
 import copy
 import time
-from typing import Optional, TYPE_CHECKING
+from typing import Optional
 
 import numpy as np
 
@@ -36,9 +36,6 @@ from ..objective.score import gesture_targets, SimilarityScore
 from ..optimize import make_algorithm, minimize, Problem, STATUS_CANCELLED, STATUS_DEADLINE
 from ..optimize.base import Clock
 from ..optimize.polish import polish
-
-if TYPE_CHECKING:   # the settings import this module's choices: no import at run time
-    from .engine import RecoverySettings
 
 _STATUS_NAMES = {0: 'converged', STATUS_DEADLINE: 'deadline', STATUS_CANCELLED: 'cancelled'}
 BIMANUAL_MODES = ('auto', 'off', 'on')
@@ -359,7 +356,7 @@ def joint_set(robot, names):
     return {robot.locate_joint(n) for n in names}
 
 
-def reconfigure_library(robot, library, faults, settings: 'RecoverySettings', *,
+def reconfigure_library(robot, library, faults, settings, *,
                         seed: Optional[int] = None, clock: Optional[Clock] = None,
                         measured=None, optimizer_overrides=None, gestures=None,
                         stay_close=0.0, lock_start=None,
@@ -381,26 +378,15 @@ def reconfigure_library(robot, library, faults, settings: 'RecoverySettings', *,
     flag of the whole library (None: ``settings.deadline_sec`` from now).  The paper's
     problem is ``bimanual='off'`` and ``collision_check=False``.
 
-    A gesture that names its designed ``joints`` searches only those first, and its
-    ``expand`` stages add further joints, in order, while the fingertip of one of its
-    keyframes stays more than ``DEFAULT_EXPANSION_THRESHOLD`` mm from its target
-    (staged DOF expansion).  ``stay_close`` (per deg^2) penalises moving the free
-    joints away from the reference pose: the smallest correction wins among equally
-    good ones, so that neighbouring keyframes stay on one redundant branch.
-    ``share_branches`` (True, False, or the names of the gestures concerned) restarts
-    each keyframe of a gesture of several keyframes from the solutions found for its
-    other keyframes (see :func:`_share_branches`); a caller that passes only some
-    points of a motion (its typical points) and reconciles them itself leaves it out.
-
-    With ``lock_strategy='optimal'`` the joints without an angle start at the library
-    average (or at ``lock_start[joint]``, e.g. the average over whole motions when
-    ``library`` holds only their typical points); that start is solved exactly as the
-    ``average`` strategy solves it, other angles are then tried on the very same
-    problem, and the lock set with the lowest library total (sum over gestures of
-    ``score_after``) wins, the start on ties: never worse than the start.
-    Returns a :class:`~.result.LibraryResult` (``method`` ``keyframes`` for every
-    gesture), a pure function of the inputs and ``seed`` (None draws one, recorded in
-    the result) up to where a deadline cuts the search.
+    A gesture's designed ``joints`` are searched first, and its ``expand`` stages add
+    joints while a keyframe's fingertip stays more than ``DEFAULT_EXPANSION_THRESHOLD``
+    mm off (staged DOF expansion).  ``stay_close`` (per deg^2) penalises moving away
+    from the reference pose, so that neighbouring keyframes stay on one redundant
+    branch.  ``share_branches`` (True, False, or gesture names) restarts each keyframe
+    of a motion from its other keyframes' solutions (:func:`_share_branches`).  With
+    ``lock_strategy='optimal'`` see :func:`_optimise_locks`; its start is the library
+    average, or ``lock_start[joint]``.  Returns a :class:`~.result.LibraryResult`, a pure
+    function of the inputs and ``seed`` (None draws one) up to where a deadline cuts.
     """
     start = time.monotonic()
     reference = robot
@@ -411,13 +397,8 @@ def reconfigure_library(robot, library, faults, settings: 'RecoverySettings', *,
     rng = np.random.default_rng(seed)
     algo = make_algorithm(settings.optimizer, settings.optimizer_preset,
                           **(optimizer_overrides or {}))
-    locks, notes = resolve_locks(robot, library, faults, settings.lock_strategy, measured)
-    optimal = []
-    if settings.lock_strategy == 'optimal':
-        optimal = [j for j, a in faults.items() if a is None]
-        for joint in optimal:
-            if lock_start and lock_start.get(joint) is not None:
-                locks[joint] = clamp_lock(robot, joint, lock_start[joint])
+    locks, notes, optimal = _start_locks(robot, library, faults, settings.lock_strategy,
+                                         measured, lock_start)
     selected = list(library) if gestures is None else [library[g] for g in gestures]
     # The optimisers stop early enough to leave time for what follows them (scoring the
     # result, the collision check).
@@ -434,6 +415,18 @@ def reconfigure_library(robot, library, faults, settings: 'RecoverySettings', *,
         notes.append(note)
     return _library_result(setup, locks, out, notes, time.monotonic() - start,
                            int(stats['nfev']))
+
+
+def _start_locks(robot, library, faults, lock_strategy, measured, lock_start):
+    """Return the lock angles to start from, the notes, and the joints to optimise."""
+    locks, notes = resolve_locks(robot, library, faults, lock_strategy, measured)
+    optimal = []
+    if lock_strategy == 'optimal':
+        optimal = [j for j, a in faults.items() if a is None]
+        for joint in optimal:
+            if lock_start and lock_start.get(joint) is not None:
+                locks[joint] = clamp_lock(robot, joint, lock_start[joint])
+    return locks, notes, optimal
 
 
 class _Setup:

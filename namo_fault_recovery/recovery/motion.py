@@ -28,7 +28,7 @@ motion come from :mod:`.figures`); it takes the run's
 
 from dataclasses import replace
 import time
-from typing import Optional, TYPE_CHECKING
+from typing import Optional
 
 import numpy as np
 
@@ -49,9 +49,6 @@ from ..objective.score import gesture_targets, SimilarityScore
 from ..optimize import make_algorithm, minimize
 from ..optimize.base import Clock
 from ..optimize.polish import polish
-
-if TYPE_CHECKING:   # the settings import this module's choices: no import at run time
-    from .engine import RecoverySettings
 
 METHODS = ('auto', 'kriging', 'per_point')
 DEFAULT_DISTORTION_MM = 60.0   # the paper's quantisation distortion threshold
@@ -125,7 +122,7 @@ class _Job:
                                         if self.quantisations.get(g.name) is None)}
 
 
-def adapt_library(robot, library, faults, settings: 'RecoverySettings', *,
+def adapt_library(robot, library, faults, settings, *,
                   seed: Optional[int] = None, clock: Optional[Clock] = None, measured=None,
                   quantisations=None, optimizer_overrides=None,
                   stay_close=DEFAULT_STAY_CLOSE) -> LibraryResult:
