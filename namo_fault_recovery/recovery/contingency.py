@@ -115,11 +115,11 @@ def table_fingerprint(robot, library, settings):
     arms, weights, joints, keyframe times and angles), every setting but
     ``deadline_sec``, the key rounding and ``FORMAT_VERSION``.
     """
-    engine = settings.public()
-    engine.pop('deadline_sec', None)
+    public = settings.public()
+    public.pop('deadline_sec', None)
     doc = {'format': FORMAT, 'version': FORMAT_VERSION, 'key_decimals': KEY_DECIMALS,
            'robot': canonical(robot), 'library': canonical(library),
-           'settings': canonical(engine)}
+           'settings': canonical(public)}
     text = json.dumps(doc, sort_keys=True, separators=(',', ':'), allow_nan=True)
     return hashlib.sha256(text.encode('utf-8')).hexdigest()
 

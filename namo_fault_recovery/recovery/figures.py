@@ -71,9 +71,9 @@ def describe_motion(ctx, motion, picks) -> GestureResult:
     collides, pairs = collisions(ctx.model, ctx.checker, m.ids, m.q_r, m.q_l)
     err_before = tip_errors(ctx.robot, ctx.model, gesture, m.design, m.base_r, m.base_l)
     err_after = tip_errors(ctx.robot, ctx.model, gesture, m.design, m.q_r, m.q_l)
-    engine = m.engine
-    if engine is not None and m.how == 'keyframes':
-        message = engine.message
+    searched = m.searched
+    if searched is not None and m.how == 'keyframes':
+        message = searched.message
     else:
         message = (f'{gesture.name}: {LABELS[m.how].format(k=len(picks))}; '
                    f'mean score {after.mean():.2f}')
@@ -86,12 +86,12 @@ def describe_motion(ctx, motion, picks) -> GestureResult:
         score_before=float(before.max()), score_after=float(after.max()),
         status=str(m.status), message=message, collides=collides,
         breakdown={c: float(v[worst]) for c, v in parts.items() if c not in ARMS},
-        stage=int(engine.stage) if engine is not None else 1,
+        stage=int(searched.stage) if searched is not None else 1,
         colliding_pairs=tuple(str(p) for p in pairs), method=m.how,
         typical_points=len(picks), tip_error_mm=float(err_after.mean()),
         max_jump_deg=largest_jump(np.concatenate((m.q_r, m.q_l), axis=1)),
         score_before_mean=float(before.mean()), score_mean=float(after.mean()),
-        stage1_score=None if engine is None else float(engine.stage1_score),
+        stage1_score=None if searched is None else float(searched.stage1_score),
         expansion_stage=int(m.stage), free_joints=tuple(str(j) for j in m.free),
         nfev=int(m.nfev), typical_indices=tuple(int(i) for i in picks),
         kriging_sigma_deg=tuple(float(v) for v in m.sigma),

@@ -271,7 +271,7 @@ class _Motion:
             'keyframes'
         self.free = ()
         self.q_r, self.q_l = self.base_r.copy(), self.base_l.copy()
-        self.engine = None   # the keyframe search's GestureResult of its typical points
+        self.searched = None   # the keyframe search's GestureResult of its typical points
 
 
 def _adapt(job, locks, seed, search):
@@ -329,7 +329,7 @@ def _adapt(job, locks, seed, search):
 def _from_typical(job, ctx, m, typical, search):
     """Take a motion's typical points from the keyframe search; Kriging does the rest."""
     robot, gesture, picks = job.robot, m.gesture, job.picks
-    m.engine = gres = typical[gesture.name]
+    m.searched = gres = typical[gesture.name]
     m.status, m.stage = gres.status, gres.expansion_stage
     m.free = gres.free_joints
     layout = free_layout(robot, gesture.arms, ctx.locked, ctx.faulted,

@@ -14,8 +14,11 @@ them all).  The main ones:
   same value for every gesture of one library);
 - ``status``: ``converged``, ``deadline``, ``cancelled``, ``frozen`` or ``unchanged``.
 
-The engine's internal stage records (the keyframe engine's and the motion adaptation's)
-stay inside :mod:`namo_fault_recovery.recovery`; everything outside reads these types.
+The stages of the engine build these types too: the keyframe search
+(:func:`.keyframes.reconfigure_library`) and the motion adaptation
+(:func:`.motion.adapt_library`) return a :class:`LibraryResult`, so there is no other
+result shape to copy from.  A mean and a worst over keyframes always have two names
+(``score_before_mean`` / ``score_before``, ``score_mean`` / ``score_after``).
 Free of ROS; JSON round trip with :meth:`LibraryResult.to_dict` / ``from_dict``, where
 every field added later has a default so that older state files still load.
 """
