@@ -10,11 +10,15 @@ from namo_fault_recovery.benchmarks import motion, speed
 from namo_fault_recovery.benchmarks.paper_data import TABLE6
 from namo_fault_recovery.cli.main import main
 from namo_fault_recovery.objective.score import gesture_targets, SimilarityScore
+from namo_fault_recovery.optimize.base import Clock
+from namo_fault_recovery.recovery.engine import RecoverySettings
 from namo_fault_recovery.recovery.keyframes import reconfigure_library
 import numpy as np
 import pytest
 import yaml
 
+# The keyframe search's own problem, the paper's: no stage 2, no collision term.
+PAPER = RecoverySettings(bimanual='off', collision_check=False)
 PNG_MAGIC = b'\x89PNG\r\n\x1a\n'
 
 
@@ -67,8 +71,9 @@ def test_run_gesture_matches_reconfigure_library(robot, library):
         spec = common.lookup_spec(key)
         run = common.run_gesture(spec, robot, library, 'bye', 'right_arm_joint2', 3)
         report = reconfigure_library(robot, library, {'right_arm_joint2': None},
-                                     algorithm=spec.algorithm, preset=spec.preset,
-                                     deadline=None, seed=3, gestures=['bye'])
+                                     PAPER.with_changes(optimizer=spec.algorithm,
+                                                        optimizer_preset=spec.preset),
+                                     clock=Clock(None), seed=3, gestures=['bye'])
         assert run['score_engine'] == pytest.approx(report['bye'].score_after, rel=1e-12)
         assert run['score_before'] == pytest.approx(report['bye'].score_before, rel=1e-12)
         assert run['score_engine'] <= run['score'] + 1e-12

@@ -155,7 +155,7 @@ def test_scores_and_breakdown_are_those_of_the_published_keyframes(robot, demo_l
 
 def test_a_cut_short_motion_worse_than_the_locked_design_is_replaced_by_it(robot, library):
     from dataclasses import replace
-    from namo_fault_recovery.recovery.engine import no_worse_than_locked
+    from namo_fault_recovery.recovery.figures import no_worse_than_locked
     settings = RecoverySettings()
     result = recover(robot, library, {'right_arm_joint2': None}, settings, seed=0)
     lock = result.locks['right_arm_joint2']

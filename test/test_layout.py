@@ -404,3 +404,72 @@ def test_every_subpackage_docstring_names_its_modules(package):
     missing = {f'{package}: {m}': 'the docstring' for m in modules
                if f':mod:`.{m}`' not in doc}
     assert_only_known('docstring', missing, package)
+
+
+# --- one result type -------------------------------------------------------------------
+
+RESULT_MODULE = f'{PACKAGE}.recovery.result'
+RESULT_TYPES = ('GestureResult', 'LibraryResult')
+# A class repeats a result type when at least this many of its fields are fields of that
+# type and they are most of its fields (OptimizeResult, scipy-shaped, shares only half).
+RESULT_COPY_MIN = 5
+
+
+def _class_fields(node):
+    """Return the field names of a class: its annotated class attributes and ``self.x``."""
+    names = {s.target.id for s in node.body
+             if isinstance(s, ast.AnnAssign) and isinstance(s.target, ast.Name)}
+    for sub in ast.walk(node):
+        targets = (sub.targets if isinstance(sub, ast.Assign)
+                   else [sub.target] if isinstance(sub, (ast.AnnAssign, ast.AugAssign)) else [])
+        for t in targets:
+            for e in (t.elts if isinstance(t, ast.Tuple) else [t]):
+                if (isinstance(e, ast.Attribute) and isinstance(e.value, ast.Name)
+                        and e.value.id == 'self'):
+                    names.add(e.attr)
+    return names
+
+
+def _classes(trees):
+    """Yield ``(where, class node)`` for every class of ``trees`` ({name: (path, tree)})."""
+    for name, (_, tree) in trees.items():
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ClassDef):
+                yield f'{name}.{node.name}', node
+
+
+def result_copies(trees, result_tree):
+    """Return ``{class: (result type, shared fields)}`` for classes that repeat a result."""
+    results = {node.name: _class_fields(node) for node in ast.walk(result_tree)
+               if isinstance(node, ast.ClassDef) and node.name in RESULT_TYPES}
+    assert set(results) == set(RESULT_TYPES), f'{RESULT_MODULE}: {sorted(results)}'
+    found = {}
+    for where, node in _classes(trees):
+        if where.startswith(RESULT_MODULE + '.'):
+            continue
+        own = _class_fields(node)
+        for kind, fields in results.items():
+            shared = own & fields
+            if len(shared) >= RESULT_COPY_MIN and 2 * len(shared) > len(own):
+                found[where] = (kind, sorted(shared))
+    return found
+
+
+def test_one_result_type():
+    # Outside recovery/result.py no class repeats most of GestureResult's or
+    # LibraryResult's fields: a wrapper holds a LibraryResult instead of copying it.
+    tests = {p.stem: (p, ast.parse(p.read_text(), str(p)))
+             for p in sorted((ROOT / 'test').glob('*.py'))}
+    found = result_copies({**MODULES, **tests}, MODULES[RESULT_MODULE][1])
+    assert not found, 'classes that copy a result type:\n' + '\n'.join(
+        f'{where}: {kind} fields {", ".join(shared)}' for where, (kind, shared) in found.items())
+
+
+def test_the_result_check_finds_a_copy():
+    copy = ast.parse('from dataclasses import dataclass\n\n\n@dataclass\nclass Shape:\n'
+                     '    name: str\n    score_before: float\n    score_after: float\n'
+                     '    status: str\n    message: str\n    version: int\n\n\n'
+                     'class Holder:\n    def __init__(self, result):\n'
+                     '        self.result, self.version = result, 1\n')
+    found = result_copies({'x': (None, copy)}, MODULES[RESULT_MODULE][1])
+    assert list(found) == ['x.Shape'] and found['x.Shape'][0] == 'GestureResult'

@@ -21,6 +21,8 @@ def test_average_strategy_uses_the_library_mean(robot, library):
 # right arm joints 1-7.
 TABLE_2_AVERAGE_DEG = [52.5, -14.25, -5.25, 89.25, 8.75, -5.75, 30.5]
 # Spec section 4: the left arm takes part in Wai alone, so its averages are Wai's angles.
+# The keyframe search's own problem, the paper's: no stage 2, no collision term.
+PAPER = RecoverySettings(bimanual='off', collision_check=False)
 WAI_DEG = [30, 5, -45, 90, -10, -45, 45]
 
 
@@ -67,10 +69,9 @@ def test_unknown_strategy(robot, library):
 
 @pytest.mark.parametrize('joint', ['right_arm_joint2', 'right_arm_joint3'])
 def test_optimal_lock_beats_average_on_library_total(robot, library, joint):
-    kw = {'seed': 4, 'bimanual': 'off'}
-    average = reconfigure_library(robot, library, {joint: None}, **kw)
-    optimal = reconfigure_library(robot, library, {joint: None}, lock_strategy='optimal',
-                                  **kw)
+    average = reconfigure_library(robot, library, {joint: None}, PAPER, seed=4)
+    optimal = reconfigure_library(robot, library, {joint: None},
+                                  PAPER.with_changes(lock_strategy='optimal'), seed=4)
     assert optimal.total_score <= average.total_score
     chosen = optimal.locks[joint]
     assert any(f'{joint} = {np.degrees(chosen):.2f} deg' in n for n in optimal.notes)
@@ -78,15 +79,15 @@ def test_optimal_lock_beats_average_on_library_total(robot, library, joint):
     side, j = robot.locate_joint(joint)
     for g in optimal.gestures:
         assert g.keyframes[0].arm(side)[j] == chosen
-    assert optimal.lock_strategy == 'optimal'
+    assert optimal.settings['lock_strategy'] == 'optimal'
 
 
 @pytest.mark.parametrize('k', range(7))
 def test_left_right_symmetry_in_wai(robot, library, k):
     angle = float(library.lock_averages('right')[k])
-    kw = {'seed': 1, 'gestures': ['wai'], 'bimanual': 'off', 'deadline': None}
-    right = reconfigure_library(robot, library, {f'right_arm_joint{k + 1}': angle}, **kw)
-    left = reconfigure_library(robot, library, {f'left_arm_joint{k + 1}': angle}, **kw)
+    kw = {'seed': 1, 'gestures': ['wai'], 'clock': Clock(None)}
+    right = reconfigure_library(robot, library, {f'right_arm_joint{k + 1}': angle}, PAPER, **kw)
+    left = reconfigure_library(robot, library, {f'left_arm_joint{k + 1}': angle}, PAPER, **kw)
     r, le = right['wai'].score_after, left['wai'].score_after
     assert le == pytest.approx(r, rel=0.005, abs=1e-3)
     # And the solutions are mirror images: left angles equal the right ones.
@@ -96,21 +97,22 @@ def test_left_right_symmetry_in_wai(robot, library, k):
 
 @pytest.mark.parametrize('joint', ['right_arm_joint2', 'right_arm_joint5'])
 def test_stage_two_never_worse_than_stage_one(robot, library, joint):
-    report = reconfigure_library(robot, library, {joint: None}, seed=2, gestures=['wai'],
-                                 bimanual='on')
+    report = reconfigure_library(robot, library, {joint: None}, PAPER.with_changes(bimanual='on'),
+                                 seed=2, gestures=['wai'])
     wai = report['wai']
     assert wai.stage in (1, 2)
     assert wai.score_after <= wai.stage1_score + 1e-9
     if wai.stage == 2:
         assert any(j.startswith('left') for j in wai.free_joints)
-    off = reconfigure_library(robot, library, {joint: None}, seed=2, gestures=['wai'],
-                              bimanual='off')
+    off = reconfigure_library(robot, library, {joint: None}, PAPER.with_changes(bimanual='off'),
+                              seed=2, gestures=['wai'])
     assert off['wai'].stage == 1 and off['wai'].stage1_score == off['wai'].score_after
 
 
 def test_bimanual_mode_is_checked(robot, library):
-    with pytest.raises(ValueError, match="unknown bimanual mode 'both'"):
-        reconfigure_library(robot, library, {'right_arm_joint1': None}, bimanual='both')
+    with pytest.raises(ValueError, match="bimanual: unknown value 'both'"):
+        reconfigure_library(robot, library, {'right_arm_joint1': None},
+                            PAPER.with_changes(bimanual='both'))
 
 
 def test_lock_within_the_tolerance_beyond_a_limit_is_clamped_exactly(robot, library):
@@ -167,12 +169,13 @@ def test_optimal_engine_includes_the_start_and_solves_it_as_the_fixed_run(robot,
     # On the engine's own problem (collision term, stage 2, stay_close), the start lock
     # is solved exactly as the fixed-lock run solves it, so optimal ties or wins.
     joint = 'right_arm_joint2'
-    kw = {'seed': 3, 'bimanual': 'auto', 'collision': True, 'stay_close': 1e-3,
-          'deadline': None}
+    node = RecoverySettings(bimanual='auto', collision_check=True)
+    kw = {'seed': 3, 'stay_close': 1e-3, 'clock': Clock(None)}
     start = {joint: 0.3}
-    fixed = reconfigure_library(robot, library, start, **kw)
-    optimal = reconfigure_library(robot, library, {joint: None}, lock_strategy='optimal',
-                                  lock_start=start, **kw)
+    fixed = reconfigure_library(robot, library, start, node, **kw)
+    optimal = reconfigure_library(robot, library, {joint: None},
+                                  node.with_changes(lock_strategy='optimal'), lock_start=start,
+                                  **kw)
     assert optimal.total_score <= fixed.total_score
     assert any('at the start 17.19 deg' in n for n in optimal.notes)
     if optimal.locks[joint] == 0.3:
@@ -182,13 +185,16 @@ def test_optimal_engine_includes_the_start_and_solves_it_as_the_fixed_run(robot,
 def test_optimal_in_adapt_library_keeps_the_better_of_average_and_its_choice(
         robot, product_library):
     faults = {'right_arm_joint3': None}
-    kw = {'method': 'kriging', 'deadline': None, 'seed': 0, 'collision': True,
-          'bimanual': 'auto'}
-    average = adapt_library(robot, product_library, faults, **kw)
-    optimal = adapt_library(robot, product_library, faults, lock_strategy='optimal', **kw)
+    settings = RecoverySettings(trajectory_method='kriging', collision_check=True,
+                                bimanual='auto')
+    average = adapt_library(robot, product_library, faults, settings, clock=Clock(None),
+                            seed=0)
+    optimal = adapt_library(robot, product_library, faults,
+                            settings.with_changes(lock_strategy='optimal'), clock=Clock(None),
+                            seed=0)
 
     def total(res):
-        return sum(g.score_max for g in res.gestures)
+        return sum(g.score_after for g in res.gestures)
     assert total(optimal) <= total(average)
     note = [n for n in optimal.notes if n.startswith('optimal lock')]
     assert len(note) == 1 and 'average lock' in note[0]

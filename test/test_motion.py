@@ -8,7 +8,10 @@ from namo_fault_recovery.model.trajectory_csv import load_trajectory_csv
 from namo_fault_recovery.objective.collision import CollisionModel
 from namo_fault_recovery.objective.score import gesture_targets
 from namo_fault_recovery.optimize.base import Clock
+from namo_fault_recovery.recovery import keyframes as keyframes_module
 from namo_fault_recovery.recovery import motion as motion_module
+from namo_fault_recovery.recovery.engine import RecoverySettings
+from namo_fault_recovery.recovery.keyframes import reconfigure_library
 from namo_fault_recovery.recovery.kriging import fit_spherical, OrdinaryKriging
 from namo_fault_recovery.recovery.kriging import SphericalVariogram, variogram_cloud
 from namo_fault_recovery.recovery.motion import adapt_library, typical_points
@@ -17,6 +20,8 @@ import numpy as np
 import pytest
 
 ELBOW = 'right_arm_joint4'
+# The keyframe search's own problem, the paper's: no stage 2, no collision term.
+PAPER = RecoverySettings(bimanual='off', collision_check=False)
 
 
 @pytest.fixture(scope='module')
@@ -171,27 +176,30 @@ def test_typical_points_within_a_tiny_budget_still_give_a_library(robot, demo_li
     assert typ['circle'].note.startswith('circle: the search for typical points stopped')
     assert typ['circle'].k == 100 and typ['wai'] is None
     faults = {'right_arm_joint2': None, 'left_arm_joint4': None}
-    res = adapt_library(robot, demo_library, faults, method='kriging', distortion_mm=1.0,
+    res = adapt_library(robot, demo_library, faults,
+                        PAPER.with_changes(trajectory_method='kriging', vq_distortion_mm=1.0),
                         clock=Clock(0.0), seed=0)
     assert res.notes[0] == typ['circle'].note
     assert [g.name for g in res.gestures] == [g.name for g in demo_library]
     for g, ref in zip(res.gestures, demo_library):
         q = np.array([kf.positions() for kf in g.keyframes])
         assert q.shape == (len(ref.keyframes), 14) and np.isfinite(q).all()
-    assert res['circle'].typical == tuple(range(100))
+    assert res['circle'].typical_indices == tuple(range(100))
     assert not res.deadline_met     # the search had no time: it says so per motion
     assert res.locks['right_arm_joint2'] == pytest.approx(
         demo_library.lock_averages('right')[1], abs=1e-12)
 
 
 def test_the_caller_clock_owns_deadline_and_cancel(robot, circle):
-    with pytest.raises(ValueError, match='cancel flag in the clock'):
-        adapt_library(robot, circle, {ELBOW: 0.0}, clock=Clock(None), cancel=lambda: False)
-    res = adapt_library(robot, circle, {ELBOW: 0.0}, method='kriging', seed=0,
+    with pytest.raises(TypeError, match='cancel'):   # the cancel flag is the clock's
+        adapt_library(robot, circle, {ELBOW: 0.0}, PAPER, clock=Clock(None), cancel=lambda: False)
+    res = adapt_library(robot, circle, {ELBOW: 0.0},
+                        PAPER.with_changes(trajectory_method='kriging'), seed=0,
                         clock=Clock(None, cancel=lambda: True))
     assert res.cancelled and res['circle'].status == 'cancelled'
     assert res.deadline is None
-    timed = adapt_library(robot, circle, {ELBOW: 0.0}, method='kriging', seed=0,
+    timed = adapt_library(robot, circle, {ELBOW: 0.0},
+                          PAPER.with_changes(trajectory_method='kriging'), seed=0,
                           clock=Clock(30.0))
     assert timed.deadline == pytest.approx(30.0)
 
@@ -260,7 +268,8 @@ def test_variogram_cloud_is_half_the_mean_squared_difference():
 
 @pytest.fixture(scope='module')
 def elbow_locked(robot, circle):
-    return {m: adapt_library(robot, circle, {ELBOW: 0.0}, method=m, deadline=None, seed=2)
+    return {m: adapt_library(robot, circle, {ELBOW: 0.0}, PAPER.with_changes(trajectory_method=m),
+                             clock=Clock(None), seed=2)
             for m in ('kriging', 'per_point')}
 
 
@@ -275,7 +284,7 @@ def test_expansion_recovers_the_circle_with_the_elbow_locked(elbow_locked, metho
     g = elbow_locked[method]['circle']
     assert g.tip_error_before_mm > 300
     assert g.expansion_stage >= 1 and 'right_arm_joint6' in g.free_joints
-    assert g.tip_error_mean_mm < 0.05 * g.tip_error_before_mm
+    assert g.tip_error_mm < 0.05 * g.tip_error_before_mm
 
 
 def test_expansion_cut_by_the_deadline_keeps_the_completed_stage(robot, circle, monkeypatch):
@@ -289,7 +298,8 @@ def test_expansion_cut_by_the_deadline_keeps_the_completed_stage(robot, circle, 
         return None if len(calls) > 1 else real(*args, **kwargs)
 
     monkeypatch.setattr(motion_module, '_chain', chain)
-    res = adapt_library(robot, circle, {ELBOW: 0.0}, method='per_point', deadline=None,
+    res = adapt_library(robot, circle, {ELBOW: 0.0},
+                        PAPER.with_changes(trajectory_method='per_point'), clock=Clock(None),
                         seed=2)
     g = res['circle']
     assert len(calls) == 2
@@ -300,8 +310,9 @@ def test_expansion_cut_by_the_deadline_keeps_the_completed_stage(robot, circle, 
 
 @pytest.mark.parametrize('seed', [0, 1])
 def test_collisions_are_checked_at_every_point_of_the_motion(robot, circle, seed):
-    res = adapt_library(robot, circle, {'right_arm_joint1': 1.2}, method='kriging',
-                        deadline=None, seed=seed, collision=True)
+    res = adapt_library(robot, circle, {'right_arm_joint1': 1.2},
+                        PAPER.with_changes(trajectory_method='kriging', collision_check=True),
+                        clock=Clock(None), seed=seed)
     g = res['circle']
     # An independent check of the published keyframes, all 100 of them.
     checker = CollisionModel(robot, gesture_targets(circle['circle']))
@@ -312,50 +323,65 @@ def test_collisions_are_checked_at_every_point_of_the_motion(robot, circle, seed
     assert g.collides == bool(hits.any())
     if seed == 0:
         # Known case: the typical points are clear, Kriging between them is not.
-        assert g.collides and not res.typical_result['circle'].collides
+        # The keyframe search at the typical points, as adapt_library runs it.
+        picks = [int(i) for i in typical_points(robot, circle)['circle'].typical]
+        motion = circle['circle']
+        sub = GestureLibrary((motion.with_keyframes([motion.keyframes[i] for i in picks]),),
+                             circle.source)
+        engine = reconfigure_library(
+            robot, sub, {'right_arm_joint1': 1.2},
+            PAPER.with_changes(trajectory_method='kriging', collision_check=True),
+            clock=Clock(None), seed=int(np.random.default_rng(seed).integers(2 ** 63)),
+            stay_close=motion_module.DEFAULT_STAY_CLOSE, share_branches=())
+        assert tuple(picks) == g.typical_indices
+        assert g.collides and not engine['circle'].collides
         assert 'right_forearm-torso' in g.colliding_pairs
 
 
 def test_continuity_is_bounded(elbow_locked):
     for res in elbow_locked.values():
         g = res['circle']
-        assert g.jump_after_deg <= 3 * g.jump_designed_deg
+        assert g.max_jump_deg <= 3 * g.max_jump_designed_deg
 
 
 def test_continuity_penalty_smooths_the_motion(robot, circle, elbow_locked):
-    free = adapt_library(robot, circle, {ELBOW: 0.0}, method='per_point', deadline=None,
-                         seed=2, continuity=0.0)['circle']
+    free = adapt_library(robot, circle, {ELBOW: 0.0},
+                         PAPER.with_changes(trajectory_method='per_point', continuity_weight=0.0),
+                         clock=Clock(None), seed=2)['circle']
     penalised = elbow_locked['per_point']['circle']
-    assert penalised.jump_after_deg < free.jump_after_deg
+    assert penalised.max_jump_deg < free.max_jump_deg
 
 
 def test_kriging_costs_a_fraction_of_per_point_exploration(elbow_locked):
     kriging, per_point = (elbow_locked[m]['circle'] for m in ('kriging', 'per_point'))
-    assert len(kriging.typical) < 20
+    assert len(kriging.typical_indices) < 20
     assert kriging.nfev < 0.4 * per_point.nfev
     assert len(kriging.kriging_sigma_deg) == 100
 
 
-def test_without_expansion_the_designed_joints_fall_short(robot, circle):
-    g = adapt_library(robot, circle, {ELBOW: 0.0}, method='kriging', deadline=None, seed=2,
-                      expansion_threshold=1e9)['circle']
+def test_without_expansion_the_designed_joints_fall_short(robot, circle, monkeypatch):
+    monkeypatch.setattr(keyframes_module, 'DEFAULT_EXPANSION_THRESHOLD', 1e9)
+    g = adapt_library(robot, circle, {ELBOW: 0.0},
+                      PAPER.with_changes(trajectory_method='kriging'), clock=Clock(None),
+                      seed=2)['circle']
     assert g.expansion_stage == 0
     assert set(g.free_joints) == {'right_arm_joint1', 'right_arm_joint2'}
-    assert g.tip_error_mean_mm > 100
+    assert g.tip_error_mm > 100
 
 
 def test_tool_and_lock_combine(robot, circle):
-    res = adapt_library(robot, circle, {'right_arm_joint7': 0.0}, tool_mm=50.0,
-                        method='kriging', deadline=None, seed=0)
+    res = adapt_library(robot, circle, {'right_arm_joint7': 0.0},
+                        PAPER.with_changes(tool_length_mm=50.0, trajectory_method='kriging'),
+                        clock=Clock(None), seed=0)
     g = res['circle']
     assert res.tool_mm == 50.0 and res.locks == {'right_arm_joint7': 0.0}
     assert g.tip_error_before_mm == pytest.approx(50.0, abs=1.0)
-    assert g.tip_error_mean_mm < 10.0
+    assert g.tip_error_mm < 10.0
 
 
 def test_auto_optimises_the_circle_after_kriging_within_the_deadline(robot, demo_library):
-    res = adapt_library(robot, demo_library, {ELBOW: None}, method='auto', deadline=1.0,
-                        seed=0)
+    res = adapt_library(robot, demo_library, {ELBOW: None},
+                        PAPER.with_changes(trajectory_method='auto'), clock=Clock(1.0), seed=0)
     g = res['circle']
     # The whole-trajectory pass replaces the Kriging result when it improves on it (it
     # keeps Kriging's only if the deadline left it no time at all).
@@ -369,8 +395,8 @@ def test_average_lock_is_over_whole_motions_not_typical_points(robot, demo_libra
                                                                method):
     # The paper's average: each gesture's keyframes averaged, then over the gestures.
     expected = demo_library.lock_averages('right')[1]
-    res = adapt_library(robot, demo_library, {'right_arm_joint2': None}, method=method,
-                        deadline=0.05, seed=0)
+    res = adapt_library(robot, demo_library, {'right_arm_joint2': None},
+                        PAPER.with_changes(trajectory_method=method), clock=Clock(0.05), seed=0)
     assert res.locks['right_arm_joint2'] == pytest.approx(expected, abs=1e-12)
 
 
@@ -378,14 +404,15 @@ def test_typical_points_are_computed_once_per_library(robot, demo_library):
     typ = typical_points(robot, demo_library)
     assert typ['wai'] is None and typ['bye'] is None
     assert typ['circle'].distortion <= 60.0
-    res = adapt_library(robot, demo_library, {ELBOW: 0.0}, method='kriging', seed=0,
-                        deadline=None, quantisations=typ)
-    assert res['circle'].typical == tuple(int(i) for i in typ['circle'].typical)
+    res = adapt_library(robot, demo_library, {ELBOW: 0.0},
+                        PAPER.with_changes(trajectory_method='kriging'), seed=0, clock=Clock(None),
+                        quantisations=typ)
+    assert res['circle'].typical_indices == tuple(int(i) for i in typ['circle'].typical)
 
 
 def test_bad_method_is_rejected(robot, circle):
-    with pytest.raises(ValueError, match="method 'fast'"):
-        adapt_library(robot, circle, {}, method='fast')
+    with pytest.raises(ValueError, match="trajectory_method: unknown value 'fast'"):
+        adapt_library(robot, circle, {}, PAPER.with_changes(trajectory_method='fast'))
 
 
 def test_the_circle_uses_its_later_expand_stage_whatever_the_seed(robot, demo_library):

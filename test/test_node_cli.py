@@ -9,6 +9,8 @@ import json
 import math
 
 from namo_fault_recovery.cli.main import main
+from namo_fault_recovery.optimize.base import Clock
+from namo_fault_recovery.recovery.engine import RecoverySettings
 from namo_fault_recovery.recovery.motion import adapt_library
 from node_harness import NodeProcess, RosClient, session_domain
 import pytest
@@ -125,7 +127,8 @@ def test_demo_runs_end_to_end(tmp_path, robot, product_library):
     assert 'fault reported on /actuator_fault: right_arm_joint2' in text
     # The unadapted score of wai is the core's, with the average lock.
     core = adapt_library(robot, product_library, {'right_arm_joint2': None},
-                         method='kriging', deadline=0.05, seed=0)
+                         RecoverySettings(trajectory_method='kriging'), clock=Clock(0.05),
+                         seed=0)
     assert f"{'wai':<14}{core['wai'].score_before:>10.2f}" in text
     assert 'calling /reconfigure_gestures' in text and '\nsuccess (' in text
     # matplotlib comes with the test extra, so the figures must be there.

@@ -11,6 +11,8 @@ import csv
 import math
 from pathlib import Path
 
+from namo_fault_recovery.optimize.base import Clock
+from namo_fault_recovery.recovery.engine import RecoverySettings
 from namo_fault_recovery.recovery.motion import adapt_library
 from node_harness import close_to, NodeProcess, RosClient, session_domain, statuses_values
 import numpy as np
@@ -188,7 +190,8 @@ def test_fault_locks_the_joint_and_improves_every_gesture(client, robot, demo_li
         assert math.isfinite(after) and after <= before + 1e-9, (name, before, after)
     # The unadapted score is the core's, with the lock applied.
     core = adapt_library(robot, demo_library, {'right_arm_joint2': None},
-                         method='kriging', deadline=0.05, seed=0)
+                         RecoverySettings(trajectory_method='kriging'), clock=Clock(0.05),
+                         seed=0)
     assert float(recon['wai.score_before']) == pytest.approx(core['wai'].score_before,
                                                              abs=0.01)
     assert float(recon['wai.score_after']) < float(recon['wai.score_before'])

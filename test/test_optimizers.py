@@ -4,10 +4,13 @@ from namo_fault_recovery.optimize import (ABC, BFOA, GA, GradientDescent, make_a
                                           polish, Problem, STATUS_CANCELLED, STATUS_DEADLINE,
                                           STATUS_DONE)
 from namo_fault_recovery.optimize.base import Clock
+from namo_fault_recovery.recovery.engine import RecoverySettings
 from namo_fault_recovery.recovery.keyframes import reconfigure_library
 import numpy as np
 import pytest
 
+# The keyframe search's own problem, the paper's: no stage 2, no collision term.
+PAPER = RecoverySettings(bimanual='off', collision_check=False)
 ALGOS = {
     'abc': lambda: ABC(n_sources=10, max_cycles=150, limit=30),
     'abc_default': lambda: make_algorithm('abc', 'default'),
@@ -44,14 +47,15 @@ def test_improves_on_random_start_smooth(name):
 
 @pytest.mark.parametrize('name', sorted(ALGOS))
 def test_improves_on_a_real_case(robot, library, name):
-    settings = {}
+    optimizer_overrides = {}
     if name == 'gd':
-        settings = {'iterations': 100, 'learning_rate': 0.05}
+        optimizer_overrides = {'iterations': 100, 'learning_rate': 0.05}
     algo, preset = (name, 'paper') if name != 'abc_default' else ('abc', 'default')
     algo = 'abc' if algo == 'abc' else algo
-    report = reconfigure_library(robot, library, {'right_arm_joint2': None}, algorithm=algo,
-                                 preset=preset, seed=3, deadline=None, gestures=['wai'],
-                                 settings=settings)
+    report = reconfigure_library(robot, library, {'right_arm_joint2': None},
+                                 PAPER.with_changes(optimizer=algo, optimizer_preset=preset),
+                                 seed=3, clock=Clock(None), gestures=['wai'],
+                                 optimizer_overrides=optimizer_overrides)
     wai = report['wai']
     assert wai.score_after <= wai.score_before
     if name != 'gd':   # GD from one random start is the paper's weak baseline
@@ -85,7 +89,7 @@ def test_deadline_returns_best_so_far(name):
     algo = {'abc': ABC(max_cycles=10 ** 6), 'abc_default': ABC(max_cycles=10 ** 6, polish=2),
             'ga': GA(generations=10 ** 6), 'bfoa': BFOA(elimination_events=1000),
             'gd': GradientDescent(iterations=10 ** 6)}[name]
-    res = minimize(problem, algo, deadline=0.05, seed=0)
+    res = minimize(problem, algo, clock=Clock(0.05), seed=0)
     assert res.status == STATUS_DEADLINE
     assert 'deadline' in res.message and not res.success
     assert np.isfinite(res.fun)
@@ -99,7 +103,8 @@ def test_cancel_stops_the_run():
         calls.append(1)
         return len(calls) > 3
 
-    res = minimize(sphere_problem(), ABC(max_cycles=10 ** 6), cancel=cancel, seed=0)
+    res = minimize(sphere_problem(), ABC(max_cycles=10 ** 6), clock=Clock(None, cancel),
+                   seed=0)
     assert res.status == STATUS_CANCELLED and np.isfinite(res.fun)
 
 
@@ -130,8 +135,10 @@ def test_minimize_runs_on_the_callers_clock():
     res = minimize(sphere_problem(), ABC(max_cycles=10 ** 6), clock=clock, seed=0)
     assert res.status == STATUS_CANCELLED
     assert clock.reason == STATUS_DONE     # the caller's clock is left untouched
-    with pytest.raises(ValueError, match='either clock or deadline'):
+    with pytest.raises(TypeError, match='deadline'):   # the deadline is the clock's
         minimize(sphere_problem(), ABC(), deadline=1.0, clock=Clock(None))
+    with pytest.raises(TypeError, match='clock: expected a Clock or None, got float'):
+        minimize(sphere_problem(), ABC(), 1.0)
 
 
 def test_polish_walks_to_the_floor():
@@ -153,7 +160,7 @@ def test_polish_walks_to_the_floor():
     (lambda: make_algorithm('abc', 'fast'), "unknown preset 'fast'"),
     (lambda: make_algorithm('abc', n_sources=1), 'ABC n_sources'),
     (lambda: Problem([0, 1], [1, 0], sphere), 'lower bound 1.0 > upper bound 0.0'),
-    (lambda: minimize(sphere_problem(), ABC(), deadline=-1), 'deadline'),
+    (lambda: minimize(sphere_problem(), ABC(), clock=Clock(-1)), 'deadline'),
 ])
 def test_bad_settings_raise_clear_errors(make, message):
     with pytest.raises(ValueError, match=message):
@@ -161,9 +168,9 @@ def test_bad_settings_raise_clear_errors(make, message):
 
 
 def test_presets_match_the_paper():
-    assert ABC.paper().settings()['n_sources'] == 5
-    assert ABC.paper().settings()['max_cycles'] == 500
-    assert ABC.paper().settings()['limit'] == 150
+    assert ABC.paper().options()['n_sources'] == 5
+    assert ABC.paper().options()['max_cycles'] == 500
+    assert ABC.paper().options()['limit'] == 150
     ga = GA.paper()
     assert (ga.population, ga.generations, ga.crossover_rate, ga.mutation_rate,
             ga.mutation_step) == (80, 50, 0.8, 0.25, 0.15)

@@ -7,6 +7,7 @@ from namo_fault_recovery.model.gestures import GestureLibrary
 from namo_fault_recovery.objective.collision import CollisionModel
 from namo_fault_recovery.objective.score import gesture_targets, SimilarityScore
 from namo_fault_recovery.optimize.base import Clock
+from namo_fault_recovery.recovery.engine import RecoverySettings
 from namo_fault_recovery.recovery.motion import adapt_library
 from namo_fault_recovery.recovery.trajectory_opt import optimise_trajectory
 from namo_fault_recovery.recovery.trajectory_opt import projected_lbfgs, TrajectoryProblem
@@ -16,6 +17,8 @@ import pytest
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / 'config'
 ELBOW = 'right_arm_joint4'
+# The keyframe search's own problem, the paper's: no stage 2, no collision term.
+PAPER = RecoverySettings(bimanual='off', collision_check=False)
 FREE = (('right', 0), ('right', 1), ('right', 2), ('right', 4), ('right', 5), ('right', 6))
 
 
@@ -55,8 +58,9 @@ def test_gradient_matches_finite_differences(robot, circle, collision):
 @pytest.fixture(scope='module')
 def kriging_start(robot, circle):
     lib = GestureLibrary((circle,), '<test>')
-    g = adapt_library(robot, lib, {ELBOW: 0.0}, method='kriging', deadline=None, seed=0,
-                      collision=True)['circle']
+    g = adapt_library(robot, lib, {ELBOW: 0.0},
+                      PAPER.with_changes(trajectory_method='kriging', collision_check=True),
+                      clock=Clock(None), seed=0)['circle']
     return np.array([kf.positions() for kf in g.keyframes])
 
 
@@ -136,13 +140,15 @@ def test_projected_lbfgs_solves_a_bounded_quadratic():
 
 def test_auto_optimises_the_whole_circle(robot, circle, kriging_start):
     lib = GestureLibrary((circle,), '<test>')
-    res = adapt_library(robot, lib, {ELBOW: 0.0}, method='auto', deadline=None, seed=0,
-                        collision=True)
+    res = adapt_library(robot, lib, {ELBOW: 0.0},
+                        PAPER.with_changes(trajectory_method='auto', collision_check=True),
+                        clock=Clock(None), seed=0)
     g = res['circle']
-    kriging = adapt_library(robot, lib, {ELBOW: 0.0}, method='kriging', deadline=None,
-                            seed=0, collision=True)['circle']
+    kriging = adapt_library(robot, lib, {ELBOW: 0.0},
+                            PAPER.with_changes(trajectory_method='kriging', collision_check=True),
+                            clock=Clock(None), seed=0)['circle']
     assert g.method == 'trajectory'
-    assert g.tip_error_mean_mm < kriging.tip_error_mean_mm
+    assert g.tip_error_mm < kriging.tip_error_mm
     assert g.score_mean < kriging.score_mean
     assert all(kf.right[3] == 0.0 for kf in g.keyframes)
-    assert g.jump_after_deg <= 1.5 * g.jump_designed_deg
+    assert g.max_jump_deg <= 1.5 * g.max_jump_designed_deg

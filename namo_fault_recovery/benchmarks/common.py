@@ -416,7 +416,7 @@ def run_gesture(spec, robot, library, gesture, joint, seed, deadline=None):
     before = problem.evaluate(problem.x0[:, None, :])[:, 0]
     rng = np.random.default_rng(int(seed))
     budget = None if deadline is None else max(deadline - (time.perf_counter() - t0), 0.0)
-    res = minimize(problem, algo, deadline=budget, seed=int(rng.integers(2 ** 63)))
+    res = minimize(problem, algo, clock=Clock(budget), seed=int(rng.integers(2 ** 63)))
     outer = time.perf_counter() - t0
     raw = np.atleast_1d(res.fun)
     engine = np.minimum(raw, before)

@@ -35,7 +35,7 @@ def _signature(spec, deadline):
     """Return what must match for stored runs to be reused: settings and deadline."""
     algo = make_algorithm(spec.algorithm, spec.preset, **spec.settings_dict())
     return {'algorithm': spec.algorithm, 'preset': spec.preset,
-            'settings': common.plain(algo.settings()), 'deadline': deadline}
+            'settings': common.plain(algo.options()), 'deadline': deadline}
 
 
 def _load_case(path, signature):

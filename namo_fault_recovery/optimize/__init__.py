@@ -1,11 +1,12 @@
 """
 Population optimisers with one scipy/pymoo-shaped API, free of ROS.
 
-A :class:`Problem` holds bounds and a batched objective; an algorithm object holds the
-settings; :func:`minimize` runs one on the other under a wall-clock deadline and returns
-an :class:`OptimizeResult`::
+A :class:`Problem` holds bounds and a batched objective; an algorithm object holds its
+options; :func:`minimize` runs one on the other within a :class:`Clock` (the one
+wall-clock deadline and cancel flag of the caller) and returns an
+:class:`OptimizeResult`::
 
-    res = minimize(problem, ABC.paper(), deadline=1.0, seed=0)
+    res = minimize(problem, ABC.paper(), clock=Clock(1.0), seed=0)
     res.x, res.fun, res.nfev, res.nit, res.status, res.message, res.wall_time
 
 - :mod:`.base`: ``Problem``, ``Algorithm``, ``minimize``, ``OptimizeResult``, ``Clock``;

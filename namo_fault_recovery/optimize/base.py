@@ -8,6 +8,7 @@ every sub-problem (e.g. all gestures of the library at once).
 
 from dataclasses import dataclass, field
 import time
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -32,7 +33,9 @@ class Problem:
     gesture: the reference pose of the free joints), which an algorithm may use.
     """
 
-    def __init__(self, lower, upper, objective, n_batch=None, x0=None, value_and_grad=None):
+    def __init__(self, lower, upper, objective: Callable[[np.ndarray], np.ndarray],
+                 n_batch: Optional[int] = None, x0=None,
+                 value_and_grad: Optional[Callable] = None):
         lower = np.asarray(lower, dtype=float).ravel()
         upper = np.asarray(upper, dtype=float).ravel()
         if lower.shape != upper.shape or lower.size == 0:
@@ -59,23 +62,23 @@ class Problem:
             np.asarray(x0, dtype=float).reshape(self.batch, self.dim))
 
     @property
-    def dim(self):
+    def dim(self) -> int:
         """Return the number of variables."""
         return self.lower.size
 
     @property
-    def batch(self):
+    def batch(self) -> int:
         """Return the number of sub-problems solved in lock-step (1 for a single one)."""
         return self.n_batch or 1
 
-    def evaluate(self, x):
+    def evaluate(self, x: np.ndarray) -> np.ndarray:
         """Evaluate X of shape (batch, N, D); counts function evaluations per sub-problem."""
         f = np.asarray(self.objective(x), dtype=float)
         self.nfev += x.shape[1]
         # A NaN must never win a comparison: treat it as the worst possible value.
         return np.where(np.isnan(f), np.inf, f)
 
-    def value_and_grad(self, x):
+    def value_and_grad(self, x: np.ndarray) -> tuple:
         """
         Return values (batch, N) and gradients (batch, N, D) at X (batch, N, D).
 
@@ -94,11 +97,11 @@ class Problem:
         f = f.reshape(batch, n, 2 * dim + 1)
         return f[..., 0], (f[..., 1:dim + 1] - f[..., dim + 1:]) / (2 * h)
 
-    def random(self, rng, n):
+    def random(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """Draw ``n`` uniform points per sub-problem, shape (batch, n, D)."""
         return rng.uniform(self.lower, self.upper, size=(self.batch, n, self.dim))
 
-    def clip(self, x):
+    def clip(self, x: np.ndarray) -> np.ndarray:
         """Clip into the bounds."""
         return np.clip(x, self.lower, self.upper)
 
@@ -108,18 +111,18 @@ class OptimizeResult:
     """What an optimiser returns, in the shape of scipy's ``OptimizeResult``."""
 
     x: np.ndarray
-    fun: object
+    fun: object            # (batch,) array, or a float for a single problem
     nfev: int
     nit: int
     status: int
     message: str
     wall_time: float
     history: np.ndarray = field(repr=False)
-    seed: int = None
+    seed: Optional[int] = None
     algorithm: str = ''
 
     @property
-    def success(self):
+    def success(self) -> bool:
         """Return True when the run ended on its own, not cut short."""
         return self.status == STATUS_DONE
 
@@ -135,7 +138,8 @@ class Clock:
     is expected to end past the deadline, so the overrun stays near one step's jitter.
     """
 
-    def __init__(self, deadline=None, cancel=None, start=None):
+    def __init__(self, deadline: Optional[float] = None,
+                 cancel: Optional[Callable[[], bool]] = None, start: Optional[float] = None):
         if deadline is not None and (not np.isfinite(deadline) or deadline < 0):
             raise ValueError(f'deadline: expected a finite number of seconds >= 0 or None, '
                              f'got {deadline!r}')
@@ -144,7 +148,7 @@ class Clock:
         self.cancel = cancel
         self.reason = STATUS_DONE
 
-    def expired(self, next_cost=0.0):
+    def expired(self, next_cost: float = 0.0) -> bool:
         """Return True (and remember why) if the run must stop now."""
         if self.cancel is not None and self.cancel():
             self.reason = STATUS_CANCELLED
@@ -154,23 +158,24 @@ class Clock:
             return True
         return False
 
-    def remaining(self):
+    def remaining(self) -> float:
         """Return the seconds left (inf without a deadline)."""
         return np.inf if self.end is None else self.end - time.monotonic()
 
-    def elapsed(self):
+    def elapsed(self) -> float:
         """Return the seconds since the start."""
         return time.monotonic() - self.start
 
     @classmethod
-    def until(cls, end, cancel=None):
+    def until(cls, end: Optional[float],
+              cancel: Optional[Callable[[], bool]] = None) -> 'Clock':
         """Return a clock that starts now and ends at ``end`` (monotonic s; None: never)."""
         clock = cls(None, cancel)
         if end is not None:
             clock.end = max(float(end), clock.start)
         return clock
 
-    def child(self, share=1.0, reserve=0.0):
+    def child(self, share: float = 1.0, reserve: float = 0.0) -> 'Clock':
         """
         Return the clock of one stage of this run: same cancel, an earlier or equal end.
 
@@ -193,7 +198,7 @@ class Clock:
 
 class Algorithm:
     """
-    Base class: subclasses implement :meth:`run` and validate their settings.
+    Base class: subclasses implement :meth:`run` and validate their options.
 
     ``run(problem, rng, clock)`` returns ``(x_best (batch, D), f_best (batch,), nit,
     history list of (batch,) arrays)``.  It must call ``clock.expired(step_cost)``
@@ -202,11 +207,12 @@ class Algorithm:
 
     name = 'algorithm'
 
-    def run(self, problem, rng, clock):
+    def run(self, problem: Problem, rng: np.random.Generator, clock: Clock) -> tuple:
+        """Run on ``problem`` until done or ``clock`` expires; see the class docstring."""
         raise NotImplementedError
 
-    def settings(self):
-        """Return the settings as a plain dict (for reports)."""
+    def options(self) -> dict:
+        """Return the constructor's arguments as a plain dict (for reports)."""
         return {k: v for k, v in vars(self).items() if not k.startswith('_')}
 
 
@@ -263,28 +269,26 @@ class StepTimer:
         return self.cost
 
 
-def minimize(problem, algorithm, deadline=None, seed=None, cancel=None, clock=None):
+def minimize(problem: Problem, algorithm: Algorithm, clock: Optional[Clock] = None,
+             seed: Optional[int] = None) -> OptimizeResult:
     """
-    Minimise ``problem`` with ``algorithm`` within ``deadline`` seconds of wall time.
+    Minimise ``problem`` with ``algorithm`` until it is done or ``clock`` expires.
 
-    ``seed`` makes the run reproducible (None draws one, reported in ``res.seed``);
-    ``cancel`` is an optional callable that stops the run early when it returns True.
-    ``clock`` (a :class:`Clock`) replaces both: the run ends at its end and honours its
-    cancel (the caller's clock itself is left untouched).
+    ``clock`` (a :class:`Clock`; None: no deadline) owns the deadline and the cancel
+    flag: the run ends at its end and honours its cancel (the caller's clock itself is
+    left untouched).  ``seed`` makes the run reproducible (None draws one, reported in
+    ``res.seed``).
     """
     if not isinstance(problem, Problem):
         raise TypeError(f'problem: expected a Problem, got {type(problem).__name__}')
     if not isinstance(algorithm, Algorithm):
         raise TypeError(f'algorithm: expected an Algorithm, got {type(algorithm).__name__}')
+    if clock is not None and not isinstance(clock, Clock):
+        raise TypeError(f'clock: expected a Clock or None, got {type(clock).__name__}')
     if seed is None:
         seed = int(np.random.SeedSequence().entropy % (2 ** 63))
     rng = np.random.default_rng(seed)
-    if clock is None:
-        clock = Clock(deadline, cancel)
-    elif deadline is not None or cancel is not None:
-        raise ValueError('minimize: pass either clock or deadline/cancel, not both')
-    else:
-        clock = Clock.until(clock.end, clock.cancel)
+    clock = Clock(None) if clock is None else Clock.until(clock.end, clock.cancel)
     problem.nfev = 0
     x, f, nit, history = algorithm.run(problem, rng, clock)
     wall = clock.elapsed()

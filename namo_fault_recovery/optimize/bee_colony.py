@@ -17,7 +17,7 @@ from .polish import polish
 
 class ABC(Algorithm):
     """
-    Artificial Bee Colony settings.
+    Artificial Bee Colony options.
 
     ``n_sources`` food sources (as many employed and onlooker bees), ``max_cycles``
     cycles, abandonment ``limit``; ``stall_cycles`` ends the run early after that many
@@ -62,8 +62,8 @@ class ABC(Algorithm):
         return problem.clip(cand)
 
     def run(self, problem, rng, clock):
+        """Run the colony on ``problem`` within ``clock``; see :class:`~.base.Algorithm`."""
         batch, sn = problem.batch, self.n_sources
-        rows = np.arange(batch)[:, None]
         x = problem.random(rng, sn)
         if self.use_x0 and problem.x0 is not None:
             x[:, 0] = problem.x0
@@ -83,43 +83,13 @@ class ABC(Algorithm):
             better = fc < f
             x[better], f[better] = cand[better], fc[better]
             trials = np.where(better, 0, trials + 1)
-            # Onlookers: roulette on fitness 1 / (1 + f) (f >= 0 for a score).
-            fit = 1.0 / (1.0 + np.maximum(f, 0.0))
-            cum = np.cumsum(fit / fit.sum(axis=1, keepdims=True), axis=1)
-            u = rng.uniform(size=(batch, sn))
-            chosen = np.minimum((u[:, :, None] > cum[:, None, :]).sum(axis=2), sn - 1)
-            cand = self._neighbours(problem, rng, x, chosen)
-            fc = problem.evaluate(cand)
-            # Several onlookers may pick one source: keep the best of their candidates.
-            order = np.argsort(fc, axis=1, kind='stable')
-            first = np.full((batch, sn), -1)
-            for pos in range(sn - 1, -1, -1):   # a loop over bees, not configurations
-                first[rows[:, 0], chosen[rows[:, 0], order[:, pos]]] = order[:, pos]
-            counts = np.zeros((batch, sn), dtype=int)
-            np.add.at(counts, (np.repeat(np.arange(batch), sn), chosen.ravel()), 1)
-            has = first >= 0
-            pick = np.where(has, first, 0)
-            fbest = fc[rows, pick]
-            improved = has & (fbest < f)
-            x[improved] = cand[rows, pick][improved]
-            f[improved] = fbest[improved]
-            trials = np.where(improved, 0, trials + counts)
+            trials = self._onlookers(problem, rng, x, f, trials)
             # Memorise the best, then send a scout to the most exhausted source.
             if np.any(remember_best(x, f, best_x, best_f)):
                 stall = 0
             else:
                 stall += 1
-            worn = np.argmax(trials, axis=1)
-            scout = trials[np.arange(batch), worn] > self.limit
-            if np.any(scout):
-                # One batched call evaluates a fresh point for every sub-problem; only
-                # those with an exhausted source take theirs.
-                b = np.nonzero(scout)[0]
-                fresh = problem.random(rng, 1)
-                f_fresh = problem.evaluate(fresh)
-                x[b, worn[b]] = fresh[b, 0]
-                f[b, worn[b]] = f_fresh[b, 0]
-                trials[b, worn[b]] = 0
+            self._scout(problem, rng, x, f, trials)
             history.append(best_f.copy())
             timer.tick()
             if self.stall_cycles is not None and stall >= self.stall_cycles:
@@ -134,6 +104,50 @@ class ABC(Algorithm):
             remember_best(px, pf, best_x, best_f)
             history.append(best_f.copy())
         return best_x, best_f, nit, history
+
+    def _onlookers(self, problem, rng, x, f, trials):
+        """
+        Run the onlooker phase on the colony ``x``/``f`` in place; return the new trials.
+
+        Onlookers pick sources by roulette on fitness 1 / (1 + f) (f >= 0 for a score);
+        several onlookers may pick one source, which keeps the best of their candidates.
+        """
+        batch, sn = x.shape[:2]
+        rows = np.arange(batch)[:, None]
+        fit = 1.0 / (1.0 + np.maximum(f, 0.0))
+        cum = np.cumsum(fit / fit.sum(axis=1, keepdims=True), axis=1)
+        u = rng.uniform(size=(batch, sn))
+        chosen = np.minimum((u[:, :, None] > cum[:, None, :]).sum(axis=2), sn - 1)
+        cand = self._neighbours(problem, rng, x, chosen)
+        fc = problem.evaluate(cand)
+        order = np.argsort(fc, axis=1, kind='stable')
+        first = np.full((batch, sn), -1)
+        for pos in range(sn - 1, -1, -1):   # a loop over bees, not configurations
+            first[rows[:, 0], chosen[rows[:, 0], order[:, pos]]] = order[:, pos]
+        counts = np.zeros((batch, sn), dtype=int)
+        np.add.at(counts, (np.repeat(np.arange(batch), sn), chosen.ravel()), 1)
+        has = first >= 0
+        pick = np.where(has, first, 0)
+        fbest = fc[rows, pick]
+        improved = has & (fbest < f)
+        x[improved] = cand[rows, pick][improved]
+        f[improved] = fbest[improved]
+        return np.where(improved, 0, trials + counts)
+
+    def _scout(self, problem, rng, x, f, trials):
+        """Send a scout to each sub-problem's most exhausted source, if over ``limit``."""
+        batch = x.shape[0]
+        worn = np.argmax(trials, axis=1)
+        scout = trials[np.arange(batch), worn] > self.limit
+        if np.any(scout):
+            # One batched call evaluates a fresh point for every sub-problem; only
+            # those with an exhausted source take theirs.
+            b = np.nonzero(scout)[0]
+            fresh = problem.random(rng, 1)
+            f_fresh = problem.evaluate(fresh)
+            x[b, worn[b]] = fresh[b, 0]
+            f[b, worn[b]] = f_fresh[b, 0]
+            trials[b, worn[b]] = 0
 
 
 def _distinct_best(x, f, best_x, k):

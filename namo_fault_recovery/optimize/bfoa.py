@@ -11,7 +11,7 @@ point with probability ``p_eliminate`` (``elimination_events`` times).
 
 Note: with the paper's values (attract depth = repel height = 0.4 and equal widths 0.3)
 the attraction and repulsion cancel exactly, so J_cc is identically zero.  It is still
-computed, so other settings behave as Passino describes.
+computed, so other options behave as Passino describes.
 """
 
 import numpy as np
@@ -20,7 +20,7 @@ from .base import Algorithm, best_of, check_float, check_int, remember_best, Ste
 
 
 class BFOA(Algorithm):
-    """BFOA settings; the defaults are the paper's Table 3 preset."""
+    """BFOA options; the defaults are the paper's Table 3 preset."""
 
     name = 'bfoa'
 
@@ -51,6 +51,7 @@ class BFOA(Algorithm):
                       + self.h_repel * np.exp(-self.w_repel * d2), axis=-1)
 
     def run(self, problem, rng, clock):
+        """Run on ``problem`` within ``clock``; see :class:`~.base.Algorithm`."""
         batch, s, dim = problem.batch, self.population, problem.dim
         rows = np.arange(batch)[:, None]
         x = problem.random(rng, s)

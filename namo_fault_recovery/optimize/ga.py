@@ -14,7 +14,7 @@ from .base import Algorithm, best_of, check_float, check_int, StepTimer
 
 
 class GA(Algorithm):
-    """Genetic algorithm settings (paper Table 3: 80 / 50 / 0.8 / 0.25 / 0.15)."""
+    """Genetic algorithm options (paper Table 3: 80 / 50 / 0.8 / 0.25 / 0.15)."""
 
     name = 'ga'
 
@@ -33,6 +33,7 @@ class GA(Algorithm):
         return cls()
 
     def run(self, problem, rng, clock):
+        """Run on ``problem`` within ``clock``; see :class:`~.base.Algorithm`."""
         batch, n, dim = problem.batch, self.population, problem.dim
         rows = np.arange(batch)[:, None]
         pop = problem.random(rng, n)

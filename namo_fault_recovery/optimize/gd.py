@@ -15,7 +15,7 @@ _H = 1e-4   # finite-difference step, degrees
 
 
 class GradientDescent(Algorithm):
-    """Momentum gradient descent settings."""
+    """Momentum gradient descent options."""
 
     name = 'gd'
 
@@ -31,6 +31,7 @@ class GradientDescent(Algorithm):
         return cls(learning_rate=learning_rate)
 
     def run(self, problem, rng, clock):
+        """Run on ``problem`` within ``clock``; see :class:`~.base.Algorithm`."""
         batch, dim = problem.batch, problem.dim
         x = problem.random(rng, 1)[:, 0]
         v = np.zeros_like(x)

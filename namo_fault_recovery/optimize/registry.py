@@ -1,5 +1,6 @@
 """Algorithms by name, and their presets: the paper's and the product default."""
 
+from .base import Algorithm
 from .bee_colony import ABC
 from .bfoa import BFOA
 from .ga import GA
@@ -15,18 +16,26 @@ DEFAULT_ABC = {'n_sources': 8, 'max_cycles': 8, 'limit': 20, 'polish': 2,
                'polish_maxiter': 100, 'polish_ftol': 1e-7, 'use_x0': True}
 
 
-def make_algorithm(name, preset='default', **overrides):
-    """Return an algorithm object by name and preset, with optional setting overrides."""
-    if name not in ALGORITHMS:
-        raise ValueError(f'unknown algorithm {name!r}; expected one of '
+def make_algorithm(optimizer: str, optimizer_preset: str = 'default',
+                   **optimizer_overrides) -> Algorithm:
+    """
+    Return an algorithm object by name and preset, with optional option overrides.
+
+    ``optimizer`` and ``optimizer_preset`` are named like the settings they come from
+    (:class:`~namo_fault_recovery.recovery.engine.RecoverySettings`); the overrides change
+    single options of the preset (e.g. ``max_cycles``).
+    """
+    if optimizer not in ALGORITHMS:
+        raise ValueError(f'unknown algorithm {optimizer!r}; expected one of '
                          f'{", ".join(ALGORITHMS)}')
-    if preset not in PRESETS:
-        raise ValueError(f'unknown preset {preset!r}; expected one of {", ".join(PRESETS)}')
-    cls = ALGORITHMS[name]
-    settings = {}
-    if name == 'abc' and preset == 'default':
-        settings.update(DEFAULT_ABC)
-    elif name == 'abc':
-        settings.update(ABC.paper().settings())
-    settings.update(overrides)
-    return cls(**settings)
+    if optimizer_preset not in PRESETS:
+        raise ValueError(f'unknown preset {optimizer_preset!r}; expected one of '
+                         f'{", ".join(PRESETS)}')
+    cls = ALGORITHMS[optimizer]
+    options = {}
+    if optimizer == 'abc' and optimizer_preset == 'default':
+        options.update(DEFAULT_ABC)
+    elif optimizer == 'abc':
+        options.update(ABC.paper().options())
+    options.update(optimizer_overrides)
+    return cls(**options)

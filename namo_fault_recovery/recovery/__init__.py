@@ -4,7 +4,8 @@ From a fault set to an adapted gesture library, free of ROS.
 - :mod:`.engine`: the one entry point, ``recover(robot, library, faults, settings)``,
   with :class:`~.engine.RecoverySettings` named as the node's parameters;
 - :mod:`.result`: the one result type, ``LibraryResult`` / ``GestureResult``, that the
-  node, the state file, the messages, ``solve`` and the benchmarks read;
+  keyframe search and the motion adaptation build and the node, the state file, the
+  messages, ``solve`` and the benchmarks read;
 - :mod:`.contingency`: the contingency table, best libraries precomputed offline per
   likely fault set, keyed by resolved lock angles (``namo-recovery precompute``);
 - :mod:`.refine`: anytime refinement, ever better libraries after the deadline result;
@@ -13,11 +14,14 @@ From a fault set to an adapted gesture library, free of ROS.
   deadline (the first paper's method, with stage 2 and the collision term);
 - :mod:`.motion`: whole-motion adaptation (the second paper: typical points and Kriging,
   point by point, or Kriging then the whole trajectory at once);
+- :mod:`.figures`: an adapted motion's figures as a ``GestureResult`` (scores, fingertip
+  error, joint jumps, collisions) and the locked-design fallback of a cut-short run;
 - :mod:`.trajectory_opt`: whole-trajectory optimisation of a dense motion (every point
   at once, batched analytic gradients, a smoothness term; ``auto``'s pass after Kriging);
 - :mod:`.vq`: vector quantisation that picks a motion's typical points;
 - :mod:`.kriging`: the variogram fit and ordinary Kriging;
 - :mod:`.budget`: how the caller's one deadline clock is shared out (reserves, shares).
 
-The stage records of :mod:`.keyframes` and :mod:`.motion` stay inside this package.
+Every function below :func:`~.engine.recover` takes the ``RecoverySettings`` unchanged
+(or the one setting it needs, under its name) and the caller's one ``Clock``.
 """

@@ -115,11 +115,11 @@ def table_fingerprint(robot, library, settings):
     arms, weights, joints, keyframe times and angles), every setting but
     ``deadline_sec``, the key rounding and ``FORMAT_VERSION``.
     """
-    engine = settings.public()
-    engine.pop('deadline_sec', None)
+    public = settings.public()
+    public.pop('deadline_sec', None)
     doc = {'format': FORMAT, 'version': FORMAT_VERSION, 'key_decimals': KEY_DECIMALS,
            'robot': canonical(robot), 'library': canonical(library),
-           'settings': canonical(engine)}
+           'settings': canonical(public)}
     text = json.dumps(doc, sort_keys=True, separators=(',', ':'), allow_nan=True)
     return hashlib.sha256(text.encode('utf-8')).hexdigest()
 
@@ -188,12 +188,12 @@ class BuiltEntry:
     """
     One entry as built: the best result and how the seeds compared.
 
-    ``locks`` are the key's lock angles (:func:`table_locks`); ``seed_scores`` the
-    ``total_score`` of every seed's library, in seed order; ``cpu_sec`` and ``wall_sec``
-    the process CPU and wall seconds of all seeds together.
+    ``locks`` are the key's lock angles (:func:`table_locks`; for ``optimal`` not the
+    result's own); ``seed_scores`` the ``total_score`` of every seed's library, in seed
+    order; ``cpu_sec`` and ``wall_sec`` the process CPU and wall seconds of all seeds
+    together.  The fault set is the result's (``faults``).
     """
 
-    faults: dict
     locks: dict
     result: LibraryResult
     seed_scores: tuple
@@ -201,7 +201,12 @@ class BuiltEntry:
     wall_sec: float
 
     @property
-    def key(self):
+    def faults(self) -> dict:
+        """Return the fault set the entry was built for (the result's)."""
+        return self.result.faults
+
+    @property
+    def key(self) -> str:
         """Return the entry's key."""
         return entry_key(self.locks)
 
@@ -236,7 +241,7 @@ def measure_entry(robot, library, faults, settings, seeds=DEFAULT_SEEDS,
         scores.append(result.total_score)
         if best is None or result.total_score < best.total_score:
             best = result
-    return BuiltEntry(dict(faults), locks, best, tuple(scores),
+    return BuiltEntry(locks, best, tuple(scores),
                       time.process_time() - cpu, time.monotonic() - wall)
 
 

@@ -21,14 +21,14 @@ top of the paper's method:
 """
 
 import copy
-from dataclasses import dataclass, field
 import time
+from typing import Optional
 
 import numpy as np
 
 from .budget import ENGINE_RESERVE, STAGE1_SHARE
 from .locks import clamp_lock, resolve_locks
-from ..model.gestures import Keyframe
+from .result import GestureResult, LibraryResult
 from ..model.kinematics import ArmLandmarks, batch_forward, batch_forward_jacobian, take_landmarks
 from ..model.robot import ARMS, N_JOINTS
 from ..objective.collision import CollisionModel
@@ -159,71 +159,6 @@ class PoseProblem(Problem):
             f = f + self.continuity * np.sum(step ** 2, axis=-1)
             grad = grad + 2.0 * self.continuity * step
         return f, grad
-
-
-@dataclass
-class GestureReconfiguration:
-    """The outcome for one gesture of the library."""
-
-    name: str
-    keyframes: tuple
-    score_before: float
-    score_after: float
-    breakdown: dict
-    wall_time: float
-    status: str
-    message: str
-    free_joints: tuple = ()
-    stage: int = 1
-    stage1_score: float = None
-    collides: object = None    # None when the collision check is off
-    colliding_pairs: tuple = ()
-    expansion_stage: int = 0   # expand stages used (0: the designed joints sufficed)
-
-
-@dataclass
-class LibraryReconfiguration:
-    """The outcome for the whole library."""
-
-    gestures: list
-    locks: dict
-    frozen_arms: tuple
-    wall_time: float
-    deadline: object
-    seed: int
-    algorithm: str
-    preset: str = 'default'
-    notes: list = field(default_factory=list)
-    lock_strategy: str = 'average'
-    nfev: int = 0              # objective evaluations, summed over all keyframes
-    tool_mm: float = 0.0
-    tool_arm: str = 'right'
-
-    @property
-    def cancelled(self):
-        """Return True if any gesture was cut short by a cancel request."""
-        return any(g.status == 'cancelled' for g in self.gestures)
-
-    @property
-    def deadline_met(self):
-        """Return True if no gesture hit the deadline."""
-        return not any(g.status in ('deadline', 'cancelled') for g in self.gestures)
-
-    @property
-    def success(self):
-        """Return True if every gesture has a finite score within the deadline."""
-        return self.deadline_met and all(np.isfinite(g.score_after) for g in self.gestures)
-
-    @property
-    def total_score(self):
-        """Return the sum of the gestures' scores after reconfiguration."""
-        return float(sum(g.score_after for g in self.gestures))
-
-    def __getitem__(self, name):
-        for g in self.gestures:
-            if g.name == name:
-                return g
-        raise KeyError(f'unknown gesture {name!r}')
 
 
 class _Batch:
@@ -421,67 +356,69 @@ def joint_set(robot, names):
     return {robot.locate_joint(n) for n in names}
 
 
-def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='default',
-                        deadline=1.0, seed=None, weights=None, lock_strategy='average',
-                        measured=None, cancel=None, gestures=None, settings=None,
-                        bimanual='off', bimanual_threshold=DEFAULT_BIMANUAL_THRESHOLD,
-                        collision=False, capsules=None, tool_mm=0.0, tool_arm='right',
-                        expansion_threshold=DEFAULT_EXPANSION_THRESHOLD, stay_close=0.0,
-                        clock=None, lock_start=None, share_branches=True):
+def reconfigure_library(robot, library, faults, settings, *,
+                        seed: Optional[int] = None, clock: Optional[Clock] = None,
+                        measured=None, optimizer_overrides=None, gestures=None,
+                        stay_close=0.0, lock_start=None,
+                        share_branches=True) -> LibraryResult:
     """
     Reconfigure every gesture (or those named in ``gestures``) for a fault set.
 
     ``faults`` maps joint names to lock angles (rad) or None (chosen by
-    ``lock_strategy``).  ``deadline`` (s) is the budget for the whole library; a
-    ``clock`` (:class:`~namo_fault_recovery.optimize.base.Clock`) replaces ``deadline``
-    and ``cancel`` when the caller owns the deadline.
-    ``bimanual`` ('auto', 'on', 'off') controls stage 2 for two-handed gestures: with
-    'auto' it runs when stage 1 scores above ``bimanual_threshold``.  ``collision``
-    keeps the arms and torso apart (``capsules`` or the robot's capsule model) and
-    reports any pose that still collides.  Both extensions are off here by default, so
-    that the library API solves exactly the paper's problem; the node and ``solve``
-    turn them on (``bimanual='auto'``, ``collision=True``).
+    ``settings.lock_strategy``; ``measured`` maps joints to measured angles for the
+    ``measured`` strategy).  ``settings`` is the run's
+    :class:`~.engine.RecoverySettings`, whose fields are used as named: ``optimizer`` /
+    ``optimizer_preset`` (with ``optimizer_overrides``, options of the preset),
+    ``weights``, ``bimanual`` (stage 2 for two-handed gestures: with ``auto`` it runs
+    when stage 1 scores above ``DEFAULT_BIMANUAL_THRESHOLD``), ``collision_check``
+    (keep the arms and torso apart and report any pose that still collides),
+    ``tool_length_mm`` / ``tool_arm`` (a tool lengthens that hand; the references stay
+    those of the designed motion on the original structure).  ``clock``
+    (:class:`~namo_fault_recovery.optimize.base.Clock`) owns the deadline and the cancel
+    flag of the whole library (None: ``settings.deadline_sec`` from now).  The paper's
+    problem is ``bimanual='off'`` and ``collision_check=False``.
 
-    Structure changes beyond locked joints: ``tool_mm`` lengthens the hand of
-    ``tool_arm`` by a tool; the references stay those of the designed motion on the
-    original structure.  A gesture that names its designed ``joints`` searches only
-    those first, and its ``expand`` stages add further joints, in order, while the
-    fingertip of one of its keyframes stays more than ``expansion_threshold`` mm from
-    its target (staged DOF expansion).  ``stay_close`` (per deg^2) penalises moving the
-    free joints away from the reference pose: the smallest correction wins among
-    equally good ones, so that neighbouring keyframes stay on one redundant branch.
-    ``share_branches`` (True, False, or the names of the gestures concerned) restarts
-    each keyframe of a gesture of several keyframes from the solutions found for its
-    other keyframes, so that every keyframe gets the best branch any of them found
-    (see :func:`_share_branches`); a caller that passes only some points of a motion
-    (its typical points) and reconciles them itself may leave that motion out.
-
-    With ``lock_strategy='optimal'`` the joints without an angle start at the library
-    average (or at ``lock_start[joint]``, e.g. the average over whole motions when
-    ``library`` holds only their typical points); that start is solved exactly as the
-    ``average`` strategy solves it, other angles are then tried on the very same
-    problem, and the lock set with the lowest library total (sum over gestures of
-    ``score_after``) wins, the start on ties: never worse than the start.
-    The result is a pure function of the inputs and ``seed`` (None draws one, reported
-    in the result), up to where a deadline cuts the search.
+    A gesture's designed ``joints`` are searched first, and its ``expand`` stages add
+    joints while a keyframe's fingertip stays more than ``DEFAULT_EXPANSION_THRESHOLD``
+    mm off (staged DOF expansion).  ``stay_close`` (per deg^2) penalises moving away
+    from the reference pose, so that neighbouring keyframes stay on one redundant
+    branch.  ``share_branches`` (True, False, or gesture names) restarts each keyframe
+    of a motion from its other keyframes' solutions (:func:`_share_branches`).  With
+    ``lock_strategy='optimal'`` see :func:`_optimise_locks`; its start is the library
+    average, or ``lock_start[joint]``.  Returns a :class:`~.result.LibraryResult`, a pure
+    function of the inputs and ``seed`` (None draws one) up to where a deadline cuts.
     """
     start = time.monotonic()
-    reference, robot = robot, robot.with_tool(tool_mm, tool_arm)
-    if bimanual not in BIMANUAL_MODES:
-        raise ValueError(f'unknown bimanual mode {bimanual!r}; expected one of '
-                         f'{", ".join(BIMANUAL_MODES)}')
-    if clock is None:
-        if deadline is not None and not (np.isfinite(deadline) and deadline > 0):
-            raise ValueError(f'deadline: expected a positive number of seconds or None, '
-                             f'got {deadline!r}')
-        clock = Clock(deadline, cancel)
-    elif cancel is not None:
-        raise ValueError('reconfigure_library: pass the cancel flag in the clock')
-    budget = None if clock.end is None else clock.end - clock.start
+    reference = robot
+    robot = robot.with_tool(settings.tool_length_mm, settings.tool_arm)
+    clock = Clock(settings.deadline_sec) if clock is None else clock
     if seed is None:
         seed = int(np.random.SeedSequence().entropy % (2 ** 63))
     rng = np.random.default_rng(seed)
-    algo = make_algorithm(algorithm, preset, **(settings or {}))
+    algo = make_algorithm(settings.optimizer, settings.optimizer_preset,
+                          **(optimizer_overrides or {}))
+    locks, notes, optimal = _start_locks(robot, library, faults, settings.lock_strategy,
+                                         measured, lock_start)
+    selected = list(library) if gestures is None else [library[g] for g in gestures]
+    # The optimisers stop early enough to leave time for what follows them (scoring the
+    # result, the collision check).
+    search = clock.child(reserve=ENGINE_RESERVE)
+    setup = _Setup(robot, reference, selected, locks, settings, algo, stay_close,
+                   share_branches)
+    setup.faults, setup.seed = dict(faults), seed
+    setup.budget = None if clock.end is None else clock.end - clock.start
+    notes += setup.notes
+    stats = {'nfev': 0}
+    out = _run(setup, [locks], rng, search, stats)
+    if optimal:
+        locks, out, note = _optimise_locks(setup, locks, out, optimal, rng, search, stats)
+        notes.append(note)
+    return _library_result(setup, locks, out, notes, time.monotonic() - start,
+                           int(stats['nfev']))
+
+
+def _start_locks(robot, library, faults, lock_strategy, measured, lock_start):
+    """Return the lock angles to start from, the notes, and the joints to optimise."""
     locks, notes = resolve_locks(robot, library, faults, lock_strategy, measured)
     optimal = []
     if lock_strategy == 'optimal':
@@ -489,35 +426,19 @@ def reconfigure_library(robot, library, faults, *, algorithm='abc', preset='defa
         for joint in optimal:
             if lock_start and lock_start.get(joint) is not None:
                 locks[joint] = clamp_lock(robot, joint, lock_start[joint])
-    selected = list(library) if gestures is None else [library[g] for g in gestures]
-    # The optimisers stop early enough to leave time for what follows them (scoring the
-    # result, the collision check).
-    search = clock.child(reserve=ENGINE_RESERVE)
-    setup = _Setup(robot, reference, selected, locks, weights, collision, capsules, algo,
-                   bimanual, bimanual_threshold, expansion_threshold, stay_close,
-                   share_branches)
-    notes += setup.notes
-    stats = {'nfev': 0}
-    out = _run(setup, [locks], rng, search, stats)
-    if optimal:
-        locks, out, note = _optimise_locks(setup, locks, out, optimal, rng, search, stats)
-        notes.append(note)
-    return _library_result(setup, locks, out, notes, time.monotonic() - start, budget, seed,
-                           preset, lock_strategy, stats, tool_mm, tool_arm)
+    return locks, notes, optimal
 
 
 class _Setup:
     """What every run on one library shares: targets, scorer, layouts and stage plans."""
 
-    def __init__(self, robot, reference, selected, locks, weights, collision, capsules,
-                 algo, bimanual, bimanual_threshold, expansion_threshold, stay_close,
+    def __init__(self, robot, reference, selected, locks, settings, algo, stay_close,
                  share_branches=True):
         self.robot = robot
         self.selected = selected
+        self.settings = settings
         self.algo = algo
-        self.bimanual = bimanual
-        self.bimanual_threshold = bimanual_threshold
-        self.expansion_threshold = expansion_threshold
+        self.bimanual = settings.bimanual
         self.stay_close = stay_close
         self.notes = []
         self.targets, self.owners = [], []
@@ -530,10 +451,11 @@ class _Setup:
         self.motions = [g if (share_branches if names is None else selected[g].name in names)
                         else -1 for g in self.owners]
         targets = self.targets
-        self.scorer = SimilarityScore(robot, targets, weights, reference_robot=reference)
+        self.scorer = SimilarityScore(robot, targets, settings.weights,
+                                      reference_robot=reference)
         self.checker = None
-        if collision:
-            self.checker = CollisionModel(robot, targets, capsules or robot.capsules)
+        if settings.collision_check:
+            self.checker = CollisionModel(robot, targets, robot.capsules)
         self.ref_r = np.array([t.q_right for t in targets])
         self.ref_l = np.array([t.q_left for t in targets])
         # The arms whose structure changed: a failed joint or a tool.  Every lock set
@@ -553,22 +475,27 @@ class _Setup:
                         for t, a in zip(targets, self.designed)]
         self.status0 = ['frozen' if any(s in self.faulted for s in t.arms) and not lay
                         else 'unchanged' for t, lay in zip(targets, self.layouts)]
-        scorer = self.scorer
-        self.two_stage = [k for k, t in enumerate(targets)
-                          if bimanual != 'off' and t.two_handed and len(self.faulted) == 1]
-        if bimanual == 'auto' and self.two_stage and all(
+        self.two_stage = self._two_stage_rows()
+        self.expandable = any(selected[owners[k]].expand for k in range(len(targets))
+                              if self.layouts[k] or self.status0[k] == 'frozen')
+
+    def _two_stage_rows(self):
+        """Return the rows stage 2 may run on (two-handed, one faulted arm), with a note."""
+        scorer, bimanual = self.scorer, self.bimanual
+        rows = [k for k, t in enumerate(self.targets)
+                if bimanual != 'off' and t.two_handed and len(self.faulted) == 1]
+        if bimanual == 'auto' and rows and all(
                 scorer.target_weights(k).wrist >= scorer.target_weights(k).wrist_lr
                 and scorer.target_weights(k).tip >= scorer.target_weights(k).tip_lr
-                for k in self.two_stage):
+                for k in rows):
             # The healthy arm starts at its reference, where its own terms are 0.  Moving
             # its wrist (tip) by d adds d to its wrist (tip) term and can shorten the
             # left-right gap by at most d, so with these weights stage 2 can never lower
             # the score.
-            self.two_stage = []
             self.notes.append('stage 2 skipped: with wrist >= wrist_lr and tip >= tip_lr '
                               'weights, moving the healthy arm cannot lower the score')
-        self.expandable = any(selected[owners[k]].expand for k in range(len(targets))
-                              if self.layouts[k] or self.status0[k] == 'frozen')
+            return []
+        return rows
 
     def totals(self, after, n_sets):
         """Return each lock set's library total: the sum of its gestures' worst scores."""
@@ -580,78 +507,96 @@ class _Setup:
         return worst.sum(axis=1)
 
 
+class _Rows:
+    """
+    The rows of one batched :func:`_run`: every lock set's targets, one after the other.
+
+    Every lock set locks the same joints (only the angles differ), so the rows of all
+    of them share their layouts and stage plans.  ``right``/``left``/``after``/
+    ``status``/``stage`` hold the solution so far, updated in place by each stage.
+    """
+
+    def __init__(self, setup, lock_sets):
+        robot = setup.robot
+        n_t, n_g, n_c = len(setup.targets), len(setup.selected), len(lock_sets)
+        self.ids = np.tile(np.arange(n_t), n_c)
+        self.owners = [g + c * n_g for c in range(n_c) for g in setup.owners]
+        self.motions = [-1 if g < 0 else g + c * n_g for c in range(n_c)
+                        for g in setup.motions]
+        self.selected = setup.selected * n_c
+        self.targets = setup.targets * n_c
+        self.layouts = setup.layouts * n_c
+        self.designed = setup.designed * n_c
+        self.status0 = setup.status0 * n_c
+        self.two_stage = [k + c * n_t for c in range(n_c) for k in setup.two_stage]
+        bases = [apply_locks(robot, setup.ref_r, setup.ref_l, locks) for locks in lock_sets]
+        # Every angle published lies within its limits, bit for bit: a designed angle or a
+        # lock accepted within the limits' tolerance is clipped before anything uses it.
+        self.base_r = robot.arms['right'].clip(np.concatenate([b[0] for b in bases]))
+        self.base_l = robot.arms['left'].clip(np.concatenate([b[1] for b in bases]))
+        self.right = self.left = self.after = self.status = None
+        self.stage = np.ones(len(self.ids), dtype=int)
+        self.expansion = np.zeros(len(self.ids), dtype=int)
+
+
 def _run(setup, lock_sets, rng, clock, stats):
     """
     Solve the whole library once for each lock set of ``lock_sets``, in one batch.
 
-    Every lock set locks the same joints (only the angles differ), so the rows of all
-    of them share their layouts and stage plans: stage 1, the staged DOF expansion and
-    stage 2 run once over all rows.  Returns a dict of per-row arrays (lock sets one
-    after the other, each in target order).
+    Stage 1, the staged DOF expansion and stage 2 run once over the rows of all lock
+    sets (:class:`_Rows`).  Returns a dict of per-row arrays (lock sets one after the
+    other, each in target order).
     """
     robot, scorer, checker, algo = setup.robot, setup.scorer, setup.checker, setup.algo
-    n_t, n_g, n_c = len(setup.targets), len(setup.selected), len(lock_sets)
-    ids = np.tile(np.arange(n_t), n_c)
-    owners = [g + c * n_g for c in range(n_c) for g in setup.owners]
-    motions = [-1 if g < 0 else g + c * n_g for c in range(n_c) for g in setup.motions]
-    selected = setup.selected * n_c
-    targets = setup.targets * n_c
-    layouts = setup.layouts * n_c
-    designed = setup.designed * n_c
-    status0 = setup.status0 * n_c
-    two_stage = [k + c * n_t for c in range(n_c) for k in setup.two_stage]
-    bases = [apply_locks(robot, setup.ref_r, setup.ref_l, locks) for locks in lock_sets]
-    # Every angle published lies within its limits, bit for bit: a designed angle or a
-    # lock accepted within the limits' tolerance is clipped before anything uses it.
-    base_r = robot.arms['right'].clip(np.concatenate([b[0] for b in bases]))
-    base_l = robot.arms['left'].clip(np.concatenate([b[1] for b in bases]))
+    rows = _Rows(setup, lock_sets)
     stage1_clock = clock
-    if two_stage or setup.expandable:
+    if rows.two_stage or setup.expandable:
         stage1_clock = clock.child(share=STAGE1_SHARE)
-    best_r, best_l, status = _solve(robot, scorer, checker,
-                                    _Batch(base_r, base_l, ids, layouts,
-                                           stay_close=setup.stay_close, motions=motions),
-                                    algo, stage1_clock, rng, stats)
-    status = [s0 if s0 == 'frozen' else s for s0, s in zip(status0, status)]
-    after = scorer.evaluate(best_r, best_l, ids)
-    stage = np.ones(len(ids), dtype=int)
-    expansion = np.zeros(len(ids), dtype=int)
+    rows.right, rows.left, status = _solve(
+        robot, scorer, checker, _Batch(rows.base_r, rows.base_l, rows.ids, rows.layouts,
+                                       stay_close=setup.stay_close, motions=rows.motions),
+        algo, stage1_clock, rng, stats)
+    rows.status = [s0 if s0 == 'frozen' else s for s0, s in zip(rows.status0, status)]
+    rows.after = scorer.evaluate(rows.right, rows.left, rows.ids)
     if setup.expandable:
-        expansion = _expand(robot, scorer, checker, selected, owners, targets, ids,
-                            setup.locked, setup.faulted, designed, layouts, best_r, best_l,
-                            after, status, setup.expansion_threshold, algo, clock,
-                            two_stage, rng, stats, setup.stay_close, motions)
-    stage1 = after.copy()
-
-    # Stage 2: the healthy arm joins in for two-handed gestures that are still poor.
-    if two_stage:
-        rows = [k for k in two_stage
-                if setup.bimanual == 'on' or after[k] > setup.bimanual_threshold]
-        if rows:
-            lay2 = [free_layout(robot, targets[k].arms, setup.locked, set(ARMS))
-                    for k in rows]
-            x0 = {}
-            for i, k in enumerate(rows):
-                x0[i] = [(best_r if s == 'right' else best_l)[k, j] for s, j in lay2[i]]
-            batch = _Batch(best_r[rows], best_l[rows], ids[rows], lay2, x0,
-                           motions=[motions[k] for k in rows])
-            r2, l2, st2 = _solve(robot, scorer, checker, batch, algo, clock, rng)
-            f2 = scorer.evaluate(r2, l2, ids[rows])
-            for i, k in enumerate(rows):
-                if f2[i] < after[k] and _no_worse_collision(checker, r2[i], l2[i],
-                                                            best_r[k], best_l[k], ids[k]):
-                    best_r[k], best_l[k], after[k] = r2[i], l2[i], f2[i]
-                    stage[k] = 2
-                if st2[i] in ('deadline', 'cancelled'):
-                    status[k] = st2[i]
+        _expand(setup, rows, clock, rng, stats)
+    stage1 = rows.after.copy()
+    if rows.two_stage:
+        _stage2(setup, rows, clock, rng)
+    best_r, best_l, after = rows.right, rows.left, rows.after
     # The optimisers search within the limits; clipping again guards that promise.
     clipped_r, clipped_l = robot.arms['right'].clip(best_r), robot.arms['left'].clip(best_l)
     if not (np.array_equal(clipped_r, best_r) and np.array_equal(clipped_l, best_l)):
         best_r, best_l = clipped_r, clipped_l
-        after = scorer.evaluate(best_r, best_l, ids)
+        after = scorer.evaluate(best_r, best_l, rows.ids)
     return {'right': best_r, 'left': best_l, 'after': after, 'stage1': stage1,
-            'stage': stage, 'expansion': expansion, 'status': status, 'layouts': layouts,
-            'base_right': base_r, 'base_left': base_l}
+            'stage': rows.stage, 'expansion': rows.expansion, 'status': rows.status,
+            'layouts': rows.layouts, 'base_right': rows.base_r, 'base_left': rows.base_l}
+
+
+def _stage2(setup, rows, clock, rng):
+    """Stage 2: the healthy arm joins in for two-handed gestures that are still poor."""
+    robot, scorer, checker = setup.robot, setup.scorer, setup.checker
+    best_r, best_l, after, ids = rows.right, rows.left, rows.after, rows.ids
+    todo = [k for k in rows.two_stage
+            if setup.bimanual == 'on' or after[k] > DEFAULT_BIMANUAL_THRESHOLD]
+    if not todo:
+        return
+    lay2 = [free_layout(robot, rows.targets[k].arms, setup.locked, set(ARMS)) for k in todo]
+    x0 = {}
+    for i, k in enumerate(todo):
+        x0[i] = [(best_r if s == 'right' else best_l)[k, j] for s, j in lay2[i]]
+    batch = _Batch(best_r[todo], best_l[todo], ids[todo], lay2, x0,
+                   motions=[rows.motions[k] for k in todo])
+    r2, l2, st2 = _solve(robot, scorer, checker, batch, setup.algo, clock, rng)
+    f2 = scorer.evaluate(r2, l2, ids[todo])
+    for i, k in enumerate(todo):
+        if f2[i] < after[k] and _no_worse_collision(checker, r2[i], l2[i],
+                                                    best_r[k], best_l[k], ids[k]):
+            best_r[k], best_l[k], after[k] = r2[i], l2[i], f2[i]
+            rows.stage[k] = 2
+        if st2[i] in ('deadline', 'cancelled'):
+            rows.status[k] = st2[i]
 
 
 def _take(out, c, n_t):
@@ -660,96 +605,106 @@ def _take(out, c, n_t):
     return {key: value[rows] for key, value in out.items()}
 
 
-def _library_result(setup, locks, out, notes, wall, budget, seed, preset, lock_strategy,
-                    stats, tool_mm, tool_arm):
-    """Describe one lock set's solved rows as a :class:`LibraryReconfiguration`."""
-    robot, scorer, checker = setup.robot, setup.scorer, setup.checker
-    targets, owners, selected = setup.targets, setup.owners, setup.selected
+def _library_result(setup, locks, out, notes, wall, nfev):
+    """Describe one lock set's solved rows as a :class:`~.result.LibraryResult`."""
+    robot, scorer, checker, settings = setup.robot, setup.scorer, setup.checker, setup.settings
+    targets, owners = setup.targets, setup.owners
     ids = np.arange(len(targets))
     best_r, best_l, after = out['right'], out['left'], out['after']
-    status, layouts = out['status'], out['layouts']
     before = scorer.evaluate(out['base_right'], out['base_left'], ids)
     _, parts = scorer.evaluate(best_r, best_l, ids, breakdown=True)
-    collides = [None] * len(targets)
+    collides = [False] * len(targets)
     pairs = [()] * len(targets)
     if checker is not None:
         lm_r, lm_l = batch_forward(robot, best_r, 'right'), batch_forward(robot, best_l, 'left')
         collides = [bool(c) for c in checker.collides(lm_r, lm_l, ids)]
         pairs = [tuple(p) for p in checker.colliding_pairs(lm_r, lm_l, ids)]
     results = []
-    for gi, gesture in enumerate(selected):
+    for gi, gesture in enumerate(setup.selected):
         ks = [k for k in range(len(targets)) if owners[k] == gi]
         worst = max(ks, key=lambda k: after[k])
-        frames = tuple(Keyframe(kf.time_from_start, best_r[k].copy(), best_l[k].copy())
-                       for kf, k in zip(gesture.keyframes, ks))
-        st = _worst_status([status[k] for k in ks])
+        st = _worst_status([out['status'][k] for k in ks])
         stage_used = int(max(out['stage'][k] for k in ks))
-        free = (layouts[ks[0]] if stage_used == 1
+        free = (out['layouts'][ks[0]] if stage_used == 1
                 else free_layout(robot, gesture.arms, setup.locked, set(ARMS)))
-        expanded = int(max(out['expansion'][k] for k in ks))
-        hit = None if checker is None else any(collides[k] for k in ks)
-        results.append(GestureReconfiguration(
-            name=gesture.name, keyframes=frames,
+        hit = any(collides[k] for k in ks)
+        results.append(GestureResult(
+            name=gesture.name,
+            times=tuple(float(kf.time_from_start) for kf in gesture.keyframes),
+            positions=tuple(tuple(float(a) for a in np.concatenate((best_r[k], best_l[k])))
+                            for k in ks),
             score_before=float(max(before[k] for k in ks)),
             score_after=float(after[worst]),
             breakdown={c: float(v[worst]) for c, v in parts.items()
                        if c not in ('right', 'left')},
-            wall_time=wall, status=st, message=_message(gesture.name, st, stage_used, hit),
+            wall_time=wall, status=st,
+            message=_message(gesture.name, st, stage_used, checker is not None and hit),
             free_joints=tuple(robot.arms[s].joint_names[j] for s, j in free),
             stage=stage_used, stage1_score=float(max(out['stage1'][k] for k in ks)),
             collides=hit, colliding_pairs=tuple(p for k in ks for p in pairs[k]),
-            expansion_stage=expanded))
-    return LibraryReconfiguration(results, dict(locks), setup.frozen, wall, budget, seed,
-                                  setup.algo.name, preset, notes, lock_strategy,
-                                  nfev=int(stats['nfev']), tool_mm=float(tool_mm),
-                                  tool_arm=tool_arm)
+            expansion_stage=int(max(out['expansion'][k] for k in ks)),
+            score_before_mean=float(np.mean([before[k] for k in ks])),
+            score_mean=float(np.mean([after[k] for k in ks])),
+            typical_points=len(ks), typical_indices=tuple(range(len(ks)))))
+    deadline_met = not any(g.status in ('deadline', 'cancelled') for g in results)
+    return LibraryResult(
+        gestures=tuple(results), faults=setup.faults,
+        locks={j: float(a) for j, a in locks.items()}, frozen_arms=setup.frozen,
+        wall_time=wall, deadline=setup.budget, deadline_met=deadline_met,
+        success=deadline_met and all(np.isfinite(g.score_after) for g in results),
+        cancelled=any(g.status == 'cancelled' for g in results),
+        settings=settings.public(), tool_mm=float(settings.tool_length_mm),
+        tool_arm=settings.tool_arm, seed=setup.seed, notes=tuple(notes), nfev=nfev,
+        origin='unbounded' if setup.budget is None else 'deadline')
 
 
-def _expand(robot, scorer, checker, selected, owners, targets, ids, locked, faulted,
-            designed, layouts, best_r, best_l, after, status, threshold, algo, clock,
-            two_stage, rng, stats, stay_close, motions):
+def _expand(setup, rows, clock, rng, stats):
     """
     Staged DOF expansion: redo a gesture's keyframes with its next ``expand`` stage.
 
     A gesture moves to its next stage while the fingertip of one of its keyframes is
-    more than ``threshold`` mm from its target (it cannot be reached well enough);
-    each stage starts from the previous stage's result and adds joints
-    in the configured priority order.  ``motions`` says which rows share branches (see
-    :class:`_Batch`).  ``layouts``, the poses, ``after`` and ``status`` are updated in
-    place; returns the stage reached per keyframe.
+    more than ``DEFAULT_EXPANSION_THRESHOLD`` mm from its target (it cannot be reached
+    well enough); each stage starts from the previous stage's result and adds joints
+    in the configured priority order.  ``rows.motions`` says which rows share branches
+    (see :class:`_Batch`).  The layouts, the poses, ``after`` and ``status`` of
+    ``rows`` are updated in place, and ``rows.expansion`` gets the stage reached per
+    keyframe.
     """
-    expansion = np.zeros(len(targets), dtype=int)
-    allowed = [None if a is None else set(a) for a in designed]
+    robot, scorer, checker, algo = setup.robot, setup.scorer, setup.checker, setup.algo
+    selected, owners, layouts = rows.selected, rows.owners, rows.layouts
+    best_r, best_l, after, status, ids = rows.right, rows.left, rows.after, rows.status, rows.ids
+    threshold = DEFAULT_EXPANSION_THRESHOLD
+    allowed = [None if a is None else set(a) for a in rows.designed]
     for level in range(1, 1 + max(len(selected[g].expand) for g in owners)):
         reach = scorer.tip_error(best_r, best_l, ids)
-        rows = []
+        todo = []
         for gi, gesture in enumerate(selected):
-            ks = [k for k in range(len(targets)) if owners[k] == gi]
+            ks = [k for k in range(len(rows.targets)) if owners[k] == gi]
             if (len(gesture.expand) >= level and any(layouts[k] for k in ks)
                     and max(reach[k] for k in ks) > threshold):
-                rows += ks
-        if not rows:
+                todo += ks
+        if not todo:
             break
         lay = []
-        for k in rows:
+        for k in todo:
             allowed[k] |= joint_set(robot, selected[owners[k]].expand[level - 1])
-            lay.append(free_layout(robot, targets[k].arms, locked, faulted, allowed[k]))
+            lay.append(free_layout(robot, rows.targets[k].arms, setup.locked, setup.faulted,
+                                   allowed[k]))
         x0 = {i: [(best_r if s == 'right' else best_l)[k, j] for s, j in lay[i]]
-              for i, k in enumerate(rows)}
+              for i, k in enumerate(todo)}
         later = any(len(selected[g].expand) > level for g in owners)
-        stage_clock = clock.child(share=STAGE1_SHARE if (later or two_stage) else 1.0)
-        batch = _Batch(best_r[rows], best_l[rows], ids[rows], lay, x0, stay_close,
-                       [motions[k] for k in rows])
+        stage_clock = clock.child(share=STAGE1_SHARE if (later or rows.two_stage) else 1.0)
+        batch = _Batch(best_r[todo], best_l[todo], ids[todo], lay, x0, setup.stay_close,
+                       [rows.motions[k] for k in todo])
         r2, l2, st2 = _solve(robot, scorer, checker, batch, algo, stage_clock, rng, stats)
-        f2 = scorer.evaluate(r2, l2, ids[rows])
-        for i, k in enumerate(rows):
+        f2 = scorer.evaluate(r2, l2, ids[todo])
+        for i, k in enumerate(todo):
             layouts[k] = lay[i]
-            expansion[k] = level
+            rows.expansion[k] = level
             if f2[i] <= after[k]:
                 best_r[k], best_l[k], after[k] = r2[i], l2[i], f2[i]
             if st2[i] in ('deadline', 'cancelled') or status[k] == 'unchanged':
                 status[k] = st2[i]
-    return expansion
 
 
 def locked_sets(robot, locks):

@@ -17,12 +17,12 @@ from ..model.robot import ARMS
 LOCK_STRATEGIES = ('average', 'measured', 'optimal')
 
 
-def check_strategy(strategy):
-    """Return ``strategy`` or raise a ValueError naming the choices."""
-    if strategy not in LOCK_STRATEGIES:
-        raise ValueError(f'unknown lock strategy {strategy!r}; expected one of '
+def check_strategy(lock_strategy):
+    """Return ``lock_strategy`` or raise a ValueError naming the choices."""
+    if lock_strategy not in LOCK_STRATEGIES:
+        raise ValueError(f'unknown lock strategy {lock_strategy!r}; expected one of '
                          f'{", ".join(LOCK_STRATEGIES)}')
-    return strategy
+    return lock_strategy
 
 
 def validate_angle(robot, joint, angle, what='lock angle'):
@@ -58,7 +58,7 @@ def clamp_lock(robot, joint, angle):
     return float(min(max(float(angle), float(arm.lower[index])), float(arm.upper[index])))
 
 
-def resolve_locks(robot, library, faults, strategy='average', measured=None):
+def resolve_locks(robot, library, faults, lock_strategy='average', measured=None):
     """
     Return ``{joint: lock angle (rad)}`` for a fault set, and a list of notes.
 
@@ -68,13 +68,13 @@ def resolve_locks(robot, library, faults, strategy='average', measured=None):
     note; ``optimal`` joints get their average here, as the starting point that
     :func:`.keyframes.reconfigure_library` improves on.
     """
-    check_strategy(strategy)
+    check_strategy(lock_strategy)
     measured = measured or {}
     locks = {}
     notes = []
     for joint, angle in dict(faults).items():
         side, index = validate_angle(robot, joint, angle)
-        if angle is None and strategy == 'measured':
+        if angle is None and lock_strategy == 'measured':
             if joint in measured and measured[joint] is not None:
                 angle = float(measured[joint])
                 validate_angle(robot, joint, angle, 'measured angle')

@@ -14,14 +14,18 @@ them all).  The main ones:
   same value for every gesture of one library);
 - ``status``: ``converged``, ``deadline``, ``cancelled``, ``frozen`` or ``unchanged``.
 
-The engine's internal stage records (the keyframe engine's and the motion adaptation's)
-stay inside :mod:`namo_fault_recovery.recovery`; everything outside reads these types.
+The stages of the engine build these types too: the keyframe search
+(:func:`.keyframes.reconfigure_library`) and the motion adaptation
+(:func:`.motion.adapt_library`) return a :class:`LibraryResult`, so there is no other
+result shape to copy from.  A mean and a worst over keyframes always have two names
+(``score_before_mean`` / ``score_before``, ``score_mean`` / ``score_after``).
 Free of ROS; JSON round trip with :meth:`LibraryResult.to_dict` / ``from_dict``, where
 every field added later has a default so that older state files still load.
 """
 
 from dataclasses import dataclass, field
 import math
+from typing import Optional
 
 import numpy as np
 
@@ -111,7 +115,7 @@ class GestureResult:
     max_jump_deg: float = 0.0
     score_before_mean: float = 0.0
     score_mean: float = 0.0
-    stage1_score: float = None
+    stage1_score: Optional[float] = None
     expansion_stage: int = 0
     free_joints: tuple = ()
     nfev: int = 0
@@ -123,13 +127,13 @@ class GestureResult:
     max_jump_before_deg: float = 0.0
 
     @property
-    def keyframes(self):
+    def keyframes(self) -> tuple:
         """Return the published keyframes as :class:`~..model.gestures.Keyframe` objects."""
         from ..model.gestures import Keyframe
         return tuple(Keyframe(t, np.array(p[:N_JOINTS]), np.array(p[N_JOINTS:]))
                      for t, p in zip(self.times, self.positions))
 
-    def to_dict(self):
+    def to_dict(self) -> dict:
         """Return a JSON-ready dict."""
         return {
             'name': self.name, 'times': list(self.times),
@@ -152,7 +156,7 @@ class GestureResult:
         }
 
     @classmethod
-    def from_dict(cls, doc):
+    def from_dict(cls, doc: dict) -> 'GestureResult':
         """Rebuild from :meth:`to_dict` output; raise MalformedResult if malformed."""
         try:
             times = tuple(finite_number(t, 'time') for t in doc['times'])
@@ -224,36 +228,36 @@ class LibraryResult:
     locks: dict = field(default_factory=dict)
     frozen_arms: tuple = ()
     wall_time: float = 0.0
-    deadline: float = 0.0
+    deadline: Optional[float] = 0.0
     deadline_met: bool = True
     success: bool = True
     cancelled: bool = False
     settings: dict = field(default_factory=dict)
     tool_mm: float = 0.0
     tool_arm: str = 'right'
-    seed: int = None
+    seed: Optional[int] = None
     notes: tuple = ()
     nfev: int = 0
     origin: str = 'deadline'
 
     @property
-    def names(self):
+    def names(self) -> tuple:
         """Gesture names in library order."""
         return tuple(g.name for g in self.gestures)
 
     @property
-    def total_score(self):
+    def total_score(self) -> float:
         """Return the sum over the gestures of ``score_after`` (the library total)."""
         return float(sum(g.score_after for g in self.gestures))
 
-    def __getitem__(self, name):
+    def __getitem__(self, name: str) -> GestureResult:
         """Return the :class:`GestureResult` named ``name`` (KeyError naming the choices)."""
         for g in self.gestures:
             if g.name == name:
                 return g
         raise KeyError(f'unknown gesture {name!r}; expected one of {", ".join(self.names)}')
 
-    def to_dict(self):
+    def to_dict(self) -> dict:
         """Return a JSON-ready dict."""
         return {
             'gestures': [g.to_dict() for g in self.gestures],
@@ -268,7 +272,7 @@ class LibraryResult:
         }
 
     @classmethod
-    def from_dict(cls, doc):
+    def from_dict(cls, doc: dict) -> 'LibraryResult':
         """
         Rebuild from :meth:`to_dict` output; raise MalformedResult if malformed.
 
@@ -308,7 +312,8 @@ class LibraryResult:
             raise MalformedResult(f'malformed library: {exc!r}') from None
 
 
-def reference_result(library, deadline=0.0, settings=None, seed=None):
+def reference_result(library, deadline: Optional[float] = 0.0, settings: Optional[dict] = None,
+                     seed: Optional[int] = None) -> LibraryResult:
     """Return the reference library as a LibraryResult (no faults, every score 0)."""
     gestures = tuple(
         GestureResult(name=g.name,
@@ -327,7 +332,7 @@ ORIGIN_TEXT = {'deadline': ' by a live search',
                'refined': ' refined in the background after the deadline result'}
 
 
-def summary(result):
+def summary(result: LibraryResult) -> str:
     """Return the one-line summary of a library version that a person reads."""
     tool = result.tool_mm > 0
     if not result.faults and not result.locks and not tool:

@@ -316,16 +316,14 @@ def designed_step_deg(design):
 
 
 def optimise_motion(robot, scorer, target_ids, start_right, start_left, layout, design,
-                    clock, *, smoothness=DEFAULT_SMOOTHNESS, step_penalty=DEFAULT_STEP_PENALTY,
-                    collision=None, maxiter=DEFAULT_MAXITER, solver='lbfgs'):
+                    clock, collision=None):
     """
     Optimise one whole motion from its warm start; return a :class:`TrajectoryResult`.
 
     ``design`` (T, 14) is the designed motion (both arms, rad): its largest step is the
     cap of the step hinge.  The other arguments are those of :class:`TrajectoryProblem`
-    and :func:`optimise_trajectory`.
+    (with the default smoothness and step penalty) and :func:`optimise_trajectory`.
     """
     problem = TrajectoryProblem(robot, scorer, target_ids, start_right, start_left, layout,
-                                smoothness=smoothness, step_cap_deg=designed_step_deg(design),
-                                step_penalty=step_penalty, collision=collision)
-    return optimise_trajectory(problem, clock, maxiter=maxiter, solver=solver)
+                                step_cap_deg=designed_step_deg(design), collision=collision)
+    return optimise_trajectory(problem, clock)

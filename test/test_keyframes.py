@@ -7,12 +7,15 @@ from pathlib import Path
 from namo_fault_recovery.cli.main import main
 from namo_fault_recovery.objective.score import gesture_targets, SimilarityScore
 from namo_fault_recovery.optimize.base import Clock
+from namo_fault_recovery.recovery.engine import RecoverySettings
 from namo_fault_recovery.recovery.keyframes import reconfigure_library
 from namo_fault_recovery.resources import config_path, PAPER_GESTURE_FILE
 import numpy as np
 import pytest
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / 'config'
+# The keyframe search's own problem, the paper's: no stage 2, no collision term.
+PAPER = RecoverySettings(bimanual='off', collision_check=False)
 
 
 def _check_locks(robot, report):
@@ -28,7 +31,7 @@ def _check_locks(robot, report):
 
 @pytest.mark.parametrize('joint', [f'right_arm_joint{k}' for k in range(1, 8)])
 def test_single_fault_locks_and_improves(robot, library, joint):
-    report = reconfigure_library(robot, library, {joint: None}, seed=0)
+    report = reconfigure_library(robot, library, {joint: None}, PAPER, seed=0)
     side, j = robot.locate_joint(joint)
     assert report.locks[joint] == pytest.approx(library.lock_averages(side)[j])
     _check_locks(robot, report)
@@ -43,7 +46,7 @@ def test_single_fault_locks_and_improves(robot, library, joint):
 
 
 def test_explicit_lock_angle_is_used(robot, library):
-    report = reconfigure_library(robot, library, {'right_arm_joint5': 0.3}, seed=0,
+    report = reconfigure_library(robot, library, {'right_arm_joint5': 0.3}, PAPER, seed=0,
                                  gestures=['bye'])
     assert report.locks == {'right_arm_joint5': 0.3}
     assert report['bye'].keyframes[0].right[4] == 0.3
@@ -51,15 +54,17 @@ def test_explicit_lock_angle_is_used(robot, library):
 
 
 def test_same_seed_same_library(robot, library):
-    a = reconfigure_library(robot, library, {'right_arm_joint3': None}, seed=7, deadline=None)
-    b = reconfigure_library(robot, library, {'right_arm_joint3': None}, seed=7, deadline=None)
+    a = reconfigure_library(robot, library, {'right_arm_joint3': None}, PAPER, seed=7,
+                            clock=Clock(None))
+    b = reconfigure_library(robot, library, {'right_arm_joint3': None}, PAPER, seed=7,
+                            clock=Clock(None))
     for ga, gb in zip(a.gestures, b.gestures):
         np.testing.assert_array_equal(ga.keyframes[0].right, gb.keyframes[0].right)
 
 
 def test_multiple_faults_both_arms(robot, library):
     faults = {'right_arm_joint1': None, 'right_arm_joint6': -0.2, 'left_arm_joint2': None}
-    report = reconfigure_library(robot, library, faults, seed=1)
+    report = reconfigure_library(robot, library, faults, PAPER, seed=1)
     _check_locks(robot, report)
     wai = report['wai']
     assert set(wai.free_joints) == ({f'right_arm_joint{k}' for k in (2, 3, 4, 5, 7)}
@@ -70,7 +75,7 @@ def test_multiple_faults_both_arms(robot, library):
 
 
 def test_left_fault_leaves_one_arm_gestures_unchanged(robot, library):
-    report = reconfigure_library(robot, library, {'left_arm_joint4': 1.0}, seed=1)
+    report = reconfigure_library(robot, library, {'left_arm_joint4': 1.0}, PAPER, seed=1)
     assert report['bye'].status == 'unchanged'
     assert report['bye'].score_after == report['bye'].score_before == 0.0
     assert report['wai'].status == 'converged'
@@ -80,7 +85,7 @@ def test_left_fault_leaves_one_arm_gestures_unchanged(robot, library):
 def test_fully_failed_arm_is_frozen_other_arm_served(robot, library):
     faults = {f'right_arm_joint{k}': None for k in range(1, 8)}
     faults['left_arm_joint2'] = 0.4
-    report = reconfigure_library(robot, library, faults, seed=2)
+    report = reconfigure_library(robot, library, faults, PAPER, seed=2)
     assert report.frozen_arms == ('right',)
     assert any('frozen' in n for n in report.notes)
     assert report['bye'].status == 'frozen'
@@ -94,7 +99,7 @@ def test_fully_failed_arm_is_frozen_other_arm_served(robot, library):
 
 
 def test_no_fault_returns_the_reference(robot, library):
-    report = reconfigure_library(robot, library, {}, seed=0)
+    report = reconfigure_library(robot, library, {}, PAPER, seed=0)
     for g, ref in zip(report.gestures, library):
         assert g.status == 'unchanged' and g.score_after == 0.0
         np.testing.assert_array_equal(g.keyframes[0].right, ref.keyframes[0].right)
@@ -107,12 +112,13 @@ def test_no_fault_returns_the_reference(robot, library):
 ])
 def test_bad_faults_raise(robot, library, faults, message):
     with pytest.raises(ValueError, match=message):
-        reconfigure_library(robot, library, faults)
+        reconfigure_library(robot, library, faults, PAPER)
 
 
 def test_deadline_status_and_finite_result(robot, library):
-    report = reconfigure_library(robot, library, {'right_arm_joint2': None}, preset='paper',
-                                 deadline=0.02, seed=0)
+    report = reconfigure_library(robot, library, {'right_arm_joint2': None},
+                                 PAPER.with_changes(optimizer_preset='paper'), clock=Clock(0.02),
+                                 seed=0)
     assert not report.deadline_met and not report.success
     for g in report.gestures:
         assert g.status == 'deadline' and np.isfinite(g.score_after)
@@ -122,19 +128,20 @@ def test_deadline_status_and_finite_result(robot, library):
 
 def test_the_callers_clock_owns_the_deadline_and_the_cancel_flag(robot, library):
     faults = {'right_arm_joint2': 0.1}
-    free = reconfigure_library(robot, library, faults, deadline=None, seed=5)
-    same = reconfigure_library(robot, library, faults, clock=Clock(None), seed=5)
+    free = reconfigure_library(robot, library, faults, PAPER, clock=Clock(None), seed=5)
+    same = reconfigure_library(robot, library, faults, PAPER, clock=Clock(None), seed=5)
     assert [g.keyframes[0].positions().tolist() for g in same.gestures] == \
         [g.keyframes[0].positions().tolist() for g in free.gestures]
     assert same.deadline is None
-    cut = reconfigure_library(robot, library, faults, clock=Clock(0.0), seed=5)
+    cut = reconfigure_library(robot, library, faults, PAPER, clock=Clock(0.0), seed=5)
     assert all(g.status == 'deadline' for g in cut.gestures) and cut.deadline == 0.0
     _check_locks(robot, cut)
-    stopped = reconfigure_library(robot, library, faults, seed=5,
+    stopped = reconfigure_library(robot, library, faults, PAPER, seed=5,
                                   clock=Clock(None, cancel=lambda: True))
     assert stopped.cancelled
-    with pytest.raises(ValueError, match='cancel flag in the clock'):
-        reconfigure_library(robot, library, faults, clock=Clock(None), cancel=lambda: True)
+    with pytest.raises(TypeError, match='cancel'):   # the cancel flag is the clock's
+        reconfigure_library(robot, library, faults, PAPER, clock=Clock(None),
+                            cancel=lambda: True)
 
 
 def test_gradient_matches_finite_differences(robot, library):

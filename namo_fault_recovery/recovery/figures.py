@@ -1,0 +1,137 @@
+"""
+The figures of an adapted motion, as a :class:`~.result.GestureResult`, and its fallback.
+
+:func:`describe_motion` scores a motion's published points against their designs
+(worst and mean score, the breakdown at the worst point, fingertip error, joint jumps,
+collisions at every point, Kriging-interpolated ones included); :func:`no_worse_than_locked`
+publishes the design with the locks applied instead of a motion that a cut-short search
+left worse.  Used by :mod:`.motion`; free of ROS.
+"""
+
+from dataclasses import replace
+
+import numpy as np
+
+from .result import GestureResult
+from ..model.kinematics import batch_forward
+from ..model.robot import ARMS, N_JOINTS
+from ..objective.collision import CollisionModel
+from ..objective.score import gesture_targets
+
+LABELS = {'kriging': '{k} typical points + Kriging',
+          'per_point': 'every point explored in order',
+          'trajectory': '{k} typical points + Kriging, then every point optimised at once',
+          'keyframes': 'every keyframe explored'}
+
+
+def columns(side):
+    """Return the columns of ``side``'s joints in a (T, 14) motion."""
+    return slice(0, N_JOINTS) if side == 'right' else slice(N_JOINTS, 2 * N_JOINTS)
+
+
+def largest_jump(q):
+    """Return the largest joint step (deg) between successive rows of ``q`` (rad)."""
+    if len(q) < 2:
+        return 0.0
+    return float(np.degrees(np.abs(np.diff(q, axis=0))).max())
+
+
+def tip_errors(robot, model, gesture, design, q_r, q_l):
+    """Return per point the fingertip distance (mm) to the design, the larger hand's."""
+    err = np.zeros(len(design))
+    for side in gesture.arms:
+        want = batch_forward(robot, design[:, columns(side)], side).tip
+        q = q_r if side == 'right' else q_l
+        err = np.maximum(err, np.linalg.norm(batch_forward(model, q, side).tip - want, axis=1))
+    return err
+
+
+def collisions(model, checker, ids, q_r, q_l):
+    """Return (any point collides, the capsule pairs that touch) for a motion."""
+    if checker is None:
+        return False, ()
+    lm_r, lm_l = batch_forward(model, q_r, 'right'), batch_forward(model, q_l, 'left')
+    collides = bool(checker.collides(lm_r, lm_l, ids).any())
+    pairs = tuple(dict.fromkeys(p for row in checker.colliding_pairs(lm_r, lm_l, ids)
+                                for p in row))
+    return collides, pairs
+
+
+def describe_motion(ctx, motion, picks) -> GestureResult:
+    """
+    Return the :class:`GestureResult` of one adapted motion (``motion``: a ``_Motion``).
+
+    ``ctx`` holds the run's models, scorer and collision checker; ``picks`` are the
+    motion's typical points.  ``wall_time`` is left for the caller.
+    """
+    m, gesture = motion, motion.gesture
+    before = ctx.scorer.evaluate(m.base_r, m.base_l, m.ids)
+    after, parts = ctx.scorer.evaluate(m.q_r, m.q_l, m.ids, breakdown=True)
+    worst = int(np.argmax(after))
+    collides, pairs = collisions(ctx.model, ctx.checker, m.ids, m.q_r, m.q_l)
+    err_before = tip_errors(ctx.robot, ctx.model, gesture, m.design, m.base_r, m.base_l)
+    err_after = tip_errors(ctx.robot, ctx.model, gesture, m.design, m.q_r, m.q_l)
+    searched = m.searched
+    if searched is not None and m.how == 'keyframes':
+        message = searched.message
+    else:
+        message = (f'{gesture.name}: {LABELS[m.how].format(k=len(picks))}; '
+                   f'mean score {after.mean():.2f}')
+        if m.status == 'deadline':
+            message += '; deadline reached, best result so far used'
+    return GestureResult(
+        name=gesture.name, times=tuple(float(kf.time_from_start) for kf in gesture.keyframes),
+        positions=tuple(tuple(float(a) for a in row)
+                        for row in np.concatenate((m.q_r, m.q_l), axis=1)),
+        score_before=float(before.max()), score_after=float(after.max()),
+        status=str(m.status), message=message, collides=collides,
+        breakdown={c: float(v[worst]) for c, v in parts.items() if c not in ARMS},
+        stage=int(searched.stage) if searched is not None else 1,
+        colliding_pairs=tuple(str(p) for p in pairs), method=m.how,
+        typical_points=len(picks), tip_error_mm=float(err_after.mean()),
+        max_jump_deg=largest_jump(np.concatenate((m.q_r, m.q_l), axis=1)),
+        score_before_mean=float(before.mean()), score_mean=float(after.mean()),
+        stage1_score=None if searched is None else float(searched.stage1_score),
+        expansion_stage=int(m.stage), free_joints=tuple(str(j) for j in m.free),
+        nfev=int(m.nfev), typical_indices=tuple(int(i) for i in picks),
+        kriging_sigma_deg=tuple(float(v) for v in m.sigma),
+        tip_error_before_mm=float(err_before.mean()),
+        tip_error_max_mm=float(err_after.max()),
+        max_jump_designed_deg=largest_jump(m.design),
+        max_jump_before_deg=largest_jump(np.concatenate((m.base_r, m.base_l), axis=1)))
+
+
+def no_worse_than_locked(robot, gesture, result, locks, settings) -> GestureResult:
+    """
+    Return ``result``, or the locked design if a cut-short search left it worse.
+
+    A run that the deadline (or a cancel) stops early can end with a motion that scores
+    worse than no adaptation at all (typical points half-solved, then Kriging spreads
+    the half-made corrections).  The design with the failed joints at their locks
+    (``score_before``) is then published instead, checked for collisions like any
+    other result, and the message says so.
+    """
+    if not result.score_after > result.score_before:
+        return result
+    cols = {robot.joint_names.index(j): float(a) for j, a in locks.items()}
+    positions = tuple(tuple(cols.get(k, float(a)) for k, a in enumerate(kf.positions()))
+                      for kf in gesture.keyframes)
+    collides, pairs = result.collides, result.colliding_pairs
+    if settings.collision_check:
+        model = robot.with_tool(settings.tool_length_mm, settings.tool_arm)
+        checker = CollisionModel(model, gesture_targets(gesture), robot.capsules)
+        q = np.array(positions)
+        lm_r = batch_forward(model, q[:, :N_JOINTS], 'right')
+        lm_l = batch_forward(model, q[:, N_JOINTS:], 'left')
+        rows = np.arange(len(q))
+        collides = bool(np.any(checker.collides(lm_r, lm_l, rows)))
+        pairs = tuple(sorted({str(p) for names in checker.colliding_pairs(lm_r, lm_l, rows)
+                              for p in names}))
+    note = ('the search was cut short before it beat the design with the locks applied; '
+            'that design is published')
+    return replace(result, positions=positions, score_after=result.score_before,
+                   score_mean=result.score_before_mean,
+                   tip_error_mm=result.tip_error_before_mm,
+                   max_jump_deg=result.max_jump_before_deg, collides=collides,
+                   colliding_pairs=pairs, breakdown={},
+                   message=f'{result.message}; {note}' if result.message else note)
