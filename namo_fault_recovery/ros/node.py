@@ -36,7 +36,7 @@ from .input_monitor import InputMonitor
 from .inputs import BadInput, parse_fault
 from .latest_worker import LatestWorker
 from .parameters import (check_parameter, declare_parameters, DEFAULT_STATE_DIR, MARKER_PARAMS,
-                         node_settings, one_line, parameter_specs, RERUN_PARAMS, shorten,
+                         node_config, one_line, parameter_specs, RERUN_PARAMS, shorten,
                          StartupError)
 from .persistence import Persistence
 from .run_book import Outcome, RunBook
@@ -61,7 +61,7 @@ class RecoveryNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._after_set_parameters)
         values = declare_parameters(self, lambda: self._last_param_reason)
-        self._settings = node_settings(values)
+        self._config = node_config(values)
         try:
             self._robot = load_robot(values['robot_file'] or None)
             self._library = load_library(self._robot, values['gesture_file'] or None)
@@ -90,7 +90,7 @@ class RecoveryNode(Node):
                                         self._state.store.directory, self._log,
                                         values['contingency_file'] or None)
         self._dispatcher = Dispatcher(self._book, self._engine, self._robot, self._library,
-                                      lambda: self._settings, self._publish_and_persist,
+                                      lambda: self._config, self._publish_and_persist,
                                       self._log, self._publish_refined, self._table)
         self._markers = LatestWorker(self._publish_markers, MARKER_DELAY, name='markers')
         try:
@@ -105,8 +105,8 @@ class RecoveryNode(Node):
         self._state.start()
         self._intake.start()
         self._dispatcher.start()
-        if self._settings.contingency_table:
-            self._table.configure(self._settings.engine,
+        if self._config.contingency_table:
+            self._table.configure(self._config.settings,
                                   active={j: f.angle for j, f in self._book.faults.items()})
         self._ready = True
         self.get_logger().info(
@@ -168,16 +168,16 @@ class RecoveryNode(Node):
         if not self._ready:
             return
         names = {p.name for p in parameters}
-        self._settings = node_settings({n: self.get_parameter(n).value
-                                        for n, _, _ in parameter_specs()})
-        tool = self._settings.engine.tool_length_mm > 0
+        self._config = node_config({n: self.get_parameter(n).value
+                                    for n, _, _ in parameter_specs()})
+        tool = self._config.settings.tool_length_mm > 0
         rerun = bool(names & RERUN_PARAMS) and (
             bool(self._book.faults) or tool or 'tool_length_mm' in names)
         if rerun:
             self._book.request()
         elif (names & RERUN_PARAMS or 'contingency_table' in names) \
-                and self._settings.contingency_table:
-            self._table.configure(self._settings.engine)    # a new fingerprint: rebuild
+                and self._config.contingency_table:
+            self._table.configure(self._config.settings)    # a new fingerprint: rebuild
         changed = ', '.join(f'{p.name}={shorten(repr(p.value))}' for p in parameters)
         self.get_logger().info(f'parameters set: {changed}'
                                + ('; reconfiguring the library' if rerun else ''))
@@ -216,7 +216,7 @@ class RecoveryNode(Node):
                 joints.update(report.joints)
             described = ', '.join(
                 f'{j} at {conv.fmt_angle(a)}' if a is not None else
-                f'{j} (lock angle: {self._settings.engine.lock_strategy} strategy)'
+                f'{j} (lock angle: {self._config.settings.lock_strategy} strategy)'
                 for j, a in joints.items())
             self.get_logger().info(f'fault accepted: {shorten(described, 400)} '
                                    f'({len(reports)} report(s)); reconfiguring the library')
@@ -256,7 +256,7 @@ class RecoveryNode(Node):
 
         outcome = await self._await_outcome(register)
         count = counted[0] if counted else 0
-        tool = self._settings.engine.tool_length_mm
+        tool = self._config.settings.tool_length_mm
         done = (f'the reference library is published ({len(self._library)} gestures)'
                 if tool <= 0 else f'the library is adapted to the {tool:g} mm tool alone '
                                   f'(tool_length_mm)')
@@ -301,7 +301,7 @@ class RecoveryNode(Node):
         try:
             markers = conv.library_markers(
                 self._robot, reference_result(self._library), result, stamp,
-                self._settings.marker_frame_id, self._settings.marker_spacing)
+                self._config.marker_frame_id, self._config.marker_spacing)
             self._marker_pub.publish(MarkerArray(markers=markers))
         except Exception as exc:  # noqa: B902 - markers are a view; never fatal
             if self._live():
@@ -311,11 +311,11 @@ class RecoveryNode(Node):
         """Publish the reference, then restore the persisted fault set (and library)."""
         reference = reference_result(self._library)
         self._book.mark_published_without_run(reference, self._publish_library(reference))
-        plan = self._state.plan_restart(self._settings.engine)
+        plan = self._state.plan_restart(self._config.settings)
         if plan.problem:
             self.get_logger().error(f'{self._state.problem}; starting without faults')
         if not plan.faults:
-            if self._settings.engine.tool_length_mm > 0:
+            if self._config.settings.tool_length_mm > 0:
                 self._book.request()      # a tool from the start is a structure change
             return
         self._book.set_faults(plan.faults, request=plan.library is None)
@@ -339,7 +339,7 @@ class RecoveryNode(Node):
 
     def publish_diagnostics(self):
         """Publish /diagnostics from a snapshot of the state."""
-        snap = diagnostics.snapshot(self._book, self._inputs, self._settings,
+        snap = diagnostics.snapshot(self._book, self._inputs, self._config.settings,
                                     self._state.problem, self._state.store.path,
                                     self._engine.restarts)
         try:
