@@ -73,13 +73,13 @@ def add_setting_options(p, deadline=False):
         if s.name == 'deadline_sec' and not deadline:
             continue
         names = [s.option] + [a for a in s.aliases if not a.startswith('--no-')]
-        kwargs = {'default': s.default, 'help': s.help}
-        if s.type is bool:
+        kwargs = {'default': s.default, 'help': s.cli_help}
+        if s.value_type is bool:
             kwargs['action'] = argparse.BooleanOptionalAction
         elif s.choices is not None:
             kwargs['choices'] = s.choices
         else:
-            kwargs.update(type=s.type, metavar=s.metavar)
+            kwargs.update(type=s.value_type, metavar=s.metavar)
         p.add_argument(*names, **kwargs)
         for alias in s.aliases:
             if alias.startswith('--no-'):

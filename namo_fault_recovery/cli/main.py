@@ -5,7 +5,6 @@ Bad arguments get a one-line error and exit code 2, never a traceback.
 """
 
 import json
-import math
 import sys
 
 import numpy as np

@@ -59,7 +59,7 @@ def _sentence(text):
 
 
 def _range(s):
-    return ' .. '.join(f'{v:g}' if isinstance(v, float) else str(v) for v in s.range)
+    return ' .. '.join(f'{v:g}' if isinstance(v, float) else str(v) for v in s.limits)
 
 
 def yaml_comment(s):
@@ -67,7 +67,7 @@ def yaml_comment(s):
     parts = [_sentence(s.doc)]
     if s.unit:
         parts.append(f'Unit: {s.unit}.')
-    if s.range is not None:
+    if s.limits is not None:
         parts.append(f'Range {_range(s)}.')
     if s.choices is not None:
         parts.append('One of: ' + ', '.join(s.choices) + '.')
@@ -114,7 +114,7 @@ def render_reference():
             '|------|---------------|------------|---------|']
     for s in _settings():
         constraint = []
-        if s.range is not None:
+        if s.limits is not None:
             constraint.append(_range(s).replace('..', '…') + (f' {s.unit}' if s.unit else ''))
         elif s.unit:
             constraint.append(s.unit)
@@ -122,7 +122,8 @@ def render_reference():
             constraint.append(', '.join(f'`{c}`' for c in s.choices))
         constraint += [flag for flag, on in (('read-only', s.read_only), ('rerun', s.rerun))
                        if on]
-        rows.append(f'| `{s.name}` | {ROS_TYPES[s.type]}, {_md_value(s.default, code=True)} | '
+        default = _md_value(s.default, code=True)
+        rows.append(f'| `{s.name}` | {ROS_TYPES[s.value_type]}, {default} | '
                     f'{"; ".join(constraint)} | {s.doc} |')
     return '\n'.join(rows) + '\n'
 

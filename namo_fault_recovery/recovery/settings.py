@@ -45,18 +45,18 @@ class Setting:
     """
     One setting: what it is, its default and bounds, and how each user treats it.
 
-    ``range`` (low, high) is the node parameter's (its descriptor); ``positive`` is the
-    bound every user checks for a number (True: > 0, False: >= 0, None: none).
-    ``aliases``, ``help`` and ``metavar`` shape the command-line option ``--name``
+    ``limits`` (low, high) are the node parameter's range (its descriptor); ``positive``
+    is the bound every user checks for a number (True: > 0, False: >= 0, None: none).
+    ``aliases``, ``cli_help`` and ``metavar`` shape the command-line option ``--name``
     (with dashes); for a flag an alias ``--no-...`` is the negative form.
     """
 
     name: str
-    type: type
+    value_type: type
     default: object
     doc: str
     unit: str = ''
-    range: tuple = None
+    limits: tuple = None
     positive: bool = None
     choices: tuple = None
     scope: str = NODE
@@ -64,12 +64,12 @@ class Setting:
     read_only: bool = False
     cli: bool = False
     aliases: tuple = ()
-    help: str = None
+    cli_help: str = None
     metavar: str = None
 
     @property
     def option(self):
-        """The command-line option: ``--vq-distortion-mm`` for ``vq_distortion_mm``."""
+        """Return the command-line option: ``--vq-distortion-mm`` for ``vq_distortion_mm``."""
         return '--' + self.name.replace('_', '-')
 
 
@@ -100,49 +100,52 @@ class RecoverySettings:
     """
 
     deadline_sec: float = setting(
-        1.0, 'hard budget for one reconfiguration of the whole library (the paper\'s 1 s)',
-        unit='s', range=(0.01, 60.0), positive=True, aliases=('--deadline',),
-        metavar='SEC', help='budget for the whole library in s (default %(default)g; 0: no deadline)')
+        1.0, "hard budget for one reconfiguration of the whole library (the paper's 1 s)",
+        unit='s', limits=(0.01, 60.0), positive=True, aliases=('--deadline',),
+        metavar='SEC',
+        cli_help='budget for the whole library in s (default %(default)g; 0: no deadline)')
     lock_strategy: str = setting(
         'average', 'lock angle of a joint reported without a position: the mean over the '
-        'gestures of its arm (the paper\'s), where /joint_states last saw it, or the best '
+        "gestures of its arm (the paper's), where /joint_states last saw it, or the best "
         'for the whole library', choices=LOCK_STRATEGIES)
     optimizer: str = setting(
-        'abc', 'optimiser: abc, the paper\'s artificial bee colony; the others for '
+        'abc', "optimiser: abc, the paper's artificial bee colony; the others for "
         'comparison', choices=tuple(ALGORITHMS), aliases=('--algorithm',))
     optimizer_preset: str = setting(
         'default', 'optimiser settings: default (product tuning) or paper (Table 3)',
         choices=PRESETS, aliases=('--preset',),
-        help="'default' (our tuned ABC) or 'paper' (the paper's Table 3)")
+        cli_help="'default' (our tuned ABC) or 'paper' (the paper's Table 3)")
     bimanual: str = setting(
         'auto', 'two-handed gestures: let the healthy arm move too (stage 2); auto = when '
         'the faulted arm alone scores poorly', choices=BIMANUAL_MODES,
-        help="stage 2 for two-handed gestures: the healthy arm moves too ('auto': when "
-             'stage 1 scores above the threshold)')
+        cli_help="stage 2 for two-handed gestures: the healthy arm moves too ('auto': when "
+                 'stage 1 scores above the threshold)')
     collision_check: bool = setting(
         True, 'keep the arms and the torso apart (capsule model); the poses that still '
-        'collide are reported (<g>.collides on /diagnostics, COLLIDES in the summary)', aliases=('--no-collision',),
-        help='keep arms and torso apart and report what still collides')
+        'collide are reported (<g>.collides on /diagnostics, COLLIDES in the summary)',
+        aliases=('--no-collision',),
+        cli_help='keep arms and torso apart and report what still collides')
     tool_length_mm: float = setting(
-        0.0, 'a tool in the hand of tool_arm lengthens it by this much (the second paper\'s 50 '
-        'and 100 mm): a structure change; setting it re-adapts the library even with no '
-        'failed joint, and setting 0 restores the reference', unit='mm', range=(0.0, 300.0), positive=False, metavar='MM',
-        help='a tool lengthening the hand of --tool-arm (mm)')
+        0.0, "a tool in the hand of tool_arm lengthens it by this much (the second paper's "
+        '50 and 100 mm): a structure change; setting it re-adapts the library even with no '
+        'failed joint, and setting 0 restores the reference', unit='mm',
+        limits=(0.0, 300.0), positive=False, metavar='MM',
+        cli_help='a tool lengthening the hand of --tool-arm (mm)')
     tool_arm: str = setting('right', 'the arm whose hand holds the tool', choices=ARMS)
     trajectory_method: str = setting(
-        'auto', 'motions: kriging = VQ typical points + Kriging (the second paper); per_point = '
-        'every point in order, warm-started, with a continuity penalty; auto = Kriging, then '
-        'the whole trajectory (every point at once, batched analytic gradients, a smoothness '
-        'term) until the deadline', choices=METHODS)
+        'auto', 'motions: kriging = VQ typical points + Kriging (the second paper); '
+        'per_point = every point in order, warm-started, with a continuity penalty; auto = '
+        'Kriging, then the whole trajectory (every point at once, batched analytic '
+        'gradients, a smoothness term) until the deadline', choices=METHODS)
     vq_distortion_mm: float = setting(
         DEFAULT_DISTORTION_MM, 'quantisation distortion threshold (mm of fingertip) that '
-        'sets the number of typical points of a dense motion (the paper\'s 60 mm)',
-        unit='mm', range=(1.0, 1000.0), positive=True, metavar='MM',
-        help='typical-point threshold (mm of fingertip)')
+        "sets the number of typical points of a dense motion (the paper's 60 mm)",
+        unit='mm', limits=(1.0, 1000.0), positive=True, metavar='MM',
+        cli_help='typical-point threshold (mm of fingertip)')
     continuity_weight: float = setting(
         DEFAULT_CONTINUITY, 'per-point adaptation: penalty per deg^2 of joint jump away from '
-        'the previous point plus the designed step', unit='per deg^2', range=(0.0, 100.0),
-        positive=False, metavar='W', help='per-point jump penalty (per deg^2)')
+        'the previous point plus the designed step', unit='per deg^2', limits=(0.0, 100.0),
+        positive=False, metavar='W', cli_help='per-point jump penalty (per deg^2)')
     weights: ScoreWeights = field(default_factory=ScoreWeights)
 
     def __post_init__(self):
@@ -182,10 +185,10 @@ def _weight_rows():
     default = ScoreWeights()
     rows = [Setting(f'weights.{c}', float, getattr(default, c),
                     f'score weight of the {c} component; one of the first four > 0',
-                    range=(0.0, 1000.0), positive=False, scope=ENGINE, rerun=True)
+                    limits=(0.0, 1000.0), positive=False, scope=ENGINE, rerun=True)
             for c in COMPONENTS]
     rows.append(Setting('weights.normalise', bool, default.normalise,
-                        'scale the weights a gesture uses so they sum to 1 (the paper\'s '
+                        "scale the weights a gesture uses so they sum to 1 (the paper's "
                         'equal weights)', scope=ENGINE, rerun=True))
     return rows
 
@@ -200,9 +203,9 @@ def _rows(engine=(), weights=()):
                 'config/demo_motions.yaml adds the dense 100-point circle',
                 read_only=True),
         *engine,
-        Setting('seed', int, -1, 'random seed for reproducible runs; -1 draws one per run (reported on '
-                '/diagnostics)',
-                range=(-1, 2 ** 31 - 1), rerun=True),
+        Setting('seed', int, -1, 'random seed for reproducible runs; -1 draws one per run '
+                '(reported on /diagnostics)',
+                limits=(-1, 2 ** 31 - 1), rerun=True),
         *weights,
         Setting('state_dir', str, DEFAULT_STATE_DIR, 'directory where the fault set, the '
                 'last library and the contingency table persist (~ and $VARS expanded)',
@@ -210,14 +213,14 @@ def _rows(engine=(), weights=()):
         Setting('marker_frame_id', str, 'base_link', 'frame of the /gesture_markers '
                 'skeletons (the torso centre)'),
         Setting('marker_spacing', float, 0.8, 'distance between the gestures shown on '
-                '/gesture_markers', unit='m', range=(0.0, 10.0)),
+                '/gesture_markers', unit='m', limits=(0.0, 10.0)),
         Setting('refine_budget_sec', float, 10.0, 'after a deadline result the node keeps '
                 'searching (further seeds) in the background for this long and publishes '
                 'each library better by more than 0.1% as a new version (library_origin: '
                 'refined); 0 = off; a new fault or call cancels it', unit='s',
-                range=(0.0, 600.0)),
+                limits=(0.0, 600.0)),
         Setting('contingency_table', bool, True, 'precompute, in a nice 19 process stopped '
-                "while a live run computes, the library of every single fault at the lock "
+                'while a live run computes, the library of every single fault at the lock '
                 "strategy's angle (and, once faults are active, of every further single "
                 'fault on top of them); kept in state_dir/contingency_table.json under a '
                 'fingerprint of the robot, the library and every setting that changes the '
@@ -226,7 +229,7 @@ def _rows(engine=(), weights=()):
                 "precompute --jobs N --out FILE'), merged at start if its fingerprint (robot, "
                 'library, settings) matches; otherwise the reason is logged', read_only=True),
         Setting('diagnostics_period_sec', float, 1.0, 'period of /diagnostics (also '
-                'published on every change)', unit='s', range=(0.1, 60.0), read_only=True),
+                'published on every change)', unit='s', limits=(0.1, 60.0), read_only=True),
     )
 
 
@@ -253,10 +256,10 @@ def check(name, value, current=None):
         if value not in s.choices:
             return (f'{name}: unknown value {shorten(repr(value))}; expected one of '
                     f'{", ".join(s.choices)}')
-    elif s.type is bool:
+    elif s.value_type is bool:
         if not isinstance(value, bool):
             return f'{name}: expected true or false, {got}'
-    elif s.type is float:
+    elif s.value_type is float:
         if (isinstance(value, bool) or not isinstance(value, (int, float))
                 or not math.isfinite(value)
                 or (s.positive is True and not value > 0)
@@ -264,8 +267,8 @@ def check(name, value, current=None):
             bound = {True: ' > 0', False: ' >= 0', None: ''}[s.positive]
             unit = f' ({s.unit})' if s.unit else ''
             return f'{name}: expected a finite number{bound}{unit}, {got}'
-    elif not isinstance(value, s.type) or isinstance(value, bool):
-        return f'{name}: expected {TYPE_NAMES[s.type]}, {got}'
+    elif not isinstance(value, s.value_type) or isinstance(value, bool):
+        return f'{name}: expected {TYPE_NAMES[s.value_type]}, {got}'
     if name in WEIGHT_PARAMS and current is not None and all(
             p in current for p in WEIGHT_PARAMS):
         try:
@@ -283,4 +286,4 @@ def weights_from(values):
 def settings_from(values):
     """Return the :class:`RecoverySettings` of a ``{setting: value}`` mapping (every one)."""
     return RecoverySettings(weights=weights_from(values),
-                            **{n: BY_NAME[n].type(values[n]) for n in ENGINE_FIELDS})
+                            **{n: BY_NAME[n].value_type(values[n]) for n in ENGINE_FIELDS})

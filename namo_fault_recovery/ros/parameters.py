@@ -48,11 +48,11 @@ def descriptor_of(s):
                             read_only=s.read_only)
     if s.choices is not None:
         d.additional_constraints = 'one of: ' + ', '.join(s.choices)
-    if s.range is not None and s.type is float:
+    if s.limits is not None and s.value_type is float:
         d.floating_point_range = [FloatingPointRange(
-            from_value=float(s.range[0]), to_value=float(s.range[1]), step=0.0)]
-    elif s.range is not None:
-        d.integer_range = [IntegerRange(from_value=int(s.range[0]), to_value=int(s.range[1]),
+            from_value=float(s.limits[0]), to_value=float(s.limits[1]), step=0.0)]
+    elif s.limits is not None:
+        d.integer_range = [IntegerRange(from_value=int(s.limits[0]), to_value=int(s.limits[1]),
                                         step=1)]
     return d
 
