@@ -230,6 +230,10 @@ def _rows(engine=(), weights=()):
                 'library, settings) matches; otherwise the reason is logged', read_only=True),
         Setting('diagnostics_period_sec', float, 1.0, 'period of /diagnostics (also '
                 'published on every change)', unit='s', limits=(0.1, 60.0), read_only=True),
+        Setting('engine_start_timeout_sec', float, 60.0, 'the engine process must be '
+                'loaded and warmed up within this long, at start and after a restart, or the '
+                'node refuses to start (the run fails)', unit='s', limits=(1.0, 600.0),
+                read_only=True),
     )
 
 

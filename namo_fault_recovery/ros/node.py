@@ -72,12 +72,14 @@ class RecoveryNode(Node):
         self._last_stamp_ns = 0
         self._diag_dirty = True
         self._engine = EngineProcess(values['robot_file'] or None,
-                                     values['gesture_file'] or None)
+                                     values['gesture_file'] or None,
+                                     values['engine_start_timeout_sec'])
         self._engine.start()
         # The engine process imports, loads and warms up (about a second): the node is
         # not ready to meet its deadline before, so it waits here (a signal still ends it).
         try:
-            self._engine.wait_ready(timeout=60.0, keep_waiting=self.context.ok)
+            self._engine.wait_ready(timeout=values['engine_start_timeout_sec'],
+                                    keep_waiting=self.context.ok)
         except EngineError as exc:
             self._engine.stop()
             raise StartupError(f'the engine process did not start: {exc}') from None
