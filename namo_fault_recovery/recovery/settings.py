@@ -36,6 +36,7 @@ ENGINE = 'engine'
 NODE = 'node'
 MAX_REASON = 200           # characters of a rejected value kept in a reason
 DEFAULT_STATE_DIR = '~/.ros/namo_fault_recovery'
+BOUNDS = {'> 0': lambda v: v > 0, '>= 0': lambda v: v >= 0}
 TYPE_NAMES = {str: 'a string', float: 'a floating-point number', int: 'an integer',
               bool: 'true or false'}
 
@@ -45,8 +46,8 @@ class Setting:
     """
     One setting: what it is, its default and bounds, and how each user treats it.
 
-    ``limits`` (low, high) are the node parameter's range (its descriptor); ``positive``
-    is the bound every user checks for a number (True: > 0, False: >= 0, None: none).
+    ``limits`` (low, high) are the node parameter's range (its descriptor); ``bound``
+    (``'> 0'``, ``'>= 0'`` or None) is what every user checks a number against.
     ``aliases``, ``cli_help`` and ``metavar`` shape the command-line option ``--name``
     (with dashes); for a flag an alias ``--no-...`` is the negative form.
     """
@@ -57,7 +58,7 @@ class Setting:
     doc: str
     unit: str = ''
     limits: tuple = None
-    positive: bool = None
+    bound: str = None
     choices: tuple = None
     scope: str = NODE
     rerun: bool = False
@@ -68,19 +69,19 @@ class Setting:
     metavar: str = None
 
     @property
-    def option(self):
+    def option(self) -> str:
         """Return the command-line option: ``--vq-distortion-mm`` for ``vq_distortion_mm``."""
         return '--' + self.name.replace('_', '-')
 
 
-def setting(default, doc, **spec):
+def setting(default: object, doc: str, **spec) -> object:
     """Declare a :class:`RecoverySettings` field: its default and its :class:`Setting`."""
     spec.setdefault('rerun', True)
     spec.setdefault('cli', True)
     return field(default=default, metadata={'setting': dict(spec, doc=doc)})
 
 
-def shorten(value, limit=MAX_REASON):
+def shorten(value: object, limit: int = MAX_REASON) -> str:
     """Return ``repr``-free text of at most ``limit`` characters (a bad value stays bounded)."""
     text = str(value)
     if len(text) <= limit:
@@ -101,7 +102,7 @@ class RecoverySettings:
 
     deadline_sec: float = setting(
         1.0, "hard budget for one reconfiguration of the whole library (the paper's 1 s)",
-        unit='s', limits=(0.01, 60.0), positive=True, aliases=('--deadline',),
+        unit='s', limits=(0.01, 60.0), bound='> 0', aliases=('--deadline',),
         metavar='SEC',
         cli_help='budget for the whole library in s (default %(default)g; 0: no deadline)')
     lock_strategy: str = setting(
@@ -129,7 +130,7 @@ class RecoverySettings:
         0.0, "a tool in the hand of tool_arm lengthens it by this much (the second paper's "
         '50 and 100 mm): a structure change; setting it re-adapts the library even with no '
         'failed joint, and setting 0 restores the reference', unit='mm',
-        limits=(0.0, 300.0), positive=False, metavar='MM',
+        limits=(0.0, 300.0), bound='>= 0', metavar='MM',
         cli_help='a tool lengthening the hand of --tool-arm (mm)')
     tool_arm: str = setting('right', 'the arm whose hand holds the tool', choices=ARMS)
     trajectory_method: str = setting(
@@ -140,15 +141,15 @@ class RecoverySettings:
     vq_distortion_mm: float = setting(
         DEFAULT_DISTORTION_MM, 'quantisation distortion threshold (mm of fingertip) that '
         "sets the number of typical points of a dense motion (the paper's 60 mm)",
-        unit='mm', limits=(1.0, 1000.0), positive=True, metavar='MM',
+        unit='mm', limits=(1.0, 1000.0), bound='> 0', metavar='MM',
         cli_help='typical-point threshold (mm of fingertip)')
     continuity_weight: float = setting(
         DEFAULT_CONTINUITY, 'per-point adaptation: penalty per deg^2 of joint jump away from '
         'the previous point plus the designed step', unit='per deg^2', limits=(0.0, 100.0),
-        positive=False, metavar='W', cli_help='per-point jump penalty (per deg^2)')
+        bound='>= 0', metavar='W', cli_help='per-point jump penalty (per deg^2)')
     weights: ScoreWeights = field(default_factory=ScoreWeights)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ENGINE_FIELDS:
             reason = check(name, getattr(self, name))
             if reason:
@@ -157,11 +158,11 @@ class RecoverySettings:
             raise ValueError(f'weights: expected a ScoreWeights or None, got '
                              f'{shorten(repr(self.weights))}')
 
-    def with_changes(self, **changes):
+    def with_changes(self, **changes) -> 'RecoverySettings':
         """Return a copy with some settings changed (validated again)."""
         return replace(self, **changes)
 
-    def public(self):
+    def public(self) -> dict:
         """Return the settings as a JSON-ready dict (what a result records)."""
         return asdict(self)
 
@@ -185,7 +186,7 @@ def _weight_rows():
     default = ScoreWeights()
     rows = [Setting(f'weights.{c}', float, getattr(default, c),
                     f'score weight of the {c} component; one of the first four > 0',
-                    limits=(0.0, 1000.0), positive=False, scope=ENGINE, rerun=True)
+                    limits=(0.0, 1000.0), bound='>= 0', scope=ENGINE, rerun=True)
             for c in COMPONENTS]
     rows.append(Setting('weights.normalise', bool, default.normalise,
                         "scale the weights a gesture uses so they sum to 1 (the paper's "
@@ -193,7 +194,7 @@ def _weight_rows():
     return rows
 
 
-def _rows(engine=(), weights=()):
+def _rows(engine, weights):
     """Return the table: the node's own settings around the engine's, in parameter order."""
     return (
         Setting('robot_file', str, '', 'arm model YAML (DH, joint names, limits); empty = '
@@ -244,7 +245,7 @@ ENGINE_FIELDS = tuple(s.name for s in SETTINGS if s.scope == ENGINE and '.' not 
 WEIGHT_PARAMS = tuple(s.name for s in SETTINGS if s.name.startswith('weights.'))
 
 
-def check(name, value, current=None):
+def check(name: str, value: object, current: dict = None) -> str | None:
     """
     Return None if ``value`` is acceptable for setting ``name``, else the one-line reason.
 
@@ -266,15 +267,14 @@ def check(name, value, current=None):
     elif s.value_type is float:
         if (isinstance(value, bool) or not isinstance(value, (int, float))
                 or not math.isfinite(value)
-                or (s.positive is True and not value > 0)
-                or (s.positive is False and not value >= 0)):
-            bound = {True: ' > 0', False: ' >= 0', None: ''}[s.positive]
+                or (s.bound is not None and not BOUNDS[s.bound](value))):
+            bound = f' {s.bound}' if s.bound else ''
             unit = f' ({s.unit})' if s.unit else ''
             return f'{name}: expected a finite number{bound}{unit}, {got}'
     elif not isinstance(value, s.value_type) or isinstance(value, bool):
         return f'{name}: expected {TYPE_NAMES[s.value_type]}, {got}'
     if name in WEIGHT_PARAMS and current is not None and all(
-            p in current for p in WEIGHT_PARAMS):
+            p in current for p in WEIGHT_PARAMS if p != 'weights.normalise'):
         try:
             weights_from(dict(current, **{name: value}))
         except ValueError as exc:
@@ -282,12 +282,13 @@ def check(name, value, current=None):
     return None
 
 
-def weights_from(values):
+def weights_from(values: dict) -> ScoreWeights:
     """Return the :class:`ScoreWeights` of the ``weights.*`` entries of ``values``."""
-    return ScoreWeights.from_mapping({p.split('.', 1)[1]: values[p] for p in WEIGHT_PARAMS})
+    return ScoreWeights.from_mapping({p.split('.', 1)[1]: values[p] for p in WEIGHT_PARAMS
+                                      if p in values})
 
 
-def settings_from(values):
+def settings_from(values: dict) -> RecoverySettings:
     """Return the :class:`RecoverySettings` of a ``{setting: value}`` mapping (every one)."""
     return RecoverySettings(weights=weights_from(values),
                             **{n: BY_NAME[n].value_type(values[n]) for n in ENGINE_FIELDS})
