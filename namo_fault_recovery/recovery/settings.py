@@ -269,8 +269,7 @@ def check(name: str, value: object, current: dict = None) -> str | None:
                 or not math.isfinite(value)
                 or (s.bound is not None and not BOUNDS[s.bound](value))):
             bound = f' {s.bound}' if s.bound else ''
-            unit = f' ({s.unit})' if s.unit else ''
-            return f'{name}: expected a finite number{bound}{unit}, {got}'
+            return f'{name}: expected a finite number{bound}, {got}'
     elif not isinstance(value, s.value_type) or isinstance(value, bool):
         return f'{name}: expected {TYPE_NAMES[s.value_type]}, {got}'
     if name in WEIGHT_PARAMS and current is not None and all(
