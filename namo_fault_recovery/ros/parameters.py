@@ -21,8 +21,9 @@ from ..recovery.settings import (check, DEFAULT_STATE_DIR, RecoverySettings, SET
                                  settings_from, shorten, TYPE_NAMES, WEIGHT_PARAMS)
 
 __all__ = ['check_parameter', 'CHOICES', 'declare_parameters', 'DEFAULT_STATE_DIR',
-           'MARKER_PARAMS', 'node_config', 'NodeConfig', 'one_line', 'parameter_specs',
-           'RERUN_PARAMS', 'shorten', 'StartupError', 'TYPE_NAMES', 'WEIGHT_PARAMS']
+           'descriptor_of', 'MARKER_PARAMS', 'node_config', 'NodeConfig', 'one_line',
+           'parameter_specs', 'RERUN_PARAMS', 'shorten', 'source', 'StartupError',
+           'TYPE_NAMES', 'WEIGHT_PARAMS']
 
 CHOICES = {s.name: s.choices for s in SETTINGS if s.choices is not None}
 # Changing one of these changes what the library should be: the node reconfigures again.
