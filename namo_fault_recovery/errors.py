@@ -19,7 +19,7 @@ class ConfigError(ValueError):
         super().__init__(f'{where}: {problem}')
 
 
-def shorten(value, limit=MAX_REASON):
+def shorten(value: object, limit: int = MAX_REASON) -> str:
     """Return ``repr``-free text of at most ``limit`` characters (a bad value stays bounded)."""
     text = str(value)
     if len(text) <= limit:

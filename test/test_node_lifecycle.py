@@ -241,6 +241,10 @@ BAD_CONFIGS = [
         d / 'p.yaml', 'recovery_node:\n  deadline_sec: 1.0\n')], 'ros__parameters'),
     ('params file missing', lambda d: ['--params-file', str(d / 'none.yaml')],
      'cannot read parameter file'),
+    ('bad value in a params file', lambda d: ['--params-file', _write(
+        d / 'bad_value.yaml', '/**:\n  ros__parameters:\n    lock_strategy: bogus\n')],
+     "lock_strategy: unknown value 'bogus'; expected one of average, measured, optimal "
+     '(in '),
 ]
 
 

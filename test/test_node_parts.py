@@ -7,7 +7,7 @@ import threading
 from namo_fault_recovery.recovery.engine import RecoverySettings
 from namo_fault_recovery.recovery.result import reference_result
 from namo_fault_recovery.ros import diagnostics
-from namo_fault_recovery.ros.parameters import check_parameter, node_settings, parameter_specs
+from namo_fault_recovery.ros.parameters import check_parameter, node_config, parameter_specs
 from namo_fault_recovery.runtime.fault_intake import Clear, FaultIntake, Report
 from namo_fault_recovery.runtime.inputs import BadInput, MAX_REASON, parse_fault
 from namo_fault_recovery.runtime.restore import check_result, restore_decision
@@ -157,10 +157,14 @@ def test_parameter_reasons_are_bounded():
     assert reason.startswith('lock_strategy') and len(reason) < 400
 
 
-def test_node_settings_are_the_engine_settings_by_name():
-    settings = node_settings(_defaults())
-    assert settings.engine == RecoverySettings()
-    assert settings.seed is None
+def test_node_config_holds_the_engine_settings_by_name():
+    config = node_config(_defaults())
+    assert config.settings == RecoverySettings()
+    assert config.seed is None
+    changed = node_config(dict(_defaults(), vq_distortion_mm=30.0, seed=4,
+                               **{'weights.palm': 2.0}))
+    assert changed.settings.vq_distortion_mm == 30.0 and changed.seed == 4
+    assert changed.settings.weights.palm == 2.0
 
 
 # --- restore and checks ---------------------------------------------------------------------
@@ -189,7 +193,7 @@ def test_check_result_refuses_an_angle_beyond_the_limit_by_any_amount(robot, lib
 # --- diagnostics ----------------------------------------------------------------------------
 
 def test_diagnostics_from_a_snapshot(robot, library):
-    settings = node_settings(_defaults())
+    settings = node_config(_defaults()).settings
     snap = diagnostics.Snapshot(
         faults={'right_arm_joint2': Fault()}, fault_version=3, current=reference_result(library),
         version=2, stamp_ns=5, pending=True, running=True, failed=None, settings=settings,
@@ -285,7 +289,7 @@ def test_a_fault_set_being_written_starts_the_run_but_is_published_only_once_on_
 
 
 def test_diagnostics_show_the_publish_path_figures(robot, library):
-    settings = node_settings(_defaults())
+    settings = node_config(_defaults()).settings
     snap = diagnostics.Snapshot(
         faults={}, fault_version=1, current=reference_result(library), version=1,
         stamp_ns=5, pending=False, running=False, failed=None, settings=settings,

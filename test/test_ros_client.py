@@ -11,7 +11,6 @@ on the real parser.
 
 import io
 import math
-from types import SimpleNamespace
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
@@ -44,7 +43,7 @@ def _statuses(robot, prefix, result, stamp=STAMP, pending=False, reported=None):
     faults = {j: Fault((reported or {}).get(j)) for j in result.locks}
     snap = Snapshot(faults=faults, fault_version=3, current=result, version=7,
                     stamp_ns=stamp, pending=pending, running=False, failed=None,
-                    settings=SimpleNamespace(engine=RecoverySettings()))
+                    settings=RecoverySettings())
     return statuses(robot, snap, prefix)
 
 
@@ -85,7 +84,7 @@ def test_every_name_and_key_the_writer_uses_is_shared(robot, result):
     faults = {j: Fault(0.1) for j in right}          # a frozen arm: every status kind
     snap = Snapshot(faults=faults, fault_version=3, current=result, version=7,
                     stamp_ns=STAMP, pending=False, running=False, failed=None,
-                    settings=SimpleNamespace(engine=RecoverySettings()),
+                    settings=RecoverySettings(),
                     rejections=[(0.0, '/actuator_fault', 'unknown joint')], rejected_total=1)
     written = statuses(robot, snap, ROBOT1)
     defined = _defined_keys(result.names)
@@ -146,7 +145,7 @@ def test_the_inbox_sees_a_rejected_input(robot, result):
     since = 0.0                      # every arrival (time.monotonic()) is after it
     snap = Snapshot(faults={}, fault_version=1, current=result, version=1, stamp_ns=STAMP,
                     pending=False, running=False, failed=None,
-                    settings=SimpleNamespace(engine=RecoverySettings()),
+                    settings=RecoverySettings(),
                     rejections=[(0.0, '/actuator_fault', "unknown joint 'x'")],
                     rejected_total=1)
     assert inbox.wait(inbox.rejection(since, 0), timeout=0.0) is None

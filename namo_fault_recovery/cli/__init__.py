@@ -16,6 +16,8 @@ The ``namo-recovery`` command line, one module per command group.
   ``gesture_player``;
 - :mod:`.urdf`: ``urdf``, Namo's URDF from the robot file;
 - :mod:`.precompute`: ``precompute``, the contingency table built offline;
+- :mod:`.settings_command`: ``settings``, the parameter file and tables written from the
+  settings' declaration;
 - :mod:`.ros_common`: what the ROS commands share (``--namespace``, errors, tables);
 - :mod:`.private_node`: the node process that ``demo`` and ``bench latency`` start;
 - :mod:`.common`: argument parsing shared by the groups (faults, the setting options);

@@ -53,61 +53,51 @@ def gesture_and_keyframe(library, name, keyframe):
     return gesture
 
 
-# The setting options (of ``solve``, ``precompute``): RecoverySettings fields, node parameters.
-SETTING_OPTIONS = ('deadline_sec', 'lock_strategy', 'optimizer', 'optimizer_preset',
-                   'bimanual', 'collision_check', 'tool_length_mm', 'tool_arm',
-                   'trajectory_method', 'vq_distortion_mm', 'continuity_weight')
+def setting_options():
+    """Return the engine's settings that are command-line options (``Setting.cli``)."""
+    from ..recovery.settings import SETTINGS
+    return tuple(s for s in SETTINGS if s.cli)
 
 
-def add_setting_options(p):
+def add_setting_options(p, deadline=False):
     """
-    Add the engine's setting options but the deadline, named like the node's parameters.
+    Add the engine's setting options (``--deadline-sec`` only with ``deadline``).
 
-    Shared by ``solve`` and ``precompute``; :func:`engine_settings` reads them back.
+    Each option is named like the node's parameter (``--vq-distortion-mm`` for
+    ``vq_distortion_mm``, plus its aliases), with its choices, default and help from the
+    declaration (:mod:`~namo_fault_recovery.recovery.settings`); a flag gets
+    ``--name`` / ``--no-name``.  Shared by ``solve`` and ``precompute``;
+    :func:`engine_settings` reads them back.
     """
-    import argparse
-    from ..model.robot import ARMS
-    from ..optimize import ALGORITHMS, PRESETS
-    from ..recovery.engine import RecoverySettings
-    from ..recovery.keyframes import BIMANUAL_MODES
-    from ..recovery.locks import LOCK_STRATEGIES
-    from ..recovery.motion import METHODS
-    d = RecoverySettings()
-    p.add_argument('--lock-strategy', choices=LOCK_STRATEGIES, default=d.lock_strategy)
-    p.add_argument('--optimizer', '--algorithm', choices=sorted(ALGORITHMS),
-                   default=d.optimizer)
-    p.add_argument('--optimizer-preset', '--preset', choices=PRESETS,
-                   default=d.optimizer_preset,
-                   help="'default' (our tuned ABC) or 'paper' (the paper's Table 3)")
-    p.add_argument('--bimanual', choices=BIMANUAL_MODES, default=d.bimanual,
-                   help='stage 2 for two-handed gestures: the healthy arm moves too '
-                        "('auto': when stage 1 scores above the threshold)")
-    p.add_argument('--collision-check', action=argparse.BooleanOptionalAction,
-                   default=d.collision_check,
-                   help='keep arms and torso apart and report what still collides')
-    p.add_argument('--no-collision', dest='collision_check', action='store_false',
-                   help='same as --no-collision-check')
-    p.add_argument('--tool-length-mm', type=float, default=d.tool_length_mm, metavar='MM',
-                   help='a tool lengthening the hand of --tool-arm (mm)')
-    p.add_argument('--tool-arm', choices=ARMS, default=d.tool_arm)
-    p.add_argument('--trajectory-method', choices=METHODS, default=d.trajectory_method)
-    p.add_argument('--vq-distortion-mm', type=float, default=d.vq_distortion_mm, metavar='MM',
-                   help='typical-point threshold (mm of fingertip)')
-    p.add_argument('--continuity-weight', type=float, default=d.continuity_weight,
-                   metavar='W', help='per-point jump penalty (per deg^2)')
+    for s in setting_options():
+        if s.name == 'deadline_sec' and not deadline:
+            continue
+        names = [s.option] + [a for a in s.aliases if not a.startswith('--no-')]
+        kwargs = {'default': s.default, 'help': s.cli_help}
+        if s.value_type is bool:
+            kwargs['action'] = argparse.BooleanOptionalAction
+        elif s.choices is not None:
+            kwargs['choices'] = s.choices
+        else:
+            kwargs.update(type=s.value_type, metavar=s.metavar)
+        p.add_argument(*names, **kwargs)
+        for alias in s.aliases:
+            if alias.startswith('--no-'):
+                p.add_argument(alias, dest=s.name, action='store_false',
+                               help=f'same as --no-{s.option[2:]}')
 
 
 def engine_settings(args, omit=()):
     """
     Return the RecoverySettings of the setting options that ``args`` has.
 
-    The options are those of :func:`add_setting_options` (and ``--deadline-sec``); a
-    setting without its option, or named in ``omit``, keeps the node's default.  A bad
-    value is a UsageError naming the option.
+    The options are those of :func:`add_setting_options`; a setting without its option,
+    or named in ``omit``, keeps the node's default.  A bad value is a UsageError naming
+    the option.
     """
-    from ..recovery.engine import RecoverySettings
-    values = {name: getattr(args, name) for name in SETTING_OPTIONS
-              if hasattr(args, name) and name not in omit}
+    from ..recovery.settings import RecoverySettings
+    values = {s.name: getattr(args, s.name) for s in setting_options()
+              if hasattr(args, s.name) and s.name not in omit}
     try:
         return RecoverySettings(**values)
     except ValueError as exc:

@@ -5,7 +5,6 @@ Bad arguments get a one-line error and exit code 2, never a traceback.
 """
 
 import json
-import math
 import sys
 
 import numpy as np
@@ -146,11 +145,7 @@ def solve_settings(args):
     ``--deadline-sec 0`` or ``--no-deadline`` runs without a deadline.
     """
     from ..optimize.base import Clock
-    deadline = args.deadline_sec
-    if not math.isfinite(deadline) or deadline < 0:
-        raise UsageError(f'--deadline-sec: expected a number of seconds >= 0 (0: none), '
-                         f'got {deadline}')
-    no_deadline = args.no_deadline or deadline == 0
+    no_deadline = args.no_deadline or args.deadline_sec == 0
     settings = engine_settings(args, omit=('deadline_sec',) if no_deadline else ())
     return settings, Clock(None if no_deadline else settings.deadline_sec)
 
@@ -224,8 +219,6 @@ def write_solve_text(result, out):
 
 def add_solve_parser(sub):
     """Add ``solve``: options named like the node's parameters, with its defaults."""
-    from ..recovery.engine import RecoverySettings
-    d = RecoverySettings()
     p = sub.add_parser('solve', help='recover the library for a fault set (as the node does)')
     p.add_argument('--fault', action='append', metavar='JOINT[=DEG]',
                    help='a failed joint, optionally with the angle (deg) it is held at; '
@@ -233,11 +226,8 @@ def add_solve_parser(sub):
     p.add_argument('--gesture', action='append', metavar='G',
                    help='only this gesture (repeatable; default: the whole library); lock '
                         'angles stay those of the whole library')
-    p.add_argument('--deadline-sec', '--deadline', type=float, default=d.deadline_sec,
-                   metavar='SEC', help=f'budget for the whole library in s (default '
-                                       f'{d.deadline_sec:g}; 0: no deadline)')
+    add_setting_options(p, deadline=True)
     p.add_argument('--no-deadline', action='store_true', help='run without a deadline')
-    add_setting_options(p)
     p.add_argument('--seed', type=int, default=None,
                    help='seed for a reproducible run (default: drawn, and printed)')
     p.add_argument('--json', action='store_true',
@@ -288,6 +278,8 @@ def build_parser():
     urdf_cli.register(sub)                   # urdf
     from . import precompute
     precompute.register(sub)                 # precompute (the contingency table)
+    from . import settings_command
+    settings_command.register(sub)           # settings (the files that list them)
     return parser
 
 

@@ -1,8 +1,10 @@
 """
 From a fault set to an adapted gesture library, free of ROS.
 
-- :mod:`.engine`: the one entry point, ``recover(robot, library, faults, settings)``,
-  with :class:`~.engine.RecoverySettings` named as the node's parameters;
+- :mod:`.engine`: the one entry point, ``recover(robot, library, faults, settings)``;
+- :mod:`.settings`: every setting declared once (name, type, default, range or choices,
+  unit, doc, flags) and :class:`~.settings.RecoverySettings`, named as the node's
+  parameters, with its one validator;
 - :mod:`.result`: the one result type, ``LibraryResult`` / ``GestureResult``, that the
   keyframe search and the motion adaptation build and the node, the state file, the
   messages, ``solve`` and the benchmarks read;

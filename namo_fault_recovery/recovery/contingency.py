@@ -66,6 +66,7 @@ from .engine import recover
 from .locks import resolve_locks, validate_angle
 from .motion import typical_points
 from .result import LibraryResult, MalformedResult
+from .settings import DEFAULT_STATE_DIR
 from ..files import write_text_atomically
 from ..optimize.base import Clock
 
@@ -75,8 +76,8 @@ KEY_DECIMALS = 6              # lock angles in a key: rounded to 1e-6 rad
 DEFAULT_SEEDS = (0, 1, 2, 3)
 DEFAULT_BUDGET_SEC = None     # per seed; None: no deadline, the preset's full iterations
 TABLE_FILE = 'contingency_table.json'
-# The node's default state directory (ros/parameters.py DEFAULT_STATE_DIR) + TABLE_FILE.
-DEFAULT_TABLE_PATH = '~/.ros/namo_fault_recovery/' + TABLE_FILE
+# The node's default state directory (the ``state_dir`` parameter) + TABLE_FILE.
+DEFAULT_TABLE_PATH = f'{DEFAULT_STATE_DIR}/{TABLE_FILE}'
 FLOAT_DIGITS = 12             # significant digits of a float in the fingerprint
 
 

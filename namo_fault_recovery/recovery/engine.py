@@ -13,83 +13,20 @@ the same seed and no deadline it returns the same library whoever asks.  Free of
     result.locks, result['wai'].score_after, result.total_score
 """
 
-from dataclasses import asdict, dataclass, field, replace
-import math
+from dataclasses import replace
 import time
 from typing import Optional, TYPE_CHECKING
 
 import numpy as np
 
-from .keyframes import BIMANUAL_MODES
-from .locks import LOCK_STRATEGIES
-from .motion import adapt_library, DEFAULT_CONTINUITY, DEFAULT_DISTORTION_MM
-from .motion import DEFAULT_STAY_CLOSE, METHODS, typical_points
+from .motion import adapt_library, DEFAULT_STAY_CLOSE, typical_points
 from .result import LibraryResult, reference_result
-from ..model.robot import ARMS
-from ..objective.score import ScoreWeights
-from ..optimize import ALGORITHMS, PRESETS
+from .settings import RecoverySettings
 from ..optimize.base import Clock
 
 if TYPE_CHECKING:
     from ..model.gestures import GestureLibrary
     from ..model.robot import RobotModel
-
-
-@dataclass(frozen=True)
-class RecoverySettings:
-    """
-    Every setting that changes the adapted library, named as the node's parameters.
-
-    The defaults are the node's (``config/recovery_node.yaml``).  ``weights`` is a
-    :class:`~namo_fault_recovery.objective.score.ScoreWeights` (None: the paper's).
-    """
-
-    deadline_sec: float = 1.0
-    lock_strategy: str = 'average'
-    optimizer: str = 'abc'
-    optimizer_preset: str = 'default'
-    bimanual: str = 'auto'
-    collision_check: bool = True
-    tool_length_mm: float = 0.0
-    tool_arm: str = 'right'
-    trajectory_method: str = 'auto'
-    vq_distortion_mm: float = DEFAULT_DISTORTION_MM
-    continuity_weight: float = DEFAULT_CONTINUITY
-    weights: ScoreWeights = field(default_factory=ScoreWeights)
-
-    def __post_init__(self):
-        for name, value, choices in (('lock_strategy', self.lock_strategy, LOCK_STRATEGIES),
-                                     ('optimizer', self.optimizer, tuple(ALGORITHMS)),
-                                     ('optimizer_preset', self.optimizer_preset,
-                                      tuple(PRESETS)),
-                                     ('bimanual', self.bimanual, BIMANUAL_MODES),
-                                     ('tool_arm', self.tool_arm, ARMS),
-                                     ('trajectory_method', self.trajectory_method, METHODS)):
-            if value not in choices:
-                raise ValueError(f'{name}: unknown value {str(value)[:80]!r}; expected one '
-                                 f'of {", ".join(choices)}')
-        for name, value, low in (('deadline_sec', self.deadline_sec, 0.0),
-                                 ('tool_length_mm', self.tool_length_mm, -1e-12),
-                                 ('vq_distortion_mm', self.vq_distortion_mm, 0.0),
-                                 ('continuity_weight', self.continuity_weight, -1e-12)):
-            if (isinstance(value, bool) or not isinstance(value, (int, float))
-                    or not math.isfinite(value) or not value > low):
-                raise ValueError(f'{name}: expected a finite number '
-                                 f"{'>' if low >= 0 else '>='} 0, got {repr(value)[:80]}")
-        if not isinstance(self.collision_check, bool):
-            raise ValueError(f'collision_check: expected True or False, got '
-                             f'{repr(self.collision_check)[:80]}')
-        if self.weights is not None and not isinstance(self.weights, ScoreWeights):
-            raise ValueError(f'weights: expected a ScoreWeights or None, got '
-                             f'{repr(self.weights)[:80]}')
-
-    def with_changes(self, **changes):
-        """Return a copy with some settings changed (validated again)."""
-        return replace(self, **changes)
-
-    def public(self):
-        """Return the settings as a JSON-ready dict (what a result records)."""
-        return asdict(self)
 
 
 def structure_changed(faults, settings):

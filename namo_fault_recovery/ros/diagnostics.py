@@ -41,7 +41,7 @@ class Snapshot:
     pending: bool
     running: bool
     failed: object               # (generation, reason) or None
-    settings: object             # NodeSettings
+    settings: object             # the RecoverySettings in use
     rejections: list = field(default_factory=list)   # (wall time, source, reason)
     rejected_total: int = 0
     joint_states_received: int = 0
@@ -77,7 +77,7 @@ def statuses(robot, snap, prefix=DEFAULT_PREFIX):
     """Return the node's DiagnosticStatus list for ``snap``."""
     hw = robot.name
     faults, current = snap.faults, snap.current
-    strategy = snap.settings.engine.lock_strategy
+    strategy = snap.settings.lock_strategy
     up_to_date = current is not None and not snap.pending and set(current.locks) == set(faults)
     out = [status(prefix, dk.FAULTS, 'ERROR' if faults else 'OK',
                   f'{len(faults)} failed joint(s): {", ".join(faults)}' if faults
@@ -143,7 +143,7 @@ def _seconds(value, digits=4):
 def reconfiguration_status(snap, up_to_date, hw, prefix):
     """Return the ``reconfiguration`` status: the library published and how it was made."""
     current, running, failed = snap.current, snap.running, snap.failed
-    version, stamp, settings = snap.version, snap.stamp_ns, snap.settings.engine
+    version, stamp, settings = snap.version, snap.stamp_ns, snap.settings
     pairs = [(dk.LIBRARY_VERSION, version), (dk.LIBRARY_STAMP, dk.format_stamp(stamp)),
              (dk.UP_TO_DATE, dk.flag(up_to_date)), (dk.RUNNING, dk.flag(running)),
              (dk.OPTIMIZER, settings.optimizer),

@@ -28,7 +28,7 @@ from . import diagnostics
 from . import messages as conv
 from .input_monitor import InputMonitor
 from .parameters import (check_parameter, declare_parameters, DEFAULT_STATE_DIR, MARKER_PARAMS,
-                         node_settings, one_line, parameter_specs, RERUN_PARAMS, StartupError)
+                         node_config, one_line, parameter_specs, RERUN_PARAMS, StartupError)
 from ..errors import ConfigError, shorten
 from ..model.gestures import load_library
 from ..model.robot import load_robot
@@ -103,7 +103,7 @@ class RecoveryNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._after_set_parameters)
         values = declare_parameters(self, lambda: self._last_param_reason)
-        self._settings = node_settings(values)
+        self._config = node_config(values)
         try:
             self._robot = load_robot(values['robot_file'] or None)
             self._library = load_library(self._robot, values['gesture_file'] or None)
@@ -114,12 +114,14 @@ class RecoveryNode(Node):
         self._last_stamp_ns = 0
         self._diag_dirty = True
         self._engine = EngineProcess(values['robot_file'] or None,
-                                     values['gesture_file'] or None)
+                                     values['gesture_file'] or None,
+                                     values['engine_start_timeout_sec'])
         self._engine.start()
         # The engine process imports, loads and warms up (about a second): the node is
         # not ready to meet its deadline before, so it waits here (a signal still ends it).
         try:
-            self._engine.wait_ready(timeout=60.0, keep_waiting=self.context.ok)
+            self._engine.wait_ready(timeout=values['engine_start_timeout_sec'],
+                                    keep_waiting=self.context.ok)
         except EngineError as exc:
             self._engine.stop()
             raise StartupError(f'the engine process did not start: {exc}') from None
@@ -132,7 +134,7 @@ class RecoveryNode(Node):
                                         self._state.store.directory, self._log,
                                         values['contingency_file'] or None)
         self._dispatcher = Dispatcher(self._book, self._engine, self._robot, self._library,
-                                      lambda: self._settings, self._publish_and_persist,
+                                      lambda: self._config, self._publish_and_persist,
                                       self._log, self._publish_refined, self._table)
         self._markers = LatestWorker(self._publish_markers, MARKER_DELAY, name='markers')
         try:
@@ -144,8 +146,8 @@ class RecoveryNode(Node):
         self._answers = AnswerPacer(self._wake.trigger)
         for part in (self._answers, self._markers, self._state, self._intake, self._dispatcher):
             part.start()
-        if self._settings.contingency_table:
-            self._table.configure(self._settings.engine,
+        if self._config.contingency_table:
+            self._table.configure(self._config.settings,
                                   active={j: f.angle for j, f in self._book.faults.items()})
         self._ready = True
         self.get_logger().info(
@@ -202,16 +204,16 @@ class RecoveryNode(Node):
         if not self._ready:
             return
         names = {p.name for p in parameters}
-        self._settings = node_settings({n: self.get_parameter(n).value
-                                        for n, _, _ in parameter_specs()})
-        tool = self._settings.engine.tool_length_mm > 0
+        self._config = node_config({n: self.get_parameter(n).value
+                                    for n, _, _ in parameter_specs()})
+        tool = self._config.settings.tool_length_mm > 0
         rerun = bool(names & RERUN_PARAMS) and (
             bool(self._book.faults) or tool or 'tool_length_mm' in names)
         if rerun:
             self._book.request()
         elif (names & RERUN_PARAMS or 'contingency_table' in names) \
-                and self._settings.contingency_table:
-            self._table.configure(self._settings.engine)    # a new fingerprint: rebuild
+                and self._config.contingency_table:
+            self._table.configure(self._config.settings)    # a new fingerprint: rebuild
         changed = ', '.join(f'{p.name}={shorten(repr(p.value))}' for p in parameters)
         self.get_logger().info(f'parameters set: {changed}'
                                + ('; reconfiguring the library' if rerun else ''))
@@ -245,7 +247,7 @@ class RecoveryNode(Node):
         self._inputs.accepted()
         self._diag_dirty = True
         if reports:
-            described = describe_reports(reports, self._settings.engine.lock_strategy)
+            described = describe_reports(reports, self._config.settings.lock_strategy)
             self.get_logger().info(f'fault accepted: {shorten(described, 400)} '
                                    f'({len(reports)} report(s)); reconfiguring the library')
 
@@ -280,7 +282,7 @@ class RecoveryNode(Node):
 
         outcome = await self._await_outcome(register)
         count = counted[0] if counted else 0
-        done = cleared_text(len(self._library), self._settings.engine.tool_length_mm)
+        done = cleared_text(len(self._library), self._config.settings.tool_length_mm)
         response.success = bool(outcome.published)
         response.message = (f'cleared {count} fault(s); {done} [{version_text(outcome)}]'
                             if outcome.published else f'cleared {count} fault(s); '
@@ -318,7 +320,7 @@ class RecoveryNode(Node):
         try:
             markers = conv.library_markers(
                 self._robot, reference_result(self._library), result, stamp,
-                self._settings.marker_frame_id, self._settings.marker_spacing)
+                self._config.marker_frame_id, self._config.marker_spacing)
             self._marker_pub.publish(MarkerArray(markers=markers))
         except Exception as exc:  # noqa: B902 - markers are a view; never fatal
             if self._live():
@@ -328,11 +330,11 @@ class RecoveryNode(Node):
         """Publish the reference, then restore the persisted fault set (and library)."""
         reference = reference_result(self._library)
         self._book.mark_published_without_run(reference, self._publish_library(reference))
-        plan = self._state.plan_restart(self._settings.engine)
+        plan = self._state.plan_restart(self._config.settings)
         if plan.problem:
             self.get_logger().error(f'{self._state.problem}; starting without faults')
         if not plan.faults:
-            if self._settings.engine.tool_length_mm > 0:
+            if self._config.settings.tool_length_mm > 0:
                 self._book.request()      # a tool from the start is a structure change
             return
         self._book.set_faults(plan.faults, request=plan.library is None)
@@ -356,7 +358,7 @@ class RecoveryNode(Node):
 
     def publish_diagnostics(self):
         """Publish /diagnostics from a snapshot of the state."""
-        snap = diagnostics.snapshot(self._book, self._inputs, self._settings,
+        snap = diagnostics.snapshot(self._book, self._inputs, self._config.settings,
                                     self._state.problem, self._state.store.path,
                                     self._engine.restarts)
         try:

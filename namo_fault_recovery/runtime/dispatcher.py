@@ -23,13 +23,13 @@ from ..recovery.result import summary
 class Dispatcher:
     """The thread between the run book and the engine process."""
 
-    def __init__(self, book, engine, robot, library, settings, publish, log,
+    def __init__(self, book, engine, robot, library, config, publish, log,
                  publish_refined=None, table=None):
         self._book = book
         self._engine = engine
         self._robot = robot
         self._library = library
-        self._settings = settings          # callable: the current NodeSettings
+        self._config = config              # callable: the current NodeConfig
         # publish(generation, faults, result, in_hand) -> callers; in_hand: the
         # time.monotonic() the result became available (for ``publish_path_sec``)
         self._publish = publish
@@ -68,21 +68,21 @@ class Dispatcher:
                     pass
 
     def _handle(self, run):
-        settings = self._settings()
-        engine = settings.engine
+        config = self._config()
+        settings = config.settings
         faults = {j: f.angle for j, f in run.faults.items()}
-        if not structure_changed(faults, engine):
+        if not structure_changed(faults, settings):
             # No structure change: the engine returns the reference library at once.
-            result = recover(self._robot, self._library, faults, engine, seed=settings.seed)
+            result = recover(self._robot, self._library, faults, settings, seed=config.seed)
         else:
             measured = {j: f.measured for j, f in run.faults.items() if f.measured is not None}
-            result = self._lookup(faults, engine, measured, settings)
+            result = self._lookup(faults, settings, measured, config)
             if result is None:
                 if self._table is not None:
                     self._table.pause()            # the live run gets the CPU
                 try:
                     result, self.last_engine_time = self._engine.run(
-                        run.generation, faults, engine, settings.seed, run.requested_at,
+                        run.generation, faults, settings, config.seed, run.requested_at,
                         measured)
                 except EngineError as exc:
                     self._fail(run, str(exc))
@@ -105,19 +105,19 @@ class Dispatcher:
         level = 'info' if result.success else 'warning'
         if all(math.isfinite(g.score_after) for g in result.gestures):
             self._log(level, summary(result))
-        if self._table is not None and settings.contingency_table:
-            self._table.configure(engine, active=dict(result.locks))
-        if result.origin == 'deadline' and settings.refine_budget_sec > 0 \
+        if self._table is not None and config.contingency_table:
+            self._table.configure(settings, active=dict(result.locks))
+        if result.origin == 'deadline' and config.refine_budget_sec > 0 \
                 and self._publish_refined is not None:
-            self._refine(run, result, settings)
+            self._refine(run, result, config)
 
-    def _lookup(self, faults, engine, measured, settings):
+    def _lookup(self, faults, settings, measured, config):
         """Return the contingency table's library for ``faults``, or None (a miss)."""
-        if self._table is None or not settings.contingency_table:
+        if self._table is None or not config.contingency_table:
             return None
-        return self._table.lookup(faults, engine, measured)
+        return self._table.lookup(faults, settings, measured)
 
-    def _refine(self, run, result, settings):
+    def _refine(self, run, result, config):
         """Keep improving ``run``'s library in the engine until done or superseded."""
         if not self._book.refining(run.generation):
             return
@@ -129,8 +129,8 @@ class Dispatcher:
                 self._log('info', f'refined: {summary(better)}')
 
         try:
-            self._engine.refine(run.generation, result, settings.engine,
-                                settings.refine_budget_sec, improved)
+            self._engine.refine(run.generation, result, config.settings,
+                                config.refine_budget_sec, improved)
         except EngineError as exc:
             self._log('warning', f'refinement stopped: {exc}; the published library stays')
         finally:
