@@ -20,8 +20,8 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from namo_fault_recovery import load_library, load_robot
-from namo_fault_recovery.cli.private_node import node_command
 from namo_fault_recovery.ros.spun_node import SpunNode
+from namo_fault_recovery.runtime.private_node import node_command
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy

@@ -11,8 +11,8 @@ the other.
 
 import math
 
-from namo_fault_recovery.cli.player_commands import player_command
 from namo_fault_recovery.objective.score import ScoreWeights, SimilarityScore
+from namo_fault_recovery.runtime.private_node import player_command
 from node_harness import NodeProcess, ros_env, session_domain, TIMEOUT
 import numpy as np
 from player_harness import FakeArms, LIBRARY, NAMES, ROBOT

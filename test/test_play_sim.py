@@ -13,9 +13,9 @@ faults one after the other (one test, the three scenarios in sequence).
 import math
 
 from diagnostic_msgs.msg import DiagnosticArray
-from namo_fault_recovery.cli.player_commands import player_command
 from namo_fault_recovery.objective.score import ScoreWeights, SimilarityScore
 from namo_fault_recovery.ros.sim_node import sim_command
+from namo_fault_recovery.runtime.private_node import player_command
 from node_harness import NodeProcess, ros_env, session_domain, TIMEOUT
 import numpy as np
 from player_harness import LIBRARY, NAMES, Recorder, ROBOT

@@ -182,6 +182,51 @@ def summary(doc):
     return out
 
 
+def run_on_sim(robot, library, **options):
+    """
+    Return :func:`run` on the simulator's physics (``NamoSim``), with its summary.
+
+    ``options`` are those of :func:`run`; the document gains ``summary`` and
+    ``wall_time_s``.
+    """
+    from ..sim.physics import designed_allowances, NamoSim
+    allowances = designed_allowances(robot, library)
+    began = time.monotonic()
+    doc = run(robot, library, lambda: NamoSim(robot, allowances=allowances), **options)
+    doc['summary'] = summary(doc)
+    doc['wall_time_s'] = time.monotonic() - began
+    return doc
+
+
+def write_summary(out, doc):
+    """Print the figures of a :func:`run_on_sim` document."""
+    s = doc['summary']
+    out.write(f"\nthreshold {doc['threshold_deg']:g} deg for {doc['hold_sec']:g} s, lag "
+              f"window {doc['tracking_lag_sec']:g} s, {doc['rate_hz']:g} Hz\n")
+    out.write(f"normal plays: {s['normal_plays']}, finished {s['normal_finished']}, false "
+              f"alarms {s['false_alarms']}, executed-vs-planned score gap max "
+              f"{s['normal_score_gap_max']:.4f}\n")
+    out.write(f"stuck joints: {s['stuck_runs']} runs, {s['exercised_runs']} where the "
+              f"gesture moves the joint by > 1.5 x threshold: {s['exercised_detected']} "
+              f"detected; detected in all {s['detected_total']}; wrong joint reported "
+              f"{s['wrong_joint_reports']}\n")
+    d = s['detection_after_departure_s']
+    if d:
+        out.write('detection time after the command leaves the stuck angle: median '
+                  f"{d['median']:.2f} s, min {d['min']:.2f} s, max {d['max']:.2f} s "
+                  f"(n={d['n']})\n")
+    r = s['stuck_to_correct_play_s']
+    out.write(f"recoveries: {s['recoveries']}, correct replays {s['replays_ok']}"
+              + (f"; stuck joint -> first correct play: median {r['median']:.2f} s, max "
+                 f"{r['max']:.2f} s" if r else '') + '\n')
+    if s['recovered_score_gap_max'] is not None:
+        out.write('replay executed-vs-library score gap max '
+                  f"{s['recovered_score_gap_max']:.4f}; lock commanded elsewhere "
+                  f"{s['lock_commanded_elsewhere']} times; self-contact events in "
+                  f"replays {s['replay_contact_events']}\n")
+    out.write(f"wall time {doc['wall_time_s']:.1f} s\n")
+
+
 def _stats(values):
     if not values:
         return None

@@ -207,10 +207,14 @@ def optima_document(robot, library, optima, starts, seed, maxiter):
     return doc
 
 
-def write_optima(path, doc):
-    """Write the optima YAML with a header comment."""
+PAPER_OPTIMA_TITLE = ('Best-known optima of the 28 paper cases (generated data; do not edit '
+                      'by hand).')
+
+
+def write_optima(path, doc, title=PAPER_OPTIMA_TITLE):
+    """Write an optima YAML under a header comment: ``title``, then how to regenerate it."""
     import yaml
-    text = ('# Best-known optima of the 28 paper cases (generated data; do not edit by hand).\n'
+    text = (f'# {title}\n'
             f'# Regenerate: {doc["generated_by"]}\n'
             + yaml.safe_dump(common.plain(doc), sort_keys=False, default_flow_style=None,
                              width=99))

@@ -251,3 +251,45 @@ def boxplot_paper(runs, keys, cases, out_dir, labels=None, dpi=100, optima=None)
     fig.savefig(path, dpi=dpi)
     written.append(path)
     return written
+
+
+def _deg(q):
+    return '[' + ', '.join(f'{x:7.2f}' for x in np.degrees(q)) + ']'
+
+
+def plot_gesture(out, robot, library, name, faults, settings, path, *, seed, deadline,
+                 keyframe=0):
+    """
+    Recover gesture ``name`` (locked as the whole library would be), draw it, print figures.
+
+    The ``plot`` command: a single pose is drawn as arm skeletons
+    (:func:`plot_reconfiguration`), a motion as fingertip paths (:func:`plot_motion`).
+    Raises ValueError for settings the engine rejects.
+    """
+    from .common import run_recover
+    gesture = library[name]
+    result = run_recover(robot, library, faults, settings, seed=seed, deadline=deadline,
+                         gestures=[name])
+    g = result[name]
+    for joint, angle in result.locks.items():
+        out.write(f'lock {joint} = {math.degrees(angle):.2f} deg\n')
+    if len(gesture.keyframes) > 1:
+        plot_motion(robot, gesture, result, path)
+        out.write(f'{g.message}\n  fingertip error (mm): unadapted mean '
+                  f'{g.tip_error_before_mm:.1f}; adapted mean {g.tip_error_mm:.1f}, max '
+                  f'{g.tip_error_max_mm:.1f}; {g.nfev} evaluations, '
+                  f'{1000 * result.wall_time:.0f} ms\n')
+        for note in result.notes:
+            out.write(f'  note: {note}\n')
+        out.write(f'written: {path}\n')
+        return result
+    plot_reconfiguration(robot, library, result, name, path, keyframe=keyframe)
+    kf = g.keyframes[keyframe]
+    out.write(f'{name}: score {g.score_before:.4f} -> {g.score_after:.4f} '
+              f'({settings.optimizer}, {g.status}, {1000 * g.wall_time:.1f} ms)\n')
+    for side in gesture.arms:
+        out.write(f'  {side:5s} reference    (deg) '
+                  f'{_deg(gesture.keyframes[keyframe].arm(side))}\n')
+        out.write(f'  {side:5s} reconfigured (deg) {_deg(kf.arm(side))}\n')
+    out.write(f'written: {path}\n')
+    return result

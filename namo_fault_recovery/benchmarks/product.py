@@ -4,7 +4,7 @@ The served problem's benchmark, offline parts: best-known optima, deadline quali
 The served problem is the packaged library (``config/gestures.yaml``) under the node's
 settings (:class:`~namo_fault_recovery.recovery.engine.RecoverySettings` defaults: 1 s
 deadline, ``average`` locks, collision check, ...), every single joint fault.  Free of
-ROS; ``namo-recovery bench product`` (``cli/product_bench.py``) adds the parts that
+ROS; ``namo-recovery bench product`` (:mod:`.product_node`) adds the parts that
 need a real node over DDS (latency, refinement curve).
 
 - :func:`generate_optima`: the best-known ``score_after`` per fault set and gesture, the
@@ -274,13 +274,10 @@ def git_commit():
 
 
 def write_product_optima(path, doc):
-    """Write the optima YAML with a header comment."""
-    import yaml
-    text = ('# Best-known optima of the served problem (generated data; do not edit).\n'
-            f'# Regenerate: {doc["generated_by"]}\n'
-            + yaml.safe_dump(common.plain(doc), sort_keys=False, default_flow_style=None,
-                             width=99))
-    common.write_text(path, text)
+    """Write the served problem's optima YAML with its header comment."""
+    from .optimum import write_optima
+    write_optima(path, doc, 'Best-known optima of the served problem (generated data; do not '
+                            'edit).')
 
 
 # --- parts 2 and 6: quality at the deadline ----------------------------------------

@@ -2,10 +2,12 @@
 What the ROS commands of ``namo-recovery`` share: connection options, errors, tables.
 
 Every ROS command (``fault``, ``clear``, ``reconfigure``, ``library``, ``demo``,
-``bench latency``) is a thin caller of :class:`~namo_fault_recovery.ros.client.
-RecoveryClient`.  They take ``--namespace NS`` (the node's namespace, default the root)
-and ``--domain-id N`` (default ``$ROS_DOMAIN_ID``, else 0), either before the command
-name or after it.  Nothing here imports rclpy: the client module is imported when a
+``export``, ``play``, ``demo-play``, ``bench latency | stream | product``) is a thin
+caller of :class:`~namo_fault_recovery.ros.client.RecoveryClient` (the player's
+services: :class:`~namo_fault_recovery.ros.player_client.PlayerClient`).  Those of
+the node take ``--namespace NS`` (the node's namespace, default the root) and
+``--domain-id N`` (default ``$ROS_DOMAIN_ID``, else 0), either before the command name
+or after it.  Nothing here imports rclpy: the client module is imported when a
 command runs, so the offline commands work without ROS.
 
 Exit codes: 0 on success, 1 when the node is unreachable, rejects the input or reports
@@ -81,6 +83,11 @@ def wrap(func):
         except KeyboardInterrupt:
             sys.stderr.write('namo-recovery: interrupted\n')
             return 130
+        except Exception as exc:  # noqa: B902 - a benchmark's one-line error, else raised
+            from ..benchmarks.common import BenchError
+            if isinstance(exc, BenchError):
+                return _fail(exc, exc.code)
+            raise
     run.__doc__ = func.__doc__
     return run
 

@@ -15,6 +15,7 @@ One definition here, instead of one per caller::
 """
 
 import threading
+import time
 
 
 class SpunNode:
@@ -59,3 +60,24 @@ class SpunNode:
         self._rclpy.try_shutdown(context=self.context)
         if self._thread is not None:
             self._thread.join(timeout=5.0)
+
+
+def wait_until(predicate, timeout, period=0.02, lock=None):
+    """
+    Return ``predicate()`` once truthy (called under ``lock`` if given), or None.
+
+    How a caller of a spun node waits for what the node's callbacks record: polled every
+    ``period`` s for at most ``timeout`` s.
+    """
+    end = time.monotonic() + timeout
+    while True:
+        if lock is None:
+            value = predicate()
+        else:
+            with lock:
+                value = predicate()
+        if value:
+            return value
+        if time.monotonic() >= end:
+            return None
+        time.sleep(period)
