@@ -20,6 +20,7 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from namo_fault_recovery import load_library, load_robot
+from namo_fault_recovery.ros.client import RecoveryClient
 from namo_fault_recovery.ros.spun_node import SpunNode
 from namo_fault_recovery.runtime.private_node import node_command
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
@@ -27,7 +28,6 @@ from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
-from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -203,12 +203,13 @@ class LibraryVersion:
         return out
 
 
-def _stamp_ns(stamp):
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
-
-
 class RosClient:
-    """An rclpy client of the node in its own context and domain, spun in a thread."""
+    """
+    An rclpy client of the node in its own context and domain, spun in a thread.
+
+    Built on :class:`RecoveryClient` (its node, its one ``/gesture_library``
+    subscription); the test's own view of every version is kept here.
+    """
 
     def __init__(self, domain, name='namo_test_client', gestures=None):
         os.environ['ROS_DOMAIN_ID'] = str(domain)
@@ -216,35 +217,32 @@ class RosClient:
         if gestures is None:   # the node's default: the packaged library
             gestures = len(load_library(load_robot()))
         self.gestures = gestures
-        self._spun = SpunNode(name, domain)
-        self.node = self._spun.node
         self._lock = threading.Condition()
         self.versions = {}            # stamp ns -> LibraryVersion
         self.order = []               # stamps in order of first arrival
         self.diagnostics = []         # node's DiagnosticArray messages
         self.markers = []
+        self.recovery = RecoveryClient('/', domain, on_library=self._on_library,
+                                       client_name=name)
+        self.node = self.recovery.node
         latched = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                              reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.node.create_subscription(JointTrajectory, '/gesture_library', self._on_library,
-                                      latched)
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 50)
         self.node.create_subscription(MarkerArray, '/gesture_markers', self._on_markers,
                                       latched)
         self.fault_pub = self.node.create_publisher(JointState, '/actuator_fault', 10)
         self.state_pub = self.node.create_publisher(JointState, '/joint_states', 10)
         self._clients = {}
-        self._spun.start()
 
     def close(self):
         """Shut the client down."""
-        self._spun.close()
+        self.recovery.close()
 
     # --- callbacks ---
 
-    def _on_library(self, msg):
+    def _on_library(self, key, msg):
         with self._lock:
-            key = _stamp_ns(msg.header.stamp)
             version = self.versions.get(key)
             if version is None:
                 version = self.versions[key] = LibraryVersion(key)

@@ -220,7 +220,7 @@ def cmd_demo_play(args, out):
 
 
 def _first_play(args, out, loop, stuck):
-    """Steps 2-5: the library and the stick; the first play; the faults it reported."""
+    """Run steps 2-5: the library and the stick; the first play; the faults it reported."""
     gesture, timeout = args.gesture, args.timeout
     first = loop.wait(lambda: loop.newest(gesture), timeout)
     if first is None:
@@ -252,7 +252,7 @@ def _first_play(args, out, loop, stuck):
 
 
 def _await_reconfiguration(out, loop, gesture, first, locks, timeout):
-    """Step 6: wait for the library that holds the reported locks; print its scores."""
+    """Wait for the library that holds the reported locks (step 6); print its scores."""
     def reconfigured():
         found = loop.newest(gesture)
         if not found or found.stamp <= first.stamp or not locks:

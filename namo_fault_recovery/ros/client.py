@@ -343,12 +343,13 @@ class RecoveryClient:
     """A client of the ``recovery_node`` in ``namespace``, in its own rclpy Context."""
 
     def __init__(self, namespace: str = '/', domain_id: int = None,
-                 node_name: str = keys.NODE_NAME, on_library=None):
+                 node_name: str = keys.NODE_NAME, on_library=None, client_name: str = None):
         """
         Connect to the node ``node_name`` in ``namespace`` and ``domain_id``.
 
         ``on_library(stamp, msg)`` is called for every gesture_library message (see
-        :class:`Inbox`); the client's one subscription serves every reader.
+        :class:`Inbox`): the client's one subscription serves every reader.
+        ``client_name`` names the client's own rclpy node (default: unique per client).
         """
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
         from diagnostic_msgs.msg import DiagnosticArray
@@ -362,8 +363,8 @@ class RecoveryClient:
         self.inbox = Inbox(keys.status_prefix(self.node_fqn), on_library)
         self.domain_id = domain_id
         self._joint_state = JointState
-        self._spun = SpunNode(f'namo_recovery_client_{os.getpid()}_{next(_COUNTER)}',
-                              domain_id, self.namespace)
+        client_name = client_name or f'namo_recovery_client_{os.getpid()}_{next(_COUNTER)}'
+        self._spun = SpunNode(client_name, domain_id, self.namespace)
         self.context, self.node = self._spun.context, self._spun.node
         latched = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
                              reliability=ReliabilityPolicy.RELIABLE,
