@@ -15,3 +15,16 @@ class ConfigError(ValueError):
         self.problem = problem
         where = f"{self.file}: key '{key}'" if key else self.file
         super().__init__(f'{where}: {problem}')
+
+
+class ReportedError(Exception):
+    """
+    A failure that a command reports on one line; ``code`` is its exit code.
+
+    1 when something failed (a node unreachable, a benchmark that could not run), 2 for
+    bad arguments.  The command line prints the message and exits with the code.
+    """
+
+    def __init__(self, message, code=1):
+        super().__init__(message)
+        self.code = code

@@ -21,7 +21,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray
 from namo_fault_recovery import load_library, load_robot
 from namo_fault_recovery.ros.client import RecoveryClient
-from namo_fault_recovery.ros.spun_node import SpunNode
+from namo_fault_recovery.ros.spun_node import call_service, SpunNode, wait_on
 from namo_fault_recovery.runtime.private_node import node_command
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
 from rclpy.parameter import Parameter, parameter_value_to_python
@@ -268,16 +268,10 @@ class RosClient:
 
     def wait_for(self, predicate, timeout=TIMEOUT, what='condition'):
         """Wait until ``predicate()`` (called under the lock) is truthy; return it."""
-        end = time.monotonic() + timeout
-        with self._lock:
-            while True:
-                value = predicate()
-                if value:
-                    return value
-                remaining = end - time.monotonic()
-                if remaining <= 0:
-                    raise AssertionError(f'timed out after {timeout:.0f} s waiting for {what}')
-                self._lock.wait(min(remaining, 0.1))
+        value = wait_on(self._lock, predicate, timeout, 0.1)
+        if not value:
+            raise AssertionError(f'timed out after {timeout:.0f} s waiting for {what}')
+        return value
 
     def complete_versions(self):
         """Return the complete library versions in order of arrival."""
@@ -357,12 +351,11 @@ class RosClient:
         client = self.client(srv_type, name)
         if not client.wait_for_service(timeout_sec=timeout):
             raise AssertionError(f'service {name} is not available')
-        done = threading.Event()
-        future = client.call_async(request if request is not None else srv_type.Request())
-        future.add_done_callback(lambda _: done.set())
-        if not done.wait(timeout):
+        response = call_service(client, request if request is not None else srv_type.Request(),
+                                timeout)
+        if response is None:
             raise AssertionError(f'no answer from {name} within {timeout:.0f} s')
-        return future.result()
+        return response
 
     def trigger(self, name, timeout=TIMEOUT):
         """Call a std_srvs/Trigger service."""
@@ -447,16 +440,15 @@ class DiagnosticsProbe:
 
     def wait_statuses(self, predicate, timeout=TIMEOUT, since=0, what='diagnostics'):
         """Wait for a node diagnostics message (index >= since) matching ``predicate``."""
-        end = time.monotonic() + timeout
-        with self._lock:
-            while True:
-                for index, statuses in reversed(self.statuses):
-                    if index >= since and predicate(statuses):
-                        return statuses
-                remaining = end - time.monotonic()
-                if remaining <= 0:
-                    raise AssertionError(f'timed out after {timeout:.0f} s waiting for {what}')
-                self._lock.wait(min(remaining, 0.1))
+        def find():
+            for index, statuses in reversed(self.statuses):
+                if index >= since and predicate(statuses):
+                    return statuses
+            return None
+        found = wait_on(self._lock, find, timeout, 0.1)
+        if found is None:
+            raise AssertionError(f'timed out after {timeout:.0f} s waiting for {what}')
+        return found
 
     def count(self):
         """Return how many /diagnostics messages arrived so far."""
@@ -486,10 +478,7 @@ class DiagnosticsProbe:
             client = self._trigger_clients[name] = self.node.create_client(Trigger, name)
         if not client.wait_for_service(timeout_sec=timeout):
             raise AssertionError(f'service {name} is not available')
-        done = threading.Event()
-        future = client.call_async(Trigger.Request())
-        future.add_done_callback(lambda _: done.set())
-        return future.result() if done.wait(timeout) else None
+        return call_service(client, Trigger.Request(), timeout)
 
 
 _BARE_SUBSCRIBER = """

@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 
+from ..errors import ReportedError
 from ..model.gestures import GestureLibrary, load_library
 from ..model.robot import ARMS, load_robot, N_JOINTS
 from ..objective.score import gesture_targets, SimilarityScore
@@ -31,16 +32,11 @@ WITHIN = 0.005   # "within 0.5% of the best-known optimum"
 # The paper's problem: the faulted arm alone, no collision term (the gesture file is the
 # paper's Table 2, see :func:`models`).  Everything else is the node's default.
 PAPER_SETTINGS = RecoverySettings(collision_check=False, bimanual='off')
-EXIT_FAILURE = 1
 EXIT_USAGE = 2
 
 
-class BenchError(Exception):
+class BenchError(ReportedError):
     """A benchmark could not run, explained on one line; ``code`` is the exit code."""
-
-    def __init__(self, message, code=EXIT_FAILURE):
-        super().__init__(message)
-        self.code = code
 
 
 @dataclass(frozen=True)

@@ -18,16 +18,14 @@ import argparse
 import math
 import sys
 
+from ..errors import ReportedError
+
 EXIT_FAILURE = 1
 EXIT_USAGE = 2
 
 
-class CommandError(Exception):
-    """A failure reported on one line; ``code`` is the exit code."""
-
-    def __init__(self, message, code=EXIT_FAILURE):
-        super().__init__(message)
-        self.code = code
+class CommandError(ReportedError):
+    """A failure of a ROS command reported on one line; ``code`` is the exit code."""
 
 
 def add_global_arguments(parser):
@@ -76,18 +74,13 @@ def wrap(func):
             return func(args, out)
         except BadNamespace as exc:
             return _fail(exc, EXIT_USAGE)
-        except CommandError as exc:
+        except ReportedError as exc:      # CommandError, a benchmark's BenchError
             return _fail(exc, exc.code)
         except ClientError as exc:
             return _fail(exc, EXIT_FAILURE)
         except KeyboardInterrupt:
             sys.stderr.write('namo-recovery: interrupted\n')
             return 130
-        except Exception as exc:  # noqa: B902 - a benchmark's one-line error, else raised
-            from ..benchmarks.common import BenchError
-            if isinstance(exc, BenchError):
-                return _fail(exc, exc.code)
-            raise
     run.__doc__ = func.__doc__
     return run
 

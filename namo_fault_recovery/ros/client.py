@@ -30,6 +30,7 @@ import time
 
 from . import diagnostic_keys as keys
 from .messages import duration_seconds, stamp_key
+from .spun_node import call_service, SpunNode, wait_on
 from ..recovery.result import GestureResult, LibraryResult
 
 # The node's names, relative: resolved in the client's namespace.
@@ -254,16 +255,7 @@ class Inbox:
 
     def wait(self, predicate, timeout):
         """Return ``predicate()`` (called under the lock) once truthy, or None at timeout."""
-        end = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                value = predicate()
-                if value:
-                    return value
-                remaining = end - time.monotonic()
-                if remaining <= 0:
-                    return None
-                self._cond.wait(min(remaining, 0.05))
+        return wait_on(self._cond, predicate, timeout)
 
     def settled(self, quiet=SETTLE_SEC):
         """
@@ -355,8 +347,6 @@ class RecoveryClient:
         from diagnostic_msgs.msg import DiagnosticArray
         from sensor_msgs.msg import JointState
         from trajectory_msgs.msg import JointTrajectory
-
-        from .spun_node import SpunNode
 
         self.namespace = normalise_namespace(namespace)
         self.node_fqn = keys.node_fqn(self.namespace, node_name)
@@ -508,13 +498,10 @@ class RecoveryClient:
             raise NodeUnreachable(
                 f'no recovery_node found: service {client.service_name} is not available '
                 f'within {timeout:g} s ({self.where()}); is the node running?')
-        done = threading.Event()
-        future = client.call_async(Trigger.Request())
-        future.add_done_callback(lambda _: done.set())
-        if not done.wait(timeout):
-            client.remove_pending_request(future)
+        response = call_service(client, Trigger.Request(), timeout)
+        if response is None:
             raise ClientError(f'no answer from {client.service_name} within {timeout:g} s')
-        return TriggerAnswer.from_response(future.result())
+        return TriggerAnswer.from_response(response)
 
     def reconfigure(self, timeout: float = 15.0) -> TriggerAnswer:
         """Call reconfigure_gestures (what the gesture player does); return the answer."""

@@ -13,7 +13,7 @@ import os
 import threading
 import time
 
-from .spun_node import SpunNode
+from .spun_node import call_service, SpunNode
 
 DEFAULT_PLAYER = '/gesture_player'
 _COUNTER = itertools.count()
@@ -70,13 +70,10 @@ class PlayerClient:
         try:
             if not client.wait_for_service(timeout_sec=min(timeout, 10.0)):
                 return False, f'no service {service}; is gesture_player running?'
-            done = threading.Event()
-            future = client.call_async(Trigger.Request())
-            future.add_done_callback(lambda _: done.set())
-            if not done.wait(timeout):
-                client.remove_pending_request(future)
+            response = call_service(client, Trigger.Request(), timeout)
+            if response is None:
                 return False, f'no answer within {timeout:g} s'
-            return future.result().success, future.result().message
+            return response.success, response.message
         finally:
             self.node.destroy_client(client)
 

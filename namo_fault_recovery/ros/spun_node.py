@@ -81,3 +81,37 @@ def wait_until(predicate, timeout, period=0.02, lock=None):
         if time.monotonic() >= end:
             return None
         time.sleep(period)
+
+
+def wait_on(condition, predicate, timeout, period=0.05):
+    """
+    Return ``predicate()`` once truthy, or None after ``timeout`` s.
+
+    ``predicate`` is called holding ``condition`` (a ``threading.Condition`` that the
+    callbacks notify), woken by each notification or every ``period`` s.
+    """
+    end = time.monotonic() + timeout
+    with condition:
+        while True:
+            value = predicate()
+            if value:
+                return value
+            remaining = end - time.monotonic()
+            if remaining <= 0:
+                return None
+            condition.wait(min(remaining, period))
+
+
+def call_service(client, request, timeout):
+    """
+    Call an rclpy service ``client`` whose node another thread spins; return the response.
+
+    Returns None when no answer came within ``timeout`` s (the request is dropped).
+    """
+    done = threading.Event()
+    future = client.call_async(request)
+    future.add_done_callback(lambda _: done.set())
+    if not done.wait(timeout):
+        client.remove_pending_request(future)
+        return None
+    return future.result()
