@@ -126,6 +126,21 @@ class Recorder:
         values = self.reconfiguration()
         return values.get('up_to_date') == 'true' and values.get('running') == 'false'
 
+    def wait_locked_library(self, gesture, locked, timeout):
+        """
+        Wait for a library whose ``gesture`` holds every ``locked`` joint, then settled.
+
+        The node refines that library in the background (better versions may follow):
+        the one it settles on is the one to play, so that the executed pose can be
+        compared with it.
+        """
+        def reconfigured():
+            lib = self.newest_library()
+            return lib and all(np.allclose(lib[gesture][:, NAMES.index(j)], a, atol=1e-9)
+                               for j, a in locked.items())
+        self.wait(reconfigured, timeout, f'a library with {", ".join(locked)} locked')
+        self.wait(self.library_settled, 30.0, 'the end of the refinement')
+
     def newest_library(self):
         """Return {gesture: positions (keyframes, 14) in NAMES order} of the newest stamp."""
         library = self.client.newest_library()
