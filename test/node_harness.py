@@ -22,7 +22,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from namo_fault_recovery import load_library, load_robot
 from namo_fault_recovery.ros.client import RecoveryClient
 from namo_fault_recovery.ros.spun_node import call_service, SpunNode, wait_on
-from namo_fault_recovery.runtime.private_node import node_command
+from namo_fault_recovery.runtime.private_node import node_command, stop_process
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -96,21 +96,22 @@ class NodeProcess:
         self.proc = subprocess.Popen(cmd, stdout=self._out, stderr=self._err,
                                      env=env or ros_env(domain))
 
+    def _read(self, index):
+        stream = (self._out, self._err)[index]
+        if stream.closed:
+            return self._text[index]
+        stream.flush()
+        return Path(stream.name).read_text(errors='replace')
+
     @property
     def stdout(self):
         """Return everything the node wrote on stdout so far."""
-        if self._out.closed:
-            return self._text[0]
-        self._out.flush()
-        return Path(self._out.name).read_text(errors='replace')
+        return self._read(0)
 
     @property
     def stderr(self):
         """Return everything the node wrote on stderr so far."""
-        if self._err.closed:
-            return self._text[1]
-        self._err.flush()
-        return Path(self._err.name).read_text(errors='replace')
+        return self._read(1)
 
     def alive(self):
         """Return True while the process runs."""
@@ -162,13 +163,7 @@ class NodeProcess:
 
     def stop(self, sig=signal.SIGTERM, timeout=TIMEOUT):
         """Stop the process with ``sig`` (SIGKILL if it does not exit); return the code."""
-        if self.alive():
-            self.proc.send_signal(sig)
-            try:
-                self.proc.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(timeout=timeout)
+        stop_process(self.proc, sig, timeout)
         if not self._out.closed:
             self._text = (self.stdout, self.stderr)
             self._out.close()

@@ -30,7 +30,7 @@ import time
 
 from . import diagnostic_keys as keys
 from .messages import duration_seconds, stamp_key
-from .spun_node import call_service, SpunNode, wait_on
+from .spun_node import call_service, SpunClient, SpunNode, wait_on
 from ..recovery.result import GestureResult, LibraryResult
 
 # The node's names, relative: resolved in the client's namespace.
@@ -331,7 +331,7 @@ class Inbox:
         return rebuild_library(stamp, msgs, diagnostics, received)
 
 
-class RecoveryClient:
+class RecoveryClient(SpunClient):
     """A client of the ``recovery_node`` in ``namespace``, in its own rclpy Context."""
 
     def __init__(self, namespace: str = '/', domain_id: int = None,
@@ -368,16 +368,6 @@ class RecoveryClient:
         self._spun.start()
 
     # --- life cycle and names ---------------------------------------------------------
-
-    def close(self) -> None:
-        """Stop spinning and shut the client's context down."""
-        self._spun.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
 
     @property
     def fault_topic(self) -> str:

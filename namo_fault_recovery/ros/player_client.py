@@ -13,7 +13,7 @@ import os
 import threading
 import time
 
-from .spun_node import call_service, SpunNode
+from .spun_node import call_service, SpunClient, SpunNode
 
 DEFAULT_PLAYER = '/gesture_player'
 _COUNTER = itertools.count()
@@ -23,7 +23,7 @@ def _seconds(duration):
     return duration.sec + duration.nanosec * 1e-9
 
 
-class PlayerClient:
+class PlayerClient(SpunClient):
     """A client of the ``gesture_player`` in ``domain_id``; a context manager."""
 
     def __init__(self, domain_id: int = None, player: str = DEFAULT_PLAYER,
@@ -47,16 +47,6 @@ class PlayerClient:
             self.node.create_subscription(JointState, '/actuator_fault',
                                           lambda m: self._add(self.faults, m), 10)
         self._spun.start()
-
-    def close(self) -> None:
-        """Stop spinning and shut the client's context down."""
-        self._spun.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
 
     def _add(self, where, item):
         with self.lock:

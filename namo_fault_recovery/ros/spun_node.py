@@ -62,6 +62,24 @@ class SpunNode:
             self._thread.join(timeout=5.0)
 
 
+class SpunClient:
+    """
+    A client that owns a :class:`SpunNode` (``self._spun``): ``close()`` and ``with``.
+
+    The base of :class:`.client.RecoveryClient` and :class:`.player_client.PlayerClient`.
+    """
+
+    def close(self) -> None:
+        """Stop spinning and shut the client's context down."""
+        self._spun.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
 def wait_until(predicate, timeout, period=0.02, lock=None):
     """
     Return ``predicate()`` once truthy (called under ``lock`` if given), or None.
