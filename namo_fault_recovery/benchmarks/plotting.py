@@ -69,6 +69,24 @@ def _draw_arm(axes, robot, q, side, color, label, style='-'):
     return np.vstack((pts, tip[None]))
 
 
+def _label_views(ax3, front, side_view):
+    """Label the 3D, front and side views of a stick figure."""
+    ax3.set_xlabel('x (mm, forward)')
+    ax3.set_ylabel('y (mm, left)')
+    ax3.set_zlabel('z (mm, up)')
+    ax3.view_init(elev=15, azim=30)
+    front.set_title('front view (y-z)', fontsize=10)
+    front.set_xlabel('y (mm, robot left)')
+    front.set_ylabel('z (mm)')
+    side_view.set_title('side view (x-z)', fontsize=10)
+    side_view.set_xlabel('x (mm, forward)')
+    side_view.set_ylabel('z (mm)')
+    for ax in (front, side_view):
+        ax.set_aspect('equal', adjustable='datalim')
+        ax.grid(True, alpha=0.3)
+    ax3.legend(loc='upper left', fontsize=8)
+
+
 def plot_reconfiguration(robot, library, report, gesture, path, keyframe=0, title=None,
                          dpi=120):
     """
@@ -105,20 +123,7 @@ def plot_reconfiguration(robot, library, report, gesture, path, keyframe=0, titl
     ax3.plot(shoulders[:, 0], shoulders[:, 1], shoulders[:, 2], '-', color='0.6', lw=4)
     pts = np.vstack(everything + [shoulders])
     _equal_3d(ax3, pts)
-    ax3.set_xlabel('x (mm, forward)')
-    ax3.set_ylabel('y (mm, left)')
-    ax3.set_zlabel('z (mm, up)')
-    ax3.view_init(elev=15, azim=30)
-    front.set_title('front view (y-z)', fontsize=10)
-    front.set_xlabel('y (mm, robot left)')
-    front.set_ylabel('z (mm)')
-    side_view.set_title('side view (x-z)', fontsize=10)
-    side_view.set_xlabel('x (mm, forward)')
-    side_view.set_ylabel('z (mm)')
-    for ax in (front, side_view):
-        ax.set_aspect('equal', adjustable='datalim')
-        ax.grid(True, alpha=0.3)
-    ax3.legend(loc='upper left', fontsize=8)
+    _label_views(ax3, front, side_view)
     if title is None:
         locks = ', '.join(f'{j} = {math.degrees(a):.2f} deg' for j, a in report.locks.items())
         title = (f'{gesture}: {locks} locked; score {result.score_before:.3f} -> '

@@ -52,21 +52,9 @@ def _run_sequential(spec, robot, library, joint, seed):
     return {'joint': joint, 'seed': int(seed), 'time': total}
 
 
-def run_speed(out, out_dir, reps=100, joints=None, seed_base=0, deadline=1.0,
-              robot_file=None, gesture_file=None, progress=True, best=None,
-              sequential_reps=10):
-    """
-    Run the speed benchmark, write ``runs.csv``/``summary.json`` and print the figures.
-
-    ``deadline`` applies to our default only; the paper ABC runs unbounded.  ``best`` is
-    a :class:`~.optimum.BestKnownOptima` (None: the packaged file).
-    """
+def _best_known(best, robot, library):
+    """Return the best-known optima (None: the packaged file, if any) and notes on them."""
     from .optimum import load_best_known
-    robot, library = common.models(robot_file, gesture_file)
-    cases = common.select_cases(robot, library, None, joints)
-    joint_list = list(dict.fromkeys(j for _, j in cases))
-    specs = {k: common.lookup_spec(k) for k in KEYS}
-    deadlines = {'abc-default': deadline, 'abc-paper': None}
     notes = []
     if best is None:
         try:
@@ -77,6 +65,24 @@ def run_speed(out, out_dir, reps=100, joints=None, seed_base=0, deadline=1.0,
         warn = best.check_model(robot, library)
         if warn:
             notes.append(warn)
+    return best, notes
+
+
+def run_speed(out, out_dir, reps=100, joints=None, seed_base=0, deadline=1.0,
+              robot_file=None, gesture_file=None, progress=True, best=None,
+              sequential_reps=10):
+    """
+    Run the speed benchmark, write ``runs.csv``/``summary.json`` and print the figures.
+
+    ``deadline`` applies to our default only; the paper ABC runs unbounded.  ``best`` is
+    a :class:`~.optimum.BestKnownOptima` (None: the packaged file).
+    """
+    robot, library = common.models(robot_file, gesture_file)
+    cases = common.select_cases(robot, library, None, joints)
+    joint_list = list(dict.fromkeys(j for _, j in cases))
+    specs = {k: common.lookup_spec(k) for k in KEYS}
+    deadlines = {'abc-default': deadline, 'abc-paper': None}
+    best, notes = _best_known(best, robot, library)
     info = common.machine_info()
     # Warm-up (imports, caches): one untimed library run of each.
     for k in KEYS:
