@@ -25,3 +25,16 @@ def shorten(value: object, limit: int = MAX_REASON) -> str:
     if len(text) <= limit:
         return text
     return f'{text[:limit]}... ({len(text)} characters)'
+
+
+class ReportedError(Exception):
+    """
+    A failure that a command reports on one line; ``code`` is its exit code.
+
+    1 when something failed (a node unreachable, a benchmark that could not run), 2 for
+    bad arguments.  The command line prints the message and exits with the code.
+    """
+
+    def __init__(self, message, code=1):
+        super().__init__(message)
+        self.code = code

@@ -20,14 +20,14 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from namo_fault_recovery import load_library, load_robot
-from namo_fault_recovery.cli.private_node import node_command
-from namo_fault_recovery.ros.spun_node import SpunNode
+from namo_fault_recovery.ros.client import RecoveryClient
+from namo_fault_recovery.ros.spun_node import call_service, SpunNode, wait_on
+from namo_fault_recovery.runtime.private_node import node_command, stop_process
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
-from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -96,21 +96,22 @@ class NodeProcess:
         self.proc = subprocess.Popen(cmd, stdout=self._out, stderr=self._err,
                                      env=env or ros_env(domain))
 
+    def _read(self, index):
+        stream = (self._out, self._err)[index]
+        if stream.closed:
+            return self._text[index]
+        stream.flush()
+        return Path(stream.name).read_text(errors='replace')
+
     @property
     def stdout(self):
         """Return everything the node wrote on stdout so far."""
-        if self._out.closed:
-            return self._text[0]
-        self._out.flush()
-        return Path(self._out.name).read_text(errors='replace')
+        return self._read(0)
 
     @property
     def stderr(self):
         """Return everything the node wrote on stderr so far."""
-        if self._err.closed:
-            return self._text[1]
-        self._err.flush()
-        return Path(self._err.name).read_text(errors='replace')
+        return self._read(1)
 
     def alive(self):
         """Return True while the process runs."""
@@ -162,13 +163,7 @@ class NodeProcess:
 
     def stop(self, sig=signal.SIGTERM, timeout=TIMEOUT):
         """Stop the process with ``sig`` (SIGKILL if it does not exit); return the code."""
-        if self.alive():
-            self.proc.send_signal(sig)
-            try:
-                self.proc.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(timeout=timeout)
+        stop_process(self.proc, sig, timeout)
         if not self._out.closed:
             self._text = (self.stdout, self.stderr)
             self._out.close()
@@ -203,12 +198,13 @@ class LibraryVersion:
         return out
 
 
-def _stamp_ns(stamp):
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
-
-
 class RosClient:
-    """An rclpy client of the node in its own context and domain, spun in a thread."""
+    """
+    An rclpy client of the node in its own context and domain, spun in a thread.
+
+    Built on :class:`RecoveryClient` (its node, its one ``/gesture_library``
+    subscription); the test's own view of every version is kept here.
+    """
 
     def __init__(self, domain, name='namo_test_client', gestures=None):
         os.environ['ROS_DOMAIN_ID'] = str(domain)
@@ -216,35 +212,32 @@ class RosClient:
         if gestures is None:   # the node's default: the packaged library
             gestures = len(load_library(load_robot()))
         self.gestures = gestures
-        self._spun = SpunNode(name, domain)
-        self.node = self._spun.node
         self._lock = threading.Condition()
         self.versions = {}            # stamp ns -> LibraryVersion
         self.order = []               # stamps in order of first arrival
         self.diagnostics = []         # node's DiagnosticArray messages
         self.markers = []
+        self.recovery = RecoveryClient('/', domain, on_library=self._on_library,
+                                       client_name=name)
+        self.node = self.recovery.node
         latched = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                              reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.node.create_subscription(JointTrajectory, '/gesture_library', self._on_library,
-                                      latched)
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 50)
         self.node.create_subscription(MarkerArray, '/gesture_markers', self._on_markers,
                                       latched)
         self.fault_pub = self.node.create_publisher(JointState, '/actuator_fault', 10)
         self.state_pub = self.node.create_publisher(JointState, '/joint_states', 10)
         self._clients = {}
-        self._spun.start()
 
     def close(self):
         """Shut the client down."""
-        self._spun.close()
+        self.recovery.close()
 
     # --- callbacks ---
 
-    def _on_library(self, msg):
+    def _on_library(self, key, msg):
         with self._lock:
-            key = _stamp_ns(msg.header.stamp)
             version = self.versions.get(key)
             if version is None:
                 version = self.versions[key] = LibraryVersion(key)
@@ -270,16 +263,10 @@ class RosClient:
 
     def wait_for(self, predicate, timeout=TIMEOUT, what='condition'):
         """Wait until ``predicate()`` (called under the lock) is truthy; return it."""
-        end = time.monotonic() + timeout
-        with self._lock:
-            while True:
-                value = predicate()
-                if value:
-                    return value
-                remaining = end - time.monotonic()
-                if remaining <= 0:
-                    raise AssertionError(f'timed out after {timeout:.0f} s waiting for {what}')
-                self._lock.wait(min(remaining, 0.1))
+        value = wait_on(self._lock, predicate, timeout, 0.1)
+        if not value:
+            raise AssertionError(f'timed out after {timeout:.0f} s waiting for {what}')
+        return value
 
     def complete_versions(self):
         """Return the complete library versions in order of arrival."""
@@ -359,12 +346,11 @@ class RosClient:
         client = self.client(srv_type, name)
         if not client.wait_for_service(timeout_sec=timeout):
             raise AssertionError(f'service {name} is not available')
-        done = threading.Event()
-        future = client.call_async(request if request is not None else srv_type.Request())
-        future.add_done_callback(lambda _: done.set())
-        if not done.wait(timeout):
+        response = call_service(client, request if request is not None else srv_type.Request(),
+                                timeout)
+        if response is None:
             raise AssertionError(f'no answer from {name} within {timeout:.0f} s')
-        return future.result()
+        return response
 
     def trigger(self, name, timeout=TIMEOUT):
         """Call a std_srvs/Trigger service."""
@@ -449,16 +435,15 @@ class DiagnosticsProbe:
 
     def wait_statuses(self, predicate, timeout=TIMEOUT, since=0, what='diagnostics'):
         """Wait for a node diagnostics message (index >= since) matching ``predicate``."""
-        end = time.monotonic() + timeout
-        with self._lock:
-            while True:
-                for index, statuses in reversed(self.statuses):
-                    if index >= since and predicate(statuses):
-                        return statuses
-                remaining = end - time.monotonic()
-                if remaining <= 0:
-                    raise AssertionError(f'timed out after {timeout:.0f} s waiting for {what}')
-                self._lock.wait(min(remaining, 0.1))
+        def find():
+            for index, statuses in reversed(self.statuses):
+                if index >= since and predicate(statuses):
+                    return statuses
+            return None
+        found = wait_on(self._lock, find, timeout, 0.1)
+        if found is None:
+            raise AssertionError(f'timed out after {timeout:.0f} s waiting for {what}')
+        return found
 
     def count(self):
         """Return how many /diagnostics messages arrived so far."""
@@ -488,10 +473,7 @@ class DiagnosticsProbe:
             client = self._trigger_clients[name] = self.node.create_client(Trigger, name)
         if not client.wait_for_service(timeout_sec=timeout):
             raise AssertionError(f'service {name} is not available')
-        done = threading.Event()
-        future = client.call_async(Trigger.Request())
-        future.add_done_callback(lambda _: done.set())
-        return future.result() if done.wait(timeout) else None
+        return call_service(client, Trigger.Request(), timeout)
 
 
 _BARE_SUBSCRIBER = """

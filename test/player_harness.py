@@ -14,7 +14,8 @@ from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from namo_fault_recovery import load_library, load_robot
 from namo_fault_recovery.resources import config_path, DEMO_MOTION_FILE
-from namo_fault_recovery.ros.spun_node import SpunNode
+from namo_fault_recovery.ros.client import RecoveryClient
+from namo_fault_recovery.ros.spun_node import wait_until
 import numpy as np
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -34,18 +35,22 @@ def _seconds(d):
 
 
 class Recorder:
-    """Watches the player and the arms; publishes a library and diagnostics on request."""
+    """
+    Watches the player and the arms; publishes a library and diagnostics on request.
+
+    Built on :class:`RecoveryClient`: the library versions and recovery_node's
+    diagnostics are its inbox's.
+    """
 
     def __init__(self, domain, name='play_recorder'):
-        self._spun = SpunNode(name, domain)
-        self.node = self._spun.node
         self.lock = threading.Lock()
         self.q = np.zeros(14)          # the latest /joint_states, in NAMES order
         self.states = 0
         self.commands = []             # (controller, msg) every command sent
         self.faults = []
-        self.library = {}              # stamp ns -> {gesture: msg}
         self.diagnostics = []
+        self.client = RecoveryClient('/', domain, client_name=name)
+        self.node = self.client.node
         for controller in CONTROLLERS:
             self.node.create_subscription(
                 JointTrajectory, f'/{controller}/joint_trajectory',
@@ -54,21 +59,18 @@ class Recorder:
         self.node.create_subscription(JointState, '/joint_states', self._on_state, 10)
         latched = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.node.create_subscription(JointTrajectory, '/gesture_library', self._on_library,
-                                      latched)
         self.node.create_subscription(DiagnosticArray, '/diagnostics',
                                       self.diagnostics.append, 50)
         self.library_pub = self.node.create_publisher(JointTrajectory, '/gesture_library',
                                                       latched)
         self.diag_pub = self.node.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.setup()
-        self._spun.start()
 
     def setup(self):
-        """Create further entities before spinning starts (subclasses)."""
+        """Create further entities (subclasses)."""
 
     def close(self):
-        self._spun.close()
+        self.client.close()
 
     def _on_command(self, controller, msg):
         with self.lock:
@@ -80,11 +82,6 @@ class Recorder:
                 if name in NAMES:
                     self.q[NAMES.index(name)] = angle
             self.states += 1
-
-    def _on_library(self, msg):
-        key = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-        with self.lock:
-            self.library.setdefault(key, {})[msg.header.frame_id] = msg
 
     def measured(self):
         """Return the latest measured pose (rad, NAMES order)."""
@@ -104,13 +101,10 @@ class Recorder:
 
     def wait(self, predicate, timeout, what):
         """Wait until ``predicate()`` is truthy; return it (assert on timeout)."""
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            value = predicate()
-            if value:
-                return value
-            time.sleep(0.02)
-        raise AssertionError(f'timed out after {timeout} s waiting for {what}')
+        value = wait_until(predicate, timeout)
+        if not value:
+            raise AssertionError(f'timed out after {timeout} s waiting for {what}')
+        return value
 
     def reconfiguration(self):
         """Return recovery_node's latest ``reconfiguration`` values, or {} if none yet."""
@@ -132,17 +126,29 @@ class Recorder:
         values = self.reconfiguration()
         return values.get('up_to_date') == 'true' and values.get('running') == 'false'
 
+    def wait_locked_library(self, gesture, locked, timeout):
+        """
+        Wait for a library whose ``gesture`` holds every ``locked`` joint, then settled.
+
+        The node refines that library in the background (better versions may follow):
+        the one it settles on is the one to play, so that the executed pose can be
+        compared with it.
+        """
+        def reconfigured():
+            lib = self.newest_library()
+            return lib and all(np.allclose(lib[gesture][:, NAMES.index(j)], a, atol=1e-9)
+                               for j, a in locked.items())
+        self.wait(reconfigured, timeout, f'a library with {", ".join(locked)} locked')
+        self.wait(self.library_settled, 30.0, 'the end of the refinement')
+
     def newest_library(self):
         """Return {gesture: positions (keyframes, 14) in NAMES order} of the newest stamp."""
-        with self.lock:
-            if not self.library:
-                return None
-            msgs = dict(self.library[max(self.library)])
-        out = {}
-        for name, msg in msgs.items():
-            order = [list(msg.joint_names).index(j) for j in NAMES]
-            out[name] = np.array([[p.positions[i] for i in order] for p in msg.points])
-        return out
+        library = self.client.newest_library()
+        if library is None:
+            return None
+        order = [library.joint_names.index(j) for j in NAMES]
+        return {g.name: np.array([[q[i] for i in order] for q in g.positions])
+                for g in library.result.gestures}
 
     def commanded(self, since, joint):
         """All positions commanded to ``joint`` by the messages received after ``since``."""
@@ -186,10 +192,7 @@ class Recorder:
         client = self.node.create_client(Trigger, service)
         assert client.wait_for_service(timeout_sec=20.0), f'no service {service}'
         future = client.call_async(Trigger.Request())
-        end = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < end:
-            time.sleep(0.02)
-        assert future.done(), f'no answer from {service} within {timeout} s'
+        assert wait_until(future.done, timeout), f'no answer from {service} within {timeout} s'
         return future.result()
 
     def play(self, gesture, timeout=30.0):

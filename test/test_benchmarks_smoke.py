@@ -216,14 +216,20 @@ def test_motion_bench_compares_both_methods_on_the_wave(tmp_path, demo_library):
             assert row['tip_error_mean_mm'] <= row['tip_error_max_mm'] + 1e-9
 
 
-def test_product_bench_offline_parts(tmp_path):
+def _bench_product(tmp_path, parts, *options):
+    """Run ``bench product`` on one joint with optima of one seed made first."""
     optima = tmp_path / 'optima.yaml'
     code, text = run_cli(['bench', 'product', '--update-optima', '--optima-file', str(optima),
                           '--optima-seeds', '1', '--demo-optima-seeds', '1', '--jobs', '1',
-                          '--parts', 'quality,table,demo', '--joints', 'right_arm_joint2',
-                          '--seeds', '1', '--demo-seeds', '1', '--no-burner',
-                          '--out', str(tmp_path / 'out'), '--quiet'])
+                          '--parts', parts, '--joints', 'right_arm_joint2', '--no-burner',
+                          *options, '--out', str(tmp_path / 'out'), '--quiet'])
     assert code == 0, text
+    return optima, text
+
+
+def test_product_bench_offline_parts(tmp_path):
+    optima, text = _bench_product(tmp_path, 'quality,table,demo', '--seeds', '1',
+                                  '--demo-seeds', '1')
     for part in ('quality at the deadline', 'contingency table', 'demo library'):
         assert part in text
     doc = yaml.safe_load(optima.read_text())
@@ -240,13 +246,7 @@ def test_product_bench_offline_parts(tmp_path):
 
 def test_product_bench_node_parts(tmp_path):
     pytest.importorskip('rclpy')
-    optima = tmp_path / 'optima.yaml'
-    code, text = run_cli(['bench', 'product', '--update-optima', '--optima-file', str(optima),
-                          '--optima-seeds', '1', '--demo-optima-seeds', '1', '--jobs', '1',
-                          '--parts', 'latency,refine', '--joints', 'right_arm_joint2',
-                          '--no-burner', '--refine-window', '1', '--refine-reps', '1',
-                          '--out', str(tmp_path / 'out'), '--quiet'])
-    assert code == 0, text
+    _bench_product(tmp_path, 'latency,refine', '--refine-window', '1', '--refine-reps', '1')
     summary = json.loads((tmp_path / 'out' / 'summary.json').read_text())
     hit = summary['latency_hit']['conditions']['idle']
     assert hit['n'] == 1 and hit['origins'] == {'table': 1}

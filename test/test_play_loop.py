@@ -11,11 +11,11 @@ the other.
 
 import math
 
-from namo_fault_recovery.cli.player_commands import player_command
 from namo_fault_recovery.objective.score import ScoreWeights, SimilarityScore
+from namo_fault_recovery.runtime.private_node import player_command
 from node_harness import NodeProcess, ros_env, session_domain, TIMEOUT
 import numpy as np
-from player_harness import FakeArms, LIBRARY, NAMES, ROBOT
+from player_harness import FakeArms, LIBRARY, ROBOT
 import pytest
 
 pytestmark = pytest.mark.slow
@@ -54,14 +54,7 @@ def _stick_and_recover(arms, joint, angle, locked):
     assert report.position[0] == pytest.approx(angle, abs=math.radians(0.5))
     locked = dict(locked, **{joint: report.position[0]})
 
-    def reconfigured():
-        lib = arms.newest_library()
-        return lib and all(np.allclose(lib['wai'][:, NAMES.index(j)], a, atol=1e-9)
-                           for j, a in locked.items())
-    arms.wait(reconfigured, TIMEOUT, f'a library with {", ".join(locked)} locked')
-    # The node refines that library in the background (better versions may follow):
-    # play the one it settles on, so that the executed pose can be compared with it.
-    arms.wait(arms.library_settled, 30.0, 'the end of the refinement')
+    arms.wait_locked_library('wai', locked, TIMEOUT)
     before = len(arms.commands)
     response = arms.play('wai')
     assert response.success, response.message

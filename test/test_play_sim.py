@@ -13,9 +13,9 @@ faults one after the other (one test, the three scenarios in sequence).
 import math
 
 from diagnostic_msgs.msg import DiagnosticArray
-from namo_fault_recovery.cli.player_commands import player_command
 from namo_fault_recovery.objective.score import ScoreWeights, SimilarityScore
 from namo_fault_recovery.ros.sim_node import sim_command
+from namo_fault_recovery.runtime.private_node import player_command
 from node_harness import NodeProcess, ros_env, session_domain, TIMEOUT
 import numpy as np
 from player_harness import LIBRARY, NAMES, Recorder, ROBOT
@@ -94,14 +94,7 @@ def _stick_and_recover(arms, joint, angle, locked):
     assert report.position[0] == pytest.approx(angle, abs=HELD_TOL)
     locked = dict(locked, **{joint: report.position[0]})
 
-    def reconfigured():
-        lib = arms.newest_library()
-        return lib and all(np.allclose(lib['wai'][:, NAMES.index(j)], a, atol=1e-9)
-                           for j, a in locked.items())
-    arms.wait(reconfigured, TIMEOUT, f'a library with {", ".join(locked)} locked')
-    # The node refines that library in the background (better versions may follow):
-    # play the one it settles on, so that the executed pose can be compared with it.
-    arms.wait(arms.library_settled, 30.0, 'the end of the refinement')
+    arms.wait_locked_library('wai', locked, TIMEOUT)
     assert arms.trigger('/namo_sim/reset_contacts').success
     before, reports = len(arms.commands), len(arms.contacts)
     response = arms.play('wai', timeout=60.0)

@@ -13,7 +13,7 @@ import os
 import threading
 import time
 
-from namo_fault_recovery.cli.player_commands import player_command
+from namo_fault_recovery.runtime.private_node import player_command
 from node_harness import NodeProcess, ros_env, session_domain
 import numpy as np
 from player_harness import CONTROLLERS, FakeArms, LIBRARY, NAMES

@@ -15,7 +15,7 @@ from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticArray
 from namo_fault_recovery import load_library, load_robot
 from namo_fault_recovery.ros.sim_node import sim_command
-from namo_fault_recovery.ros.spun_node import SpunNode
+from namo_fault_recovery.ros.spun_node import SpunNode, wait_until
 from namo_fault_recovery.sim.trajectory import ActiveTrajectory, Command, Point
 from node_harness import NodeProcess, session_domain
 import numpy as np
@@ -96,14 +96,10 @@ class SimClient:
         return self.node.get_clock().now().nanoseconds * 1e-9
 
     def wait(self, predicate, what, timeout=TIMEOUT):
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            with self.lock:
-                value = predicate()
-            if value:
-                return value
-            time.sleep(0.02)
-        raise AssertionError(f'timed out waiting for {what}')
+        value = wait_until(predicate, timeout, lock=self.lock)
+        if not value:
+            raise AssertionError(f'timed out waiting for {what}')
+        return value
 
     def latest(self):
         with self.lock:

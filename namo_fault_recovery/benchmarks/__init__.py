@@ -1,8 +1,9 @@
 """
-Benchmarks that print figures: the paper's comparison, the optimum, speed, deadlines.
+Every benchmark: the paper's comparison, the optimum, speed, deadlines, the node's.
 
-These are commands, not timed tests (``namo-recovery bench ...``).  Each module has one
-``run_*`` function that returns a plain dict (written as JSON) and prints its figures:
+These are commands, not timed tests (``namo-recovery bench ...``; the command line only
+parses the options and calls them).  Each module has one ``run_*`` function that
+returns a plain dict (written as JSON) and prints its figures:
 
 - :mod:`.paper`: GA, BFOA and ABC (paper presets) and our default ABC over the 28
   (gesture, failed right-arm joint) cases, as the paper's Tables 3-6;
@@ -11,14 +12,24 @@ These are commands, not timed tests (``namo-recovery bench ...``).  Each module 
 - :mod:`.speed`: whole-library time and quality of our default against the paper ABC;
 - :mod:`.deadline`: the worst deadline overrun, idle and with a CPU burner;
 - :mod:`.beyond`, :mod:`.motion`: the extensions beyond the paper, whole motions;
-- :mod:`.detection`: stuck-joint detection and recovery on the simulated Namo;
 - :mod:`.lock_compare`: ``average`` against ``optimal`` lock angles, every single fault;
-- :mod:`.detection`: stuck-joint detection and recovery on the simulator's physics;
+- :mod:`.detection`: stuck-joint detection and recovery on the simulator's physics
+  (``bench detection``);
 - :mod:`.product`: the served problem (packaged library, node settings): best-known
-  optima, quality at the deadline, the contingency table (``bench product``);
+  optima, quality at the deadline, the contingency table, free of ROS;
+- :mod:`.product_node`: ``bench product`` whole: those parts, and the latency and
+  refinement curve of private nodes over DDS;
+- :mod:`.latency`: fault -> library latency of a running or private node
+  (``bench latency``);
+- :mod:`.stream`: the node's deadline and latency while ``/joint_states`` streams and a
+  CPU burner runs (``bench stream``);
 - :mod:`.common`: models, cases, statistics and output files shared by the above;
 - :mod:`.paper_data`: the paper's published tables, to print beside ours;
-- :mod:`.plotting`: the figures (matplotlib, optional).
+- :mod:`.plotting`: the figures (matplotlib, optional), and the ``plot`` command's run.
+
+The node benchmarks reach ROS only through ``ros/`` (:class:`~namo_fault_recovery.ros.
+client.RecoveryClient`, :class:`~namo_fault_recovery.ros.joint_state_stream.
+StreamProcess`) and start nodes with :mod:`namo_fault_recovery.runtime.private_node`.
 
 Every library they need comes from the engine's entry point, ``recover()``, through
 :func:`.common.run_recover` with explicit settings (:data:`.common.PAPER_SETTINGS` for

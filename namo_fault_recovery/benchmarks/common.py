@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 
+from ..errors import ReportedError
 from ..model.gestures import GestureLibrary, load_library
 from ..model.robot import ARMS, load_robot, N_JOINTS
 from ..objective.score import gesture_targets, SimilarityScore
@@ -31,6 +32,11 @@ WITHIN = 0.005   # "within 0.5% of the best-known optimum"
 # The paper's problem: the faulted arm alone, no collision term (the gesture file is the
 # paper's Table 2, see :func:`models`).  Everything else is the node's default.
 PAPER_SETTINGS = RecoverySettings(collision_check=False, bimanual='off')
+EXIT_USAGE = 2
+
+
+class BenchError(ReportedError):
+    """A benchmark could not run, explained on one line; ``code`` is the exit code."""
 
 
 @dataclass(frozen=True)
@@ -120,6 +126,26 @@ def lookup_spec(key):
                          f'{", ".join(ALGORITHM_SPECS)}') from None
 
 
+def recover_subset(robot, library, faults, settings, gestures=None, *, seed=None,
+                   clock=None, overrides=None):
+    """
+    Return ``(LibraryResult, lock notes)`` of :func:`recover` on some of ``library``.
+
+    ``gestures`` names a subset (None: the whole library): the library is cut down to
+    it, with the lock angles the whole library would get (the ``average`` is over the
+    whole library); the notes are those of resolving them.
+    """
+    notes = []
+    if gestures is not None:
+        if settings.lock_strategy != 'optimal':
+            faults, notes = resolve_locks(robot, library, faults, settings.lock_strategy)
+        library = GestureLibrary(tuple(library[g] for g in dict.fromkeys(gestures)),
+                                 library.source)
+    result = recover(robot, library, faults, settings, seed=seed, clock=clock,
+                     optimizer_overrides=overrides)
+    return result, notes
+
+
 def run_recover(robot, library, faults, settings=PAPER_SETTINGS, *, seed, deadline=None,
                 gestures=None, overrides=None):
     """
@@ -128,19 +154,14 @@ def run_recover(robot, library, faults, settings=PAPER_SETTINGS, *, seed, deadli
     This is how every benchmark asks for a library: ``settings`` (the paper's problem
     unless told otherwise), ``deadline`` in s (None: no deadline; else it also becomes
     ``settings.deadline_sec``), ``overrides`` of the optimiser's preset.  ``gestures``
-    names a subset: the library is cut down to it, with the lock angles the whole
-    library would get (the ``average`` is over the whole library).  Returns the
+    names a subset (see :func:`recover_subset`).  Returns the
     :class:`~namo_fault_recovery.recovery.result.LibraryResult`.
     """
     if deadline is not None:
         settings = settings.with_changes(deadline_sec=float(deadline))
-    if gestures is not None:
-        if settings.lock_strategy != 'optimal':
-            faults, _ = resolve_locks(robot, library, faults, settings.lock_strategy)
-        library = GestureLibrary(tuple(library[g] for g in gestures), library.source)
-    return recover(robot, library, faults, settings, seed=int(seed),
-                   clock=Clock(None if deadline is None else float(deadline)),
-                   optimizer_overrides=overrides)
+    return recover_subset(robot, library, faults, settings, gestures, seed=int(seed),
+                          clock=Clock(None if deadline is None else float(deadline)),
+                          overrides=overrides)[0]
 
 
 def spec_settings(spec, settings=PAPER_SETTINGS):

@@ -75,6 +75,61 @@ def run_case(robot, gesture, method, seed, min_points, distortion_mm=DEFAULT_DIS
     return res[gesture.name], time.monotonic() - start
 
 
+def _motion_row(name, label, method, gesture, g, wall):
+    """Return one row of ``bench motion``: a motion, scenario and method's figures."""
+    return {'motion': name, 'scenario': label, 'method': method,
+            'points': len(gesture.keyframes),
+            'typical': (g.typical_points if method == 'kriging'
+                        else len(gesture.keyframes)),
+            'nfev': g.nfev, 'wall_ms': 1000 * wall,
+            'tip_error_before_mm': g.tip_error_before_mm,
+            'tip_error_mean_mm': g.tip_error_mm,
+            'tip_error_max_mm': g.tip_error_max_mm,
+            'recovery_pct': 100 * (1 - g.tip_error_mm
+                                   / max(g.tip_error_before_mm, 1e-9)),
+            'score_before': g.score_before_mean, 'score_mean': g.score_mean,
+            'score_max': g.score_after,
+            'jump_designed_deg': g.max_jump_designed_deg,
+            'jump_before_deg': g.max_jump_before_deg,
+            'jump_after_deg': g.max_jump_deg,
+            'kriging_sigma_max_deg': max(g.kriging_sigma_deg, default=0.0),
+            'expansion_stage': g.expansion_stage,
+            'free_joints': list(g.free_joints),
+            'paper': PAPER[label]}
+
+
+def _motion_rows(out, robot, name, gesture, seed, distortion_mm):
+    """Run one motion under every scenario and method; print and return its rows."""
+    rows = []
+    # A short keyframed motion is quantised too here, to show the method on it, with
+    # a threshold to suit its small fingertip excursion.
+    min_points = 2
+    threshold = distortion_mm if len(gesture.keyframes) > 20 else WAVE_DISTORTION_MM
+    out.write(f'\n## {name}: {len(gesture.keyframes)} points, distortion threshold '
+              f'{threshold:g} mm\n')
+    out.write(f'{"scenario":36s} {"method":10s} {"K":>3s} {"evals":>7s} {"cost":>6s} '
+              f'{"time ms":>8s} {"err0 mm":>8s} {"mean mm":>8s} {"max mm":>7s} '
+              f'{"recov":>6s} {"score":>7s} {"jump0":>6s} {"jump":>6s} {"stage":>5s}\n')
+    for label, kwargs in SCENARIOS:
+        pair = {}
+        for method in METHODS:
+            g, wall = run_case(robot, gesture, method, seed, min_points,
+                               distortion_mm=threshold, **kwargs)
+            pair[method] = g
+            rows.append(_motion_row(name, label, method, gesture, g, wall))
+        base = pair['per_point'].nfev
+        for row in rows[-2:]:
+            row['cost_pct'] = 100.0 * row['nfev'] / base if base else math.nan
+            out.write(f'{label:36s} {row["method"]:10s} {row["typical"]:3d} '
+                      f'{row["nfev"]:7d} {row["cost_pct"]:5.1f}% {row["wall_ms"]:8.0f} '
+                      f'{row["tip_error_before_mm"]:8.1f} {row["tip_error_mean_mm"]:8.1f} '
+                      f'{row["tip_error_max_mm"]:7.1f} {row["recovery_pct"]:5.1f}% '
+                      f'{row["score_mean"]:7.2f} {row["jump_before_deg"]:6.1f} '
+                      f'{row["jump_after_deg"]:6.1f} '
+                      f'{row["expansion_stage"]:5d}\n')
+    return rows
+
+
 def bench_motion(out, out_dir, seed=0, motions=MOTIONS, robot_file=None, gesture_file=None,
                  distortion_mm=DEFAULT_DISTORTION_MM):
     """
@@ -89,52 +144,7 @@ def bench_motion(out, out_dir, seed=0, motions=MOTIONS, robot_file=None, gesture
               f'{common.format_machine(common.machine_info())}\n')
     rows = []
     for name in motions:
-        gesture = library[name]
-        # A short keyframed motion is quantised too here, to show the method on it, with
-        # a threshold to suit its small fingertip excursion.
-        min_points = 2
-        threshold = distortion_mm if len(gesture.keyframes) > 20 else WAVE_DISTORTION_MM
-        out.write(f'\n## {name}: {len(gesture.keyframes)} points, distortion threshold '
-                  f'{threshold:g} mm\n')
-        out.write(f'{"scenario":36s} {"method":10s} {"K":>3s} {"evals":>7s} {"cost":>6s} '
-                  f'{"time ms":>8s} {"err0 mm":>8s} {"mean mm":>8s} {"max mm":>7s} '
-                  f'{"recov":>6s} {"score":>7s} {"jump0":>6s} {"jump":>6s} {"stage":>5s}\n')
-        for label, kwargs in SCENARIOS:
-            pair = {}
-            for method in METHODS:
-                g, wall = run_case(robot, gesture, method, seed, min_points,
-                                   distortion_mm=threshold, **kwargs)
-                pair[method] = g
-                row = {'motion': name, 'scenario': label, 'method': method,
-                       'points': len(gesture.keyframes),
-                       'typical': (g.typical_points if method == 'kriging'
-                                   else len(gesture.keyframes)),
-                       'nfev': g.nfev, 'wall_ms': 1000 * wall,
-                       'tip_error_before_mm': g.tip_error_before_mm,
-                       'tip_error_mean_mm': g.tip_error_mm,
-                       'tip_error_max_mm': g.tip_error_max_mm,
-                       'recovery_pct': 100 * (1 - g.tip_error_mm
-                                              / max(g.tip_error_before_mm, 1e-9)),
-                       'score_before': g.score_before_mean, 'score_mean': g.score_mean,
-                       'score_max': g.score_after,
-                       'jump_designed_deg': g.max_jump_designed_deg,
-                       'jump_before_deg': g.max_jump_before_deg,
-                       'jump_after_deg': g.max_jump_deg,
-                       'kriging_sigma_max_deg': max(g.kriging_sigma_deg, default=0.0),
-                       'expansion_stage': g.expansion_stage,
-                       'free_joints': list(g.free_joints),
-                       'paper': PAPER[label]}
-                rows.append(row)
-            base = pair['per_point'].nfev
-            for row in rows[-2:]:
-                row['cost_pct'] = 100.0 * row['nfev'] / base if base else math.nan
-                out.write(f'{label:36s} {row["method"]:10s} {row["typical"]:3d} '
-                          f'{row["nfev"]:7d} {row["cost_pct"]:5.1f}% {row["wall_ms"]:8.0f} '
-                          f'{row["tip_error_before_mm"]:8.1f} {row["tip_error_mean_mm"]:8.1f} '
-                          f'{row["tip_error_max_mm"]:7.1f} {row["recovery_pct"]:5.1f}% '
-                          f'{row["score_mean"]:7.2f} {row["jump_before_deg"]:6.1f} '
-                          f'{row["jump_after_deg"]:6.1f} '
-                          f'{row["expansion_stage"]:5d}\n')
+        rows += _motion_rows(out, robot, name, library[name], seed, distortion_mm)
     out.write('\nK: points explored; cost: evaluations of the method / those of per-point '
               'exploration in the same run; err0: mean fingertip error of the unadapted '
               'motion; recov: 1 - mean error '

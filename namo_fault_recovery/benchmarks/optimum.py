@@ -84,6 +84,34 @@ def load_best_known(path=None):
     return BestKnownOptima(cases, meta, str(path))
 
 
+def _polish_starts(problem, x_start, clock, maxiter):
+    """Polish every start, ``_CHUNK`` at a time; return (x, f) of all of them."""
+    xs, fs = [], []
+    for lo in range(0, x_start.shape[1], _CHUNK):
+        x, f = polish(problem, x_start[:, lo:lo + _CHUNK], clock, maxiter=maxiter,
+                      ftol=1e-12)
+        xs.append(x)
+        fs.append(f)
+    return np.concatenate(xs, axis=1), np.concatenate(fs, axis=1)
+
+
+def _keyframe_entry(best_f, q_right, q_left, f_starts, polished_f):
+    """Return one keyframe's optimum and how the starts (``f_starts``) reached it."""
+    hits = float(np.mean(f_starts <= best_f + common.WITHIN * abs(best_f) + 1e-12))
+    # Starts that reached the best basin floor (to the polish's 1e-4 accuracy).
+    same = float(np.mean(f_starts <= polished_f + 1e-4 * abs(polished_f) + 1e-9))
+    return {
+        'score': float(best_f),
+        'right_deg': [round(float(v), 6) for v in np.degrees(q_right)],
+        'left_deg': [round(float(v), 6) for v in np.degrees(q_left)],
+        'reference_start_score': float(f_starts[0]),
+        'reference_start_in_best_basin': bool(
+            f_starts[0] <= polished_f + 1e-4 * abs(polished_f) + 1e-9),
+        'share_of_starts_within_0.5pct': round(hits, 4),
+        'share_of_starts_in_best_basin': round(same, 4),
+    }
+
+
 def dense_optimum(robot, library, gesture, joint, starts=1000, seed=0, maxiter=300):
     """
     Return the best-known optimum of one case as a dict (see the module docstring).
@@ -97,14 +125,7 @@ def dense_optimum(robot, library, gesture, joint, starts=1000, seed=0, maxiter=3
     rng = np.random.default_rng([seed, k_case])
     clock = Clock(None)
     x_start = np.concatenate((problem.x0[:, None, :], problem.random(rng, starts)), axis=1)
-    xs, fs = [], []
-    for lo in range(0, x_start.shape[1], _CHUNK):
-        x, f = polish(problem, x_start[:, lo:lo + _CHUNK], clock, maxiter=maxiter,
-                      ftol=1e-12)
-        xs.append(x)
-        fs.append(f)
-    x_all = np.concatenate(xs, axis=1)
-    f_all = np.concatenate(fs, axis=1)
+    x_all, f_all = _polish_starts(problem, x_start, clock, maxiter)
     n_targets = problem.batch
     polished_f = f_all.min(axis=1)
     # Equivalent optima exist (e.g. the spherical wrist flipped): among the starts that
@@ -123,19 +144,8 @@ def dense_optimum(robot, library, gesture, joint, starts=1000, seed=0, maxiter=3
     keyframes = []
     q_right, q_left = problem.assemble(best_x)
     for t in range(n_targets):
-        hits = float(np.mean(f_all[t] <= best_f[t] + common.WITHIN * abs(best_f[t]) + 1e-12))
-        # Starts that reached the best basin floor (to the polish's 1e-4 accuracy).
-        same = float(np.mean(f_all[t] <= polished_f[t] + 1e-4 * abs(polished_f[t]) + 1e-9))
-        keyframes.append({
-            'score': float(best_f[t]),
-            'right_deg': [round(float(v), 6) for v in np.degrees(q_right[t])],
-            'left_deg': [round(float(v), 6) for v in np.degrees(q_left[t])],
-            'reference_start_score': float(f_all[t, 0]),
-            'reference_start_in_best_basin': bool(
-                f_all[t, 0] <= polished_f[t] + 1e-4 * abs(polished_f[t]) + 1e-9),
-            'share_of_starts_within_0.5pct': round(hits, 4),
-            'share_of_starts_in_best_basin': round(same, 4),
-        })
+        keyframes.append(_keyframe_entry(best_f[t], q_right[t], q_left[t], f_all[t],
+                                         polished_f[t]))
     worst = max(range(n_targets), key=lambda t: keyframes[t]['score'])
     return {
         'score': keyframes[worst]['score'],
@@ -207,10 +217,14 @@ def optima_document(robot, library, optima, starts, seed, maxiter):
     return doc
 
 
-def write_optima(path, doc):
-    """Write the optima YAML with a header comment."""
+PAPER_OPTIMA_TITLE = ('Best-known optima of the 28 paper cases (generated data; do not edit '
+                      'by hand).')
+
+
+def write_optima(path, doc, title=PAPER_OPTIMA_TITLE):
+    """Write an optima YAML under a header comment: ``title``, then how to regenerate it."""
     import yaml
-    text = ('# Best-known optima of the 28 paper cases (generated data; do not edit by hand).\n'
+    text = (f'# {title}\n'
             f'# Regenerate: {doc["generated_by"]}\n'
             + yaml.safe_dump(common.plain(doc), sort_keys=False, default_flow_style=None,
                              width=99))
@@ -240,6 +254,50 @@ def algorithm_gaps(robot, library, cases, best, keys, seeds, deadline=None, prog
     return rows
 
 
+def _print_optima(out, robot, optima):
+    """Print the table of the optima beside the paper ABC's best."""
+    from .paper_data import TABLE6
+    header = ['gesture', 'joint', 'lock deg', 'optimum', 'ref start', 'ref in best basin',
+              'starts within 0.5%', 'paper ABC min']
+    rows = []
+    for (gesture, joint), e in optima.items():
+        kf = e.get('keyframes', [{}])[0]
+        jn = common.joint_number(robot, joint)
+        paper = TABLE6.get((gesture, jn), {}).get('abc', {}).get('min')
+        rows.append([gesture, jn, common.fmt(e['lock_deg'], 2), common.fmt(e['score']),
+                     common.fmt(kf.get('reference_start_score', math.nan)),
+                     {True: 'yes', False: 'no'}.get(kf.get('reference_start_in_best_basin'),
+                                                    '-'),
+                     common.fmt(100 * kf.get('share_of_starts_within_0.5pct', math.nan), 1)
+                     + '%', common.fmt(paper)])
+    out.write(common.text_table(header, rows))
+
+
+def _print_gaps(out, robot, gaps, keys, seeds):
+    """Print every algorithm's median gap per case, and the share of runs within 0.5%."""
+    out.write(f'\ngap to the best-known optimum, % (median over seeds 0..{seeds - 1}; '
+              f'per-gesture runs, no deadline)\n')
+    by_case = {}
+    for r in gaps:
+        by_case.setdefault((r['gesture'], r['joint']), {})[r['algorithm']] = r
+    header = ['gesture', 'joint'] + [common.lookup_spec(k).label for k in keys]
+    rows = []
+    for (gesture, joint), per in by_case.items():
+        rows.append([gesture, common.joint_number(robot, joint)]
+                    + [common.fmt(100 * float(np.median(per[k]['gaps'])), 2) for k in keys])
+    out.write(common.text_table(header, rows))
+    shares = []
+    for k in keys:
+        hits = [g <= common.WITHIN for r in gaps if r['algorithm'] == k for g in r['gaps']]
+        shares.append(f'{common.lookup_spec(k).label} {100 * np.mean(hits):.1f}%')
+    out.write('share of runs within 0.5%: ' + ', '.join(shares) + '\n')
+    below = [r for r in gaps if min(r['gaps']) < -1e-6]
+    for r in below:
+        out.write(f'note: {r["algorithm"]} beat the stored optimum of {r["gesture"]} '
+                  f'{r["joint"]} ({min(r["scores"]):.6f} < {r["optimum"]:.6f}); rerun '
+                  f'with more starts\n')
+
+
 def run_optimum(robot, library, out, cases, starts=1000, seed=0, maxiter=300, write=None,
                 keys=common.PAPER_LINEUP, seeds=3, use_stored=False, progress=True):
     """
@@ -261,21 +319,7 @@ def run_optimum(robot, library, out, cases, starts=1000, seed=0, maxiter=300, wr
         optima = compute_optima(robot, library, cases, starts, seed, maxiter, progress)
         out.write(f'best-known optima by dense multistart local search: reference start + '
                   f'{starts} random starts per case (seed {seed})\n')
-    header = ['gesture', 'joint', 'lock deg', 'optimum', 'ref start', 'ref in best basin',
-              'starts within 0.5%', 'paper ABC min']
-    from .paper_data import TABLE6
-    rows = []
-    for (gesture, joint), e in optima.items():
-        kf = e.get('keyframes', [{}])[0]
-        jn = common.joint_number(robot, joint)
-        paper = TABLE6.get((gesture, jn), {}).get('abc', {}).get('min')
-        rows.append([gesture, jn, common.fmt(e['lock_deg'], 2), common.fmt(e['score']),
-                     common.fmt(kf.get('reference_start_score', math.nan)),
-                     {True: 'yes', False: 'no'}.get(kf.get('reference_start_in_best_basin'),
-                                                    '-'),
-                     common.fmt(100 * kf.get('share_of_starts_within_0.5pct', math.nan), 1)
-                     + '%', common.fmt(paper)])
-    out.write(common.text_table(header, rows))
+    _print_optima(out, robot, optima)
     if write is not None and not use_stored:
         doc = optima_document(robot, library, optima, starts, seed, maxiter)
         write_optima(write, doc)
@@ -284,26 +328,6 @@ def run_optimum(robot, library, out, cases, starts=1000, seed=0, maxiter=300, wr
     if seeds > 0 and keys:
         gaps = algorithm_gaps(robot, library, list(optima), optima, keys, seeds,
                               progress=progress)
-        out.write(f'\ngap to the best-known optimum, % (median over seeds 0..{seeds - 1}; '
-                  f'per-gesture runs, no deadline)\n')
-        by_case = {}
-        for r in gaps:
-            by_case.setdefault((r['gesture'], r['joint']), {})[r['algorithm']] = r
-        header = ['gesture', 'joint'] + [common.lookup_spec(k).label for k in keys]
-        rows = []
-        for (gesture, joint), per in by_case.items():
-            rows.append([gesture, common.joint_number(robot, joint)]
-                        + [common.fmt(100 * float(np.median(per[k]['gaps'])), 2) for k in keys])
-        out.write(common.text_table(header, rows))
-        shares = []
-        for k in keys:
-            hits = [g <= common.WITHIN for r in gaps if r['algorithm'] == k for g in r['gaps']]
-            shares.append(f'{common.lookup_spec(k).label} {100 * np.mean(hits):.1f}%')
-        out.write('share of runs within 0.5%: ' + ', '.join(shares) + '\n')
-        below = [r for r in gaps if min(r['gaps']) < -1e-6]
-        for r in below:
-            out.write(f'note: {r["algorithm"]} beat the stored optimum of {r["gesture"]} '
-                      f'{r["joint"]} ({min(r["scores"]):.6f} < {r["optimum"]:.6f}); rerun '
-                      f'with more starts\n')
+        _print_gaps(out, robot, gaps, keys, seeds)
     return {'machine': info, 'optima': {f'{g}/{j}': e for (g, j), e in optima.items()},
             'gaps': gaps}

@@ -69,6 +69,24 @@ def _draw_arm(axes, robot, q, side, color, label, style='-'):
     return np.vstack((pts, tip[None]))
 
 
+def _label_views(ax3, front, side_view):
+    """Label the 3D, front and side views of a stick figure."""
+    ax3.set_xlabel('x (mm, forward)')
+    ax3.set_ylabel('y (mm, left)')
+    ax3.set_zlabel('z (mm, up)')
+    ax3.view_init(elev=15, azim=30)
+    front.set_title('front view (y-z)', fontsize=10)
+    front.set_xlabel('y (mm, robot left)')
+    front.set_ylabel('z (mm)')
+    side_view.set_title('side view (x-z)', fontsize=10)
+    side_view.set_xlabel('x (mm, forward)')
+    side_view.set_ylabel('z (mm)')
+    for ax in (front, side_view):
+        ax.set_aspect('equal', adjustable='datalim')
+        ax.grid(True, alpha=0.3)
+    ax3.legend(loc='upper left', fontsize=8)
+
+
 def plot_reconfiguration(robot, library, report, gesture, path, keyframe=0, title=None,
                          dpi=120):
     """
@@ -105,20 +123,7 @@ def plot_reconfiguration(robot, library, report, gesture, path, keyframe=0, titl
     ax3.plot(shoulders[:, 0], shoulders[:, 1], shoulders[:, 2], '-', color='0.6', lw=4)
     pts = np.vstack(everything + [shoulders])
     _equal_3d(ax3, pts)
-    ax3.set_xlabel('x (mm, forward)')
-    ax3.set_ylabel('y (mm, left)')
-    ax3.set_zlabel('z (mm, up)')
-    ax3.view_init(elev=15, azim=30)
-    front.set_title('front view (y-z)', fontsize=10)
-    front.set_xlabel('y (mm, robot left)')
-    front.set_ylabel('z (mm)')
-    side_view.set_title('side view (x-z)', fontsize=10)
-    side_view.set_xlabel('x (mm, forward)')
-    side_view.set_ylabel('z (mm)')
-    for ax in (front, side_view):
-        ax.set_aspect('equal', adjustable='datalim')
-        ax.grid(True, alpha=0.3)
-    ax3.legend(loc='upper left', fontsize=8)
+    _label_views(ax3, front, side_view)
     if title is None:
         locks = ', '.join(f'{j} = {math.degrees(a):.2f} deg' for j, a in report.locks.items())
         title = (f'{gesture}: {locks} locked; score {result.score_before:.3f} -> '
@@ -251,3 +256,45 @@ def boxplot_paper(runs, keys, cases, out_dir, labels=None, dpi=100, optima=None)
     fig.savefig(path, dpi=dpi)
     written.append(path)
     return written
+
+
+def _deg(q):
+    return '[' + ', '.join(f'{x:7.2f}' for x in np.degrees(q)) + ']'
+
+
+def plot_gesture(out, robot, library, name, faults, settings, path, *, seed, deadline,
+                 keyframe=0):
+    """
+    Recover gesture ``name`` (locked as the whole library would be), draw it, print figures.
+
+    The ``plot`` command: a single pose is drawn as arm skeletons
+    (:func:`plot_reconfiguration`), a motion as fingertip paths (:func:`plot_motion`).
+    Raises ValueError for settings the engine rejects.
+    """
+    from .common import run_recover
+    gesture = library[name]
+    result = run_recover(robot, library, faults, settings, seed=seed, deadline=deadline,
+                         gestures=[name])
+    g = result[name]
+    for joint, angle in result.locks.items():
+        out.write(f'lock {joint} = {math.degrees(angle):.2f} deg\n')
+    if len(gesture.keyframes) > 1:
+        plot_motion(robot, gesture, result, path)
+        out.write(f'{g.message}\n  fingertip error (mm): unadapted mean '
+                  f'{g.tip_error_before_mm:.1f}; adapted mean {g.tip_error_mm:.1f}, max '
+                  f'{g.tip_error_max_mm:.1f}; {g.nfev} evaluations, '
+                  f'{1000 * result.wall_time:.0f} ms\n')
+        for note in result.notes:
+            out.write(f'  note: {note}\n')
+        out.write(f'written: {path}\n')
+        return result
+    plot_reconfiguration(robot, library, result, name, path, keyframe=keyframe)
+    kf = g.keyframes[keyframe]
+    out.write(f'{name}: score {g.score_before:.4f} -> {g.score_after:.4f} '
+              f'({settings.optimizer}, {g.status}, {1000 * g.wall_time:.1f} ms)\n')
+    for side in gesture.arms:
+        out.write(f'  {side:5s} reference    (deg) '
+                  f'{_deg(gesture.keyframes[keyframe].arm(side))}\n')
+        out.write(f'  {side:5s} reconfigured (deg) {_deg(kf.arm(side))}\n')
+    out.write(f'written: {path}\n')
+    return result

@@ -4,7 +4,7 @@ The served problem's benchmark, offline parts: best-known optima, deadline quali
 The served problem is the packaged library (``config/gestures.yaml``) under the node's
 settings (:class:`~namo_fault_recovery.recovery.engine.RecoverySettings` defaults: 1 s
 deadline, ``average`` locks, collision check, ...), every single joint fault.  Free of
-ROS; ``namo-recovery bench product`` (``cli/product_bench.py``) adds the parts that
+ROS; ``namo-recovery bench product`` (:mod:`.product_node`) adds the parts that
 need a real node over DDS (latency, refinement curve).
 
 - :func:`generate_optima`: the best-known ``score_after`` per fault set and gesture, the
@@ -191,6 +191,27 @@ def optima_plan(settings, seeds=OPTIMA_SEEDS, demo_seeds=DEMO_OPTIMA_SEEDS, join
     return plan
 
 
+def _best_of_runs(runs, names):
+    """
+    Return one fault set's stored optimum from its ``(seed, scores)`` runs.
+
+    Per gesture the lowest score_after over the seeds whose keyframes are playable
+    (all seeds if none is), the seed that gave it and the unplayable seeds.
+    """
+    best, best_seed, unplayable = {}, {}, {}
+    for g in names:
+        ok = [(sc[g][0], seed) for seed, sc in runs if sc[g][1]] or \
+            [(sc[g][0], seed) for seed, sc in runs]
+        best[g], best_seed[g] = min(ok)
+        unplayable[g] = sum(1 for _, sc in runs if not sc[g][1])
+    scores = [{g: v[0] for g, v in sc.items()} for _, sc in runs]
+    return {'best': {g: float(v) for g, v in best.items()},
+            'best_seed': {g: int(v) for g, v in best_seed.items()},
+            'unplayable_seeds': {g: n for g, n in unplayable.items() if n},
+            'seeds_within_1pct': round(float(np.mean(
+                [worst_gap(sc, best) <= QUALITY_WITHIN for sc in scores])), 4)}
+
+
 def generate_optima(out, seeds=OPTIMA_SEEDS, demo_seeds=DEMO_OPTIMA_SEEDS, jobs=2,
                     joints=None, settings=None, progress=True):
     """
@@ -239,21 +260,8 @@ def generate_optima(out, seeds=OPTIMA_SEEDS, demo_seeds=DEMO_OPTIMA_SEEDS, jobs=
         n = seeds if which == 'product' else demo_seeds
         entry = {'file': LIBRARIES[which], 'seeds': n,
                  'fingerprint': table_fingerprint(robot, lib, settings), 'fault_sets': {}}
-        for key, faults in sets.items():
-            runs = sorted(found[(which, key)])
-            best, best_seed, unplayable = {}, {}, {}
-            for g in lib.names:
-                ok = [(sc[g][0], seed) for seed, sc in runs if sc[g][1]] or \
-                    [(sc[g][0], seed) for seed, sc in runs]
-                best[g], best_seed[g] = min(ok)
-                unplayable[g] = sum(1 for _, sc in runs if not sc[g][1])
-            scores = [{g: v[0] for g, v in sc.items()} for _, sc in runs]
-            entry['fault_sets'][key] = {
-                'best': {g: float(v) for g, v in best.items()},
-                'best_seed': {g: int(v) for g, v in best_seed.items()},
-                'unplayable_seeds': {g: n for g, n in unplayable.items() if n},
-                'seeds_within_1pct': round(float(np.mean(
-                    [worst_gap(sc, best) <= QUALITY_WITHIN for sc in scores])), 4)}
+        for key in sets:
+            entry['fault_sets'][key] = _best_of_runs(sorted(found[(which, key)]), lib.names)
         doc['libraries'][which] = entry
     out.write(f'optima: {len(tasks)} runs in {wall:.0f} s ({jobs} jobs)\n')
     return doc
@@ -274,16 +282,60 @@ def git_commit():
 
 
 def write_product_optima(path, doc):
-    """Write the optima YAML with a header comment."""
-    import yaml
-    text = ('# Best-known optima of the served problem (generated data; do not edit).\n'
-            f'# Regenerate: {doc["generated_by"]}\n'
-            + yaml.safe_dump(common.plain(doc), sort_keys=False, default_flow_style=None,
-                             width=99))
-    common.write_text(path, text)
+    """Write the served problem's optima YAML with its header comment."""
+    from .optimum import write_optima
+    write_optima(path, doc, 'Best-known optima of the served problem (generated data; do not '
+                            'edit).')
 
 
 # --- parts 2 and 6: quality at the deadline ----------------------------------------
+
+def _quality_runs(robot, lib, settings, quant, best_doc, which, faults_of, cond, seeds,
+                  seed_base, prog):
+    """Run every fault set ``seeds`` times under one condition; return the runs."""
+    runs = []
+    for key, faults in faults_of.items():
+        best = best_of(best_doc, which, key)
+        if best is None:
+            raise KeyError(f'{PRODUCT_BEST_KNOWN_FILE}: no optimum stored for '
+                           f'[{which}] {key}; regenerate with --update-optima')
+        for k in range(seeds):
+            t0 = time.monotonic()
+            res = recover(robot, lib, faults, settings, seed=seed_base + k,
+                          quantisations=quant)
+            wall = time.monotonic() - t0
+            scores = {g.name: g.score_after for g in res.gestures}
+            gaps = {g: gap(scores[g], best[g]) for g in best}
+            runs.append({'condition': cond, 'fault': key, 'seed': seed_base + k,
+                         'wall_s': wall, 'deadline_met': res.deadline_met,
+                         'scores': scores, 'gaps': gaps,
+                         'worst_gap': max(gaps.values())})
+            if prog:
+                prog.step(note=cond)
+    return runs
+
+
+def _quality_condition(rs, names):
+    """Return the summary of one condition's runs ``rs`` (gestures ``names``)."""
+    share = float(np.mean([r['worst_gap'] <= QUALITY_WITHIN for r in rs]))
+    per_gesture = {g: {'median_pct': 100 * common.percentile(
+                       [r['gaps'][g] for r in rs], 50),
+                       'p95_pct': 100 * common.percentile([r['gaps'][g] for r in rs], 95),
+                       'max_pct': 100 * max(r['gaps'][g] for r in rs),
+                       'share_within': float(np.mean([r['gaps'][g] <= QUALITY_WITHIN
+                                                      for r in rs]))}
+                   for g in names}
+    misses = {}
+    for r in rs:
+        if r['worst_gap'] > QUALITY_WITHIN:
+            misses[r['fault']] = misses.get(r['fault'], 0) + 1
+    return {'runs': len(rs), 'share_all_within': share, 'met': share >= QUALITY_TARGET,
+            'deadline_met_share': float(np.mean([r['deadline_met'] for r in rs])),
+            'wall_p95_ms': 1000 * common.percentile([r['wall_s'] for r in rs], 95),
+            'wall_max_ms': 1000 * max(r['wall_s'] for r in rs),
+            'below_best_known': sum(min(r['gaps'].values()) < -1e-6 for r in rs),
+            'per_gesture': per_gesture, 'misses_by_fault': misses}
+
 
 def run_quality(out, best_doc, which='product', seeds=10, burner=True, joints=None,
                 seed_base=QUALITY_SEED_BASE, deadline=None, progress=True):
@@ -314,49 +366,15 @@ def run_quality(out, best_doc, which='product', seeds=10, burner=True, joints=No
         with (CpuBurner() if cond == 'cpu burner' else contextlib.nullcontext()) as ctx:
             if ctx is not None:
                 burner_cpu = ctx.cpu
-            for key, faults in faults_of.items():
-                best = best_of(best_doc, which, key)
-                if best is None:
-                    raise KeyError(f'{PRODUCT_BEST_KNOWN_FILE}: no optimum stored for '
-                                   f'[{which}] {key}; regenerate with --update-optima')
-                for k in range(seeds):
-                    t0 = time.monotonic()
-                    res = recover(robot, lib, faults, settings, seed=seed_base + k,
-                                  quantisations=quant)
-                    wall = time.monotonic() - t0
-                    scores = {g.name: g.score_after for g in res.gestures}
-                    gaps = {g: gap(scores[g], best[g]) for g in best}
-                    runs.append({'condition': cond, 'fault': key, 'seed': seed_base + k,
-                                 'wall_s': wall, 'deadline_met': res.deadline_met,
-                                 'scores': scores, 'gaps': gaps,
-                                 'worst_gap': max(gaps.values())})
-                    if prog:
-                        prog.step(note=cond)
+            runs += _quality_runs(robot, lib, settings, quant, best_doc, which, faults_of,
+                                  cond, seeds, seed_base, prog)
     summary = {'library': which, 'file': LIBRARIES[which], 'seeds': seeds,
                'seed_base': seed_base, 'deadline_sec': settings.deadline_sec,
                'burner_cpu': burner_cpu, 'target_within': QUALITY_WITHIN,
                'target_share': QUALITY_TARGET, 'conditions': {}, 'runs': runs}
     for cond in conditions:
-        rs = [r for r in runs if r['condition'] == cond]
-        share = float(np.mean([r['worst_gap'] <= QUALITY_WITHIN for r in rs]))
-        per_gesture = {g: {'median_pct': 100 * common.percentile(
-                           [r['gaps'][g] for r in rs], 50),
-                           'p95_pct': 100 * common.percentile([r['gaps'][g] for r in rs], 95),
-                           'max_pct': 100 * max(r['gaps'][g] for r in rs),
-                           'share_within': float(np.mean([r['gaps'][g] <= QUALITY_WITHIN
-                                                          for r in rs]))}
-                       for g in lib.names}
-        misses = {}
-        for r in rs:
-            if r['worst_gap'] > QUALITY_WITHIN:
-                misses[r['fault']] = misses.get(r['fault'], 0) + 1
-        summary['conditions'][cond] = {
-            'runs': len(rs), 'share_all_within': share, 'met': share >= QUALITY_TARGET,
-            'deadline_met_share': float(np.mean([r['deadline_met'] for r in rs])),
-            'wall_p95_ms': 1000 * common.percentile([r['wall_s'] for r in rs], 95),
-            'wall_max_ms': 1000 * max(r['wall_s'] for r in rs),
-            'below_best_known': sum(min(r['gaps'].values()) < -1e-6 for r in rs),
-            'per_gesture': per_gesture, 'misses_by_fault': misses}
+        summary['conditions'][cond] = _quality_condition(
+            [r for r in runs if r['condition'] == cond], lib.names)
     print_quality(out, summary)
     return summary
 

@@ -52,21 +52,9 @@ def _run_sequential(spec, robot, library, joint, seed):
     return {'joint': joint, 'seed': int(seed), 'time': total}
 
 
-def run_speed(out, out_dir, reps=100, joints=None, seed_base=0, deadline=1.0,
-              robot_file=None, gesture_file=None, progress=True, best=None,
-              sequential_reps=10):
-    """
-    Run the speed benchmark, write ``runs.csv``/``summary.json`` and print the figures.
-
-    ``deadline`` applies to our default only; the paper ABC runs unbounded.  ``best`` is
-    a :class:`~.optimum.BestKnownOptima` (None: the packaged file).
-    """
+def _best_known(best, robot, library):
+    """Return the best-known optima (None: the packaged file, if any) and notes on them."""
     from .optimum import load_best_known
-    robot, library = common.models(robot_file, gesture_file)
-    cases = common.select_cases(robot, library, None, joints)
-    joint_list = list(dict.fromkeys(j for _, j in cases))
-    specs = {k: common.lookup_spec(k) for k in KEYS}
-    deadlines = {'abc-default': deadline, 'abc-paper': None}
     notes = []
     if best is None:
         try:
@@ -77,6 +65,24 @@ def run_speed(out, out_dir, reps=100, joints=None, seed_base=0, deadline=1.0,
         warn = best.check_model(robot, library)
         if warn:
             notes.append(warn)
+    return best, notes
+
+
+def run_speed(out, out_dir, reps=100, joints=None, seed_base=0, deadline=1.0,
+              robot_file=None, gesture_file=None, progress=True, best=None,
+              sequential_reps=10):
+    """
+    Run the speed benchmark, write ``runs.csv``/``summary.json`` and print the figures.
+
+    ``deadline`` applies to our default only; the paper ABC runs unbounded.  ``best`` is
+    a :class:`~.optimum.BestKnownOptima` (None: the packaged file).
+    """
+    robot, library = common.models(robot_file, gesture_file)
+    cases = common.select_cases(robot, library, None, joints)
+    joint_list = list(dict.fromkeys(j for _, j in cases))
+    specs = {k: common.lookup_spec(k) for k in KEYS}
+    deadlines = {'abc-default': deadline, 'abc-paper': None}
+    best, notes = _best_known(best, robot, library)
     info = common.machine_info()
     # Warm-up (imports, caches): one untimed library run of each.
     for k in KEYS:
@@ -189,6 +195,41 @@ def _ms(x):
     return common.fmt(1000 * x, 1)
 
 
+def _print_quality(out, q):
+    """Print the quality half of ``bench speed``: the share within 0.5%, per case."""
+    out.write('\nshare of runs within 0.5% of the best-known optimum, per case '
+              '(ours | paper ABC)\n')
+    rows = []
+    for a, b in zip(q['abc-default']['cases'], q['abc-paper']['cases']):
+        rows.append([a['gesture'], a['joint'].replace('right_arm_', ''),
+                     common.fmt(a['optimum']), f'{100 * a["share_within"]:.0f}%',
+                     common.fmt(100 * a['max_gap'], 3), f'{100 * b["share_within"]:.0f}%',
+                     common.fmt(100 * b['median_gap'], 2), common.fmt(100 * b['max_gap'], 2)])
+    out.write(common.text_table(['gesture', 'joint', 'optimum', 'ours within',
+                                 'ours max gap %', 'paper within', 'paper median gap %',
+                                 'paper max gap %'], rows))
+    for k in ('abc-default', 'abc-paper'):
+        qq = q[k]
+        w = qq['worst_case']
+        out.write(f'{common.lookup_spec(k).label}: {100 * qq["share_within_overall"]:.2f}% of '
+                  f'runs within 0.5% overall; worst case {w["gesture"]} {w["joint"]}: '
+                  f'{100 * w["share_within"]:.0f}% (max gap {100 * w["max_gap"]:.3f}%)\n')
+        below = [cc for cc in qq['cases'] if cc['below_optimum']]
+        for cc in below:
+            out.write(f'  note: {cc["below_optimum"]} run(s) beat the stored optimum of '
+                      f'{cc["gesture"]} {cc["joint"]}; rerun `bench optimum --write`\n')
+    worst = min(c['share_within'] for c in q['abc-default']['cases'])
+    out.write(f'target >= {100 * TARGET_SHARE:.0f}% within 0.5% in every case: '
+              f'{_verdict(worst >= TARGET_SHARE)} (worst {100 * worst:.0f}%)\n')
+    e = q['equal_or_better']
+    out.write(f'quality equal or better than the paper ABC (share within 0.5% and median '
+              f'score): {e["equal_or_better"]}/{e["cases"]} cases\n')
+    for w in e['worse']:
+        out.write(f'  worse: {w["gesture"]} {w["joint"]}: within {100 * w["share_ours"]:.0f}% '
+                  f'vs {100 * w["share_paper"]:.0f}%, median {w["median_ours"]:.4f} vs '
+                  f'{w["median_paper"]:.4f}\n')
+
+
 def _print(out, s, out_dir):
     c = s['config']
     out.write(common.format_machine(s['machine'], 'machine at start') + '\n')
@@ -221,37 +262,7 @@ def _print(out, s, out_dir):
     if q is None:
         out.write(f'written: {out_dir / "runs.csv"}, {out_dir / "summary.json"}\n')
         return
-    out.write('\nshare of runs within 0.5% of the best-known optimum, per case '
-              '(ours | paper ABC)\n')
-    rows = []
-    for a, b in zip(q['abc-default']['cases'], q['abc-paper']['cases']):
-        rows.append([a['gesture'], a['joint'].replace('right_arm_', ''),
-                     common.fmt(a['optimum']), f'{100 * a["share_within"]:.0f}%',
-                     common.fmt(100 * a['max_gap'], 3), f'{100 * b["share_within"]:.0f}%',
-                     common.fmt(100 * b['median_gap'], 2), common.fmt(100 * b['max_gap'], 2)])
-    out.write(common.text_table(['gesture', 'joint', 'optimum', 'ours within',
-                                 'ours max gap %', 'paper within', 'paper median gap %',
-                                 'paper max gap %'], rows))
-    for k in ('abc-default', 'abc-paper'):
-        qq = q[k]
-        w = qq['worst_case']
-        out.write(f'{common.lookup_spec(k).label}: {100 * qq["share_within_overall"]:.2f}% of '
-                  f'runs within 0.5% overall; worst case {w["gesture"]} {w["joint"]}: '
-                  f'{100 * w["share_within"]:.0f}% (max gap {100 * w["max_gap"]:.3f}%)\n')
-        below = [cc for cc in qq['cases'] if cc['below_optimum']]
-        for cc in below:
-            out.write(f'  note: {cc["below_optimum"]} run(s) beat the stored optimum of '
-                      f'{cc["gesture"]} {cc["joint"]}; rerun `bench optimum --write`\n')
-    worst = min(c['share_within'] for c in q['abc-default']['cases'])
-    out.write(f'target >= {100 * TARGET_SHARE:.0f}% within 0.5% in every case: '
-              f'{_verdict(worst >= TARGET_SHARE)} (worst {100 * worst:.0f}%)\n')
-    e = q['equal_or_better']
-    out.write(f'quality equal or better than the paper ABC (share within 0.5% and median '
-              f'score): {e["equal_or_better"]}/{e["cases"]} cases\n')
-    for w in e['worse']:
-        out.write(f'  worse: {w["gesture"]} {w["joint"]}: within {100 * w["share_ours"]:.0f}% '
-                  f'vs {100 * w["share_paper"]:.0f}%, median {w["median_ours"]:.4f} vs '
-                  f'{w["median_paper"]:.4f}\n')
+    _print_quality(out, q)
     out.write(f'written: {out_dir / "runs.csv"}, {out_dir / "summary.json"}\n')
 
 

@@ -1,16 +1,17 @@
 """
 The ``namo-recovery`` command line, one module per command group.
 
+The commands parse their options and call the package: the benchmarks in
+``benchmarks/``, the engine in ``recovery/``, the nodes through ``ros/client.py`` and
+``ros/player_client.py`` (imported when a ROS command runs; no rclpy here).
+
 - :mod:`.main`: the parser and the offline commands (``show``, ``score``, ``solve``);
 - :mod:`.bench`: ``bench paper | optimum | speed | deadline`` and ``plot``;
 - :mod:`.beyond`: the benchmarks of the extensions beyond the paper;
+- :mod:`.node_bench`: ``bench latency | stream | product``, the benchmarks of a node;
 - :mod:`.node_commands`: ``fault``, ``clear``, ``reconfigure``, ``library`` against a
-  running node (rclpy imported lazily, as in every ROS command);
+  running node;
 - :mod:`.demo`: ``demo``, a private node driven end to end;
-- :mod:`.latency_bench`: ``bench latency``;
-- :mod:`.product_bench`: ``bench product``, the served problem (offline parts in
-  ``benchmarks/product.py``, the DDS parts here);
-- :mod:`.stream_bench_command`: ``bench stream`` (the measurement is in ``ros/``);
 - :mod:`.export`: ``export --format play_motion2`` (from the running node or a solve);
 - :mod:`.player_commands`: ``play``, ``demo-play`` and ``bench detection``, around
   ``gesture_player``;
@@ -19,7 +20,6 @@ The ``namo-recovery`` command line, one module per command group.
 - :mod:`.settings_command`: ``settings``, the parameter file and tables written from the
   settings' declaration;
 - :mod:`.ros_common`: what the ROS commands share (``--namespace``, errors, tables);
-- :mod:`.private_node`: the node process that ``demo`` and ``bench latency`` start;
 - :mod:`.common`: argument parsing shared by the groups (faults, the setting options);
 - :mod:`.__main__`: ``python -m namo_fault_recovery.cli``.
 """

@@ -10,8 +10,6 @@ import math
 from pathlib import Path
 import sys
 
-import numpy as np
-
 from .common import gesture_and_keyframe, parse_faults, Parser, UsageError
 
 EXIT_USAGE = 2
@@ -27,7 +25,8 @@ def _positive_int(option, value, minimum=1):
     return value
 
 
-def _models(args):
+def models_of(args):
+    """Return (robot, library) of a command's ``--robot-file`` and ``--gesture-file``."""
     from ..benchmarks import common
     return common.models(getattr(args, 'robot_file', None), getattr(args, 'gesture_file', None))
 
@@ -48,7 +47,8 @@ def _keys_or_usage(keys, option='--algorithms'):
         raise _usage(f'{option}: {exc}') from None
 
 
-def _out_dir(args, name):
+def out_dir_of(args, name):
+    """Return a command's ``--out`` directory (default ``bench_out/<name>``)."""
     from ..benchmarks import common
     return Path(args.out) if args.out else Path(common.DEFAULT_OUT_ROOT) / name
 
@@ -60,12 +60,12 @@ def cmd_bench_paper(args, out):
     _positive_int('--reps', reps)
     _positive_int('--jobs', args.jobs)
     joints = args.joints or (list(paper.QUICK_JOINTS) if args.quick else None)
-    robot, library = _models(args)
+    robot, library = models_of(args)
     _cases_or_usage(robot, library, args.gestures, joints)
     keys = _keys_or_usage(args.algorithms)
     if args.deadline is not None and not (math.isfinite(args.deadline) and args.deadline > 0):
         raise _usage(f'--deadline: expected a number of seconds > 0, got {args.deadline}')
-    out_dir = _out_dir(args, 'paper-quick' if args.quick else 'paper')
+    out_dir = out_dir_of(args, 'paper-quick' if args.quick else 'paper')
     paper.run_paper(out, out_dir, reps=reps, jobs=args.jobs, keys=keys, gestures=args.gestures,
                     joints=joints, seed_base=args.seed_base, deadline=args.deadline,
                     robot_file=args.robot_file, gesture_file=args.gesture_file,
@@ -79,7 +79,7 @@ def cmd_bench_optimum(args, out):
     _positive_int('--starts', args.starts, 0)
     _positive_int('--seeds', args.seeds, 0)
     _positive_int('--maxiter', args.maxiter)
-    robot, library = _models(args)
+    robot, library = models_of(args)
     cases = _cases_or_usage(robot, library, args.gestures, args.joints)
     keys = _keys_or_usage(args.algorithms)
     write = None
@@ -96,7 +96,7 @@ def cmd_bench_optimum(args, out):
                                   progress=not args.quiet)
     except FileNotFoundError as exc:
         raise _usage(f'--stored: {exc}') from None
-    out_dir = _out_dir(args, 'optimum')
+    out_dir = out_dir_of(args, 'optimum')
     common.write_json(out_dir / 'summary.json', doc)
     out.write(f'written: {out_dir / "summary.json"}\n')
     return 0
@@ -107,11 +107,11 @@ def cmd_bench_speed(args, out):
     from ..benchmarks import speed
     _positive_int('--reps', args.reps)
     _positive_int('--sequential-reps', args.sequential_reps, 0)
-    robot, library = _models(args)
+    robot, library = models_of(args)
     _cases_or_usage(robot, library, None, args.joints)
     if args.deadline is not None and not (math.isfinite(args.deadline) and args.deadline > 0):
         raise _usage(f'--deadline: expected a number of seconds > 0, got {args.deadline}')
-    speed.run_speed(out, _out_dir(args, 'speed'), reps=args.reps, joints=args.joints,
+    speed.run_speed(out, out_dir_of(args, 'speed'), reps=args.reps, joints=args.joints,
                     seed_base=args.seed_base, deadline=args.deadline,
                     robot_file=args.robot_file, gesture_file=args.gesture_file,
                     progress=not args.quiet, sequential_reps=args.sequential_reps)
@@ -129,7 +129,7 @@ def cmd_bench_deadline(args, out):
     if unknown:
         raise _usage(f'--algorithms: unknown key {unknown[0]!r}; expected some of '
                      f'{", ".join(deadline.UNBOUNDED)}')
-    deadline.run_deadline(out, _out_dir(args, 'deadline'), deadlines=tuple(args.deadlines),
+    deadline.run_deadline(out, out_dir_of(args, 'deadline'), deadlines=tuple(args.deadlines),
                           reps=args.reps, keys=tuple(args.algorithms), burner=not args.no_burner,
                           robot_file=args.robot_file, gesture_file=args.gesture_file,
                           progress=not args.quiet)
@@ -143,10 +143,10 @@ def cmd_plot(args, out):
     A single pose is drawn as arm skeletons; a motion (several keyframes) as fingertip
     paths: desired, unadapted and adapted, like the second source paper's Fig. 5-7.
     """
-    from ..benchmarks import common, plotting
+    from ..benchmarks import plotting
     from ..model.gestures import load_library
     from ..recovery.engine import RecoverySettings
-    robot = _models(args)[0]
+    robot = models_of(args)[0]
     library = load_library(robot, getattr(args, 'gesture_file', None))
     gesture = gesture_and_keyframe(library, args.gesture, args.keyframe)
     faults = parse_faults(robot, args.fault or [])
@@ -160,44 +160,15 @@ def cmd_plot(args, out):
     tag = '_'.join([j.replace('_arm_joint', '') for j in faults]
                    + ([f'tool{args.tool:g}'] if args.tool else []))
     path = Path(args.out) if args.out else Path(f'{gesture.name}_{tag}.png')
-    # The node's settings, with the options given; the gesture alone, locked as the
-    # whole library would be.
     try:
         settings = RecoverySettings(optimizer=args.algorithm, optimizer_preset=args.preset,
                                     trajectory_method=args.method,
                                     tool_length_mm=float(args.tool))
-        result = common.run_recover(robot, library, faults, settings, seed=args.seed,
-                                    deadline=args.deadline, gestures=[gesture.name])
+        plotting.plot_gesture(out, robot, library, gesture.name, faults, settings, path,
+                              seed=args.seed, deadline=args.deadline, keyframe=args.keyframe)
     except ValueError as exc:
         raise _usage(str(exc)) from None
-    g = result[gesture.name]
-    for joint, angle in result.locks.items():
-        out.write(f'lock {joint} = {math.degrees(angle):.2f} deg\n')
-    if len(gesture.keyframes) > 1:
-        plotting.plot_motion(robot, gesture, result, path)
-        out.write(f'{g.message}\n  fingertip error (mm): unadapted mean '
-                  f'{g.tip_error_before_mm:.1f}; adapted mean {g.tip_error_mm:.1f}, max '
-                  f'{g.tip_error_max_mm:.1f}; {g.nfev} evaluations, '
-                  f'{1000 * result.wall_time:.0f} ms\n')
-        for note in result.notes:
-            out.write(f'  note: {note}\n')
-        out.write(f'written: {path}\n')
-        return 0
-    plotting.plot_reconfiguration(robot, library, result, gesture.name, path,
-                                  keyframe=args.keyframe)
-    kf = g.keyframes[args.keyframe]
-    out.write(f'{gesture.name}: score {g.score_before:.4f} -> {g.score_after:.4f} '
-              f'({settings.optimizer}, {g.status}, {1000 * g.wall_time:.1f} ms)\n')
-    for side in gesture.arms:
-        out.write(f'  {side:5s} reference    (deg) '
-                  f'{_deg(gesture.keyframes[args.keyframe].arm(side))}\n')
-        out.write(f'  {side:5s} reconfigured (deg) {_deg(kf.arm(side))}\n')
-    out.write(f'written: {path}\n')
     return 0
-
-
-def _deg(q):
-    return '[' + ', '.join(f'{x:7.2f}' for x in np.degrees(q)) + ']'
 
 
 def _add_common(p):
@@ -206,22 +177,10 @@ def _add_common(p):
     p.add_argument('--quiet', action='store_true', help='no progress lines on stderr')
 
 
-def register(subparsers):
-    """
-    Add the ``bench`` and ``plot`` commands to the main parser's subparsers.
-
-    Returns the ``bench`` command's own subparsers, so that more benchmarks can be
-    added to it (``add_parser(...)`` with ``set_defaults(func=...)``).
-    """
+def _add_paper(bench_sub):
+    """Add ``bench paper``: the paper's Tables 3-6."""
     from ..benchmarks.common import ALGORITHM_SPECS, PAPER_LINEUP
-    from ..benchmarks.deadline import DEADLINES, DEFAULT_KEYS
     keys = ', '.join(ALGORITHM_SPECS)
-
-    bench = subparsers.add_parser('bench', help='benchmarks that print figures')
-    bench_sub = bench.add_subparsers(dest='bench_command', metavar='BENCHMARK',
-                                     parser_class=Parser)
-    bench_sub.required = True
-
     p = bench_sub.add_parser('paper', help="reproduce the paper's Tables 3-6 (resumable)")
     p.add_argument('--reps', type=int, default=None,
                    help='repetitions per case (default 100; 5 with --quick)')
@@ -241,6 +200,11 @@ def register(subparsers):
     _add_common(p)
     p.set_defaults(func=cmd_bench_paper)
 
+
+def _add_optimum(bench_sub):
+    """Add ``bench optimum``: the best-known optima and the gaps."""
+    from ..benchmarks.common import ALGORITHM_SPECS, PAPER_LINEUP
+    keys = ', '.join(ALGORITHM_SPECS)
     p = bench_sub.add_parser('optimum', help='best-known optimum of every case, and the gaps')
     p.add_argument('--starts', type=int, default=1000,
                    help='random starts per case besides the reference start (default 1000)')
@@ -262,6 +226,9 @@ def register(subparsers):
     _add_common(p)
     p.set_defaults(func=cmd_bench_optimum)
 
+
+def _add_speed(bench_sub):
+    """Add ``bench speed``: whole-library time and quality."""
     p = bench_sub.add_parser('speed', help='whole-library time and quality: ours vs paper ABC')
     p.add_argument('--reps', type=int, default=100, help='seeds per failed joint (default 100)')
     p.add_argument('--joints', nargs='+', default=None, metavar='J',
@@ -275,6 +242,10 @@ def register(subparsers):
     _add_common(p)
     p.set_defaults(func=cmd_bench_speed)
 
+
+def _add_deadline(bench_sub):
+    """Add ``bench deadline``: the worst deadline overrun."""
+    from ..benchmarks.deadline import DEADLINES, DEFAULT_KEYS
     p = bench_sub.add_parser('deadline', help='worst deadline overrun, idle and with a burner')
     p.add_argument('--deadlines', nargs='+', type=float, default=list(DEADLINES),
                    metavar='S', help='deadlines in s (default 0.05 0.1 0.25 1)')
@@ -286,6 +257,9 @@ def register(subparsers):
     _add_common(p)
     p.set_defaults(func=cmd_bench_deadline)
 
+
+def _add_plot(subparsers):
+    """Add ``plot``: one gesture before and after adaptation."""
     p = subparsers.add_parser('plot', help='draw a gesture before and after adaptation (PNG)')
     p.add_argument('--gesture', required=True,
                    help='gesture name, e.g. wai, or circle with --gesture-file '
@@ -305,4 +279,20 @@ def register(subparsers):
     p.add_argument('--deadline', type=float, default=1.0, help='deadline in s (default 1)')
     p.add_argument('--keyframe', type=int, default=0, help='keyframe index (default 0)')
     p.set_defaults(func=cmd_plot)
+
+
+def register(subparsers):
+    """
+    Add the ``bench`` and ``plot`` commands to the main parser's subparsers.
+
+    Returns the ``bench`` command's own subparsers, so that more benchmarks can be
+    added to it (``add_parser(...)`` with ``set_defaults(func=...)``).
+    """
+    bench = subparsers.add_parser('bench', help='benchmarks that print figures')
+    bench_sub = bench.add_subparsers(dest='bench_command', metavar='BENCHMARK',
+                                     parser_class=Parser)
+    bench_sub.required = True
+    for add in (_add_paper, _add_optimum, _add_speed, _add_deadline):
+        add(bench_sub)
+    _add_plot(subparsers)
     return bench_sub

@@ -1,23 +1,17 @@
 """The ``bench lock|pairs|bimanual|collision`` commands: the capabilities beyond the paper."""
 
-from pathlib import Path
+from .bench import models_of, out_dir_of
+from .common import UsageError
 
 
 def _out(args, name):
-    from ..benchmarks.common import DEFAULT_OUT_ROOT
-    path = Path(args.out) if args.out else Path(DEFAULT_OUT_ROOT) / name
+    path = out_dir_of(args, name)
     path.mkdir(parents=True, exist_ok=True)
     return path
 
 
-def _models(args):
-    from ..benchmarks import common
-    return common.models(getattr(args, 'robot_file', None), getattr(args, 'gesture_file', None))
-
-
 def _check_positive(option, value):
     if value < 1:
-        from .common import UsageError
         raise UsageError(f'{option}: expected an integer >= 1, got {value}')
 
 
@@ -25,7 +19,7 @@ def cmd_lock(args, out):
     """Average vs optimal lock for every right-arm joint."""
     from ..benchmarks import beyond
     _check_positive('--seeds', args.seeds)
-    robot, library = _models(args)
+    robot, library = models_of(args)
     beyond.bench_lock(out, _out(args, 'lock'), seeds=args.seeds, robot=robot, library=library)
     return 0
 
@@ -33,7 +27,7 @@ def cmd_lock(args, out):
 def cmd_pairs(args, out):
     """Every pair of right-arm joints failing at once."""
     from ..benchmarks import beyond
-    robot, library = _models(args)
+    robot, library = models_of(args)
     beyond.bench_pairs(out, _out(args, 'pairs'), seed=args.seed, robot=robot, library=library)
     return 0
 
@@ -42,7 +36,7 @@ def cmd_bimanual(args, out):
     """Wai: stage 1 vs stage 2 under each single failure."""
     from ..benchmarks import beyond
     _check_positive('--seeds', args.seeds)
-    robot, library = _models(args)
+    robot, library = models_of(args)
     beyond.bench_bimanual(out, _out(args, 'bimanual'), seeds=args.seeds, robot=robot,
                           library=library)
     return 0
@@ -51,7 +45,7 @@ def cmd_bimanual(args, out):
 def cmd_collision(args, out):
     """Colliding results without and with the collision term; the Fig. 7g case."""
     from ..benchmarks import beyond
-    robot, library = _models(args)
+    robot, library = models_of(args)
     beyond.bench_collision(out, _out(args, 'collision'), seed=args.seed, robot=robot,
                            library=library, png=not args.no_plots)
     return 0

@@ -9,10 +9,10 @@ import importlib.util
 from pathlib import Path
 import time
 
-from .private_node import private_domain, PrivateNode
 from .ros_common import (add_connection_arguments, CommandError, describe_fault,
                          domain_id, EXIT_FAILURE, fault_angles, namespace, open_client,
                          report_library, wrap)
+from ..runtime.private_node import private_domain, PrivateNode
 
 DEFAULT_FAULT = 'right_arm_joint2'
 
@@ -72,7 +72,7 @@ def cmd_demo(args, out):
     domain = domain_id(args)
     domain = private_domain() if domain is None else domain
     failed = True
-    node = PrivateNode(args, domain, ns, out)
+    node = PrivateNode.for_args(args, domain, ns, out)
     try:
         with open_client(args, domain) as client:
             _run(args, client, out)

@@ -2,13 +2,13 @@
 ``namo-recovery export --format play_motion2``: the library as a play_motion2 file.
 
 The library comes from the running ``recovery_node`` (its current ``/gesture_library``
-version, over ROS) or, with ``--fault``, from a solve in this process
-(:func:`namo_fault_recovery.recovery.engine.recover`, no ROS).
+version, through :class:`~namo_fault_recovery.ros.client.RecoveryClient`) or, with
+``--fault``, from a solve in this process (:func:`namo_fault_recovery.recovery.engine.
+recover`, no ROS).
 """
 
 import math
 from pathlib import Path
-import time
 
 from .common import parse_faults, UsageError
 from ..model.gestures import load_library
@@ -16,7 +16,6 @@ from ..model.robot import load_robot
 from ..playback.export import dump, motions_document
 
 FORMATS = ('play_motion2',)
-_SETTLE = 0.5
 
 
 def _from_solve(args, robot, library):
@@ -30,44 +29,15 @@ def _from_solve(args, robot, library):
 
 def receive_library(domain_id, timeout):
     """Return ``[(name, joints, times, positions)]`` of the newest /gesture_library."""
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    from trajectory_msgs.msg import JointTrajectory
-
-    from ..ros.messages import stamp_key, trajectory_angles
-    context = Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    node = rclpy.create_node('namo_recovery_export', context=context)
-    versions, last = {}, [None]
-
-    def on_library(msg):
-        versions.setdefault(stamp_key(msg.header.stamp), {})[msg.header.frame_id] = msg
-        last[0] = time.monotonic()
-    latched = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    node.create_subscription(JointTrajectory, '/gesture_library', on_library, latched)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    end = time.monotonic() + timeout
+    from ..ros.client import NodeUnreachable, RecoveryClient
     try:
-        while time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.05)
-            if last[0] is not None and time.monotonic() - last[0] > _SETTLE:
-                break
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
-    if not versions:
+        with RecoveryClient('/', domain_id) as client:
+            library = client.current_library(timeout, diagnostics_timeout=0.0)
+    except NodeUnreachable:
         raise UsageError(f'nothing received on /gesture_library within {timeout:g} s; is '
-                         f'recovery_node running (or give --fault to solve here)?')
-    out = []
-    for name, msg in versions[max(versions)].items():
-        positions, times = trajectory_angles(msg)
-        out.append((name, list(msg.joint_names), times, positions))
-    return out
+                         f'recovery_node running (or give --fault to solve here)?') from None
+    joints = list(library.joint_names)
+    return [(g.name, joints, g.times, g.positions) for g in library.result.gestures]
 
 
 def cmd_export(args, out):

@@ -153,31 +153,20 @@ def solve_settings(args):
 def cmd_solve(args, out):
     """Recover the library for a fault set with :func:`recover`; print the result."""
     from dataclasses import replace
-    from ..model.gestures import GestureLibrary
-    from ..recovery.engine import recover
-    from ..recovery.locks import resolve_locks
+    from ..benchmarks.common import recover_subset
     robot, library = _load_models(args)
     faults = parse_faults(robot, args.fault or [])
     settings, clock = solve_settings(args)
-    whole, requested, notes = library, dict(faults), []
-    if args.gesture:
-        for name in args.gesture:
-            if name not in library.names:
-                raise UsageError(f'--gesture: unknown gesture {name!r}; expected one of '
-                                 f'{", ".join(library.names)}')
-        if settings.lock_strategy != 'optimal':
-            # Lock angles as the whole library gets them (the average is over it).
-            try:
-                faults, notes = resolve_locks(robot, whole, faults, settings.lock_strategy)
-            except ValueError as exc:
-                raise UsageError(f'--fault: {exc}') from None
-        library = GestureLibrary(tuple(library[n] for n in dict.fromkeys(args.gesture)),
-                                 library.source)
+    for name in args.gesture or ():
+        if name not in library.names:
+            raise UsageError(f'--gesture: unknown gesture {name!r}; expected one of '
+                             f'{", ".join(library.names)}')
     try:
-        result = recover(robot, library, faults, settings, seed=args.seed, clock=clock)
+        result, notes = recover_subset(robot, library, faults, settings, args.gesture,
+                                       seed=args.seed, clock=clock)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    result = replace(result, faults=requested, notes=tuple(notes) + result.notes)
+    result = replace(result, faults=dict(faults), notes=tuple(notes) + result.notes)
     if args.json:
         out.write(json.dumps(solve_document(result, robot, library), indent=2) + '\n')
         return 0
@@ -263,15 +252,12 @@ def build_parser():
     p.set_defaults(func=cmd_score)
 
     add_solve_parser(sub)
-    from . import (bench, beyond, demo, export, latency_bench, node_commands,
-                   player_commands, product_bench, stream_bench_command)
+    from . import bench, beyond, demo, export, node_bench, node_commands, player_commands
     bench_sub = bench.register(sub)
     beyond.register(bench_sub)
     node_commands.register(sub, parser)      # fault, clear, reconfigure, library; --namespace
     demo.register(sub)                       # demo
-    latency_bench.register_bench(bench_sub)  # bench latency
-    stream_bench_command.register(bench_sub)   # bench stream
-    product_bench.register_bench(bench_sub)    # bench product
+    node_bench.register(bench_sub)           # bench latency, stream, product
     export.register(sub)                     # export --format play_motion2
     player_commands.register(sub, bench_sub)   # play, demo-play, bench detection
     from . import urdf as urdf_cli

@@ -2,10 +2,12 @@
 What the ROS commands of ``namo-recovery`` share: connection options, errors, tables.
 
 Every ROS command (``fault``, ``clear``, ``reconfigure``, ``library``, ``demo``,
-``bench latency``) is a thin caller of :class:`~namo_fault_recovery.ros.client.
-RecoveryClient`.  They take ``--namespace NS`` (the node's namespace, default the root)
-and ``--domain-id N`` (default ``$ROS_DOMAIN_ID``, else 0), either before the command
-name or after it.  Nothing here imports rclpy: the client module is imported when a
+``export``, ``play``, ``demo-play``, ``bench latency | stream | product``) is a thin
+caller of :class:`~namo_fault_recovery.ros.client.RecoveryClient` (the player's
+services: :class:`~namo_fault_recovery.ros.player_client.PlayerClient`).  Those of
+the node take ``--namespace NS`` (the node's namespace, default the root) and
+``--domain-id N`` (default ``$ROS_DOMAIN_ID``, else 0), either before the command name
+or after it.  Nothing here imports rclpy: the client module is imported when a
 command runs, so the offline commands work without ROS.
 
 Exit codes: 0 on success, 1 when the node is unreachable, rejects the input or reports
@@ -16,16 +18,14 @@ import argparse
 import math
 import sys
 
+from ..errors import ReportedError
+
 EXIT_FAILURE = 1
 EXIT_USAGE = 2
 
 
-class CommandError(Exception):
-    """A failure reported on one line; ``code`` is the exit code."""
-
-    def __init__(self, message, code=EXIT_FAILURE):
-        super().__init__(message)
-        self.code = code
+class CommandError(ReportedError):
+    """A failure of a ROS command reported on one line; ``code`` is the exit code."""
 
 
 def add_global_arguments(parser):
@@ -74,7 +74,7 @@ def wrap(func):
             return func(args, out)
         except BadNamespace as exc:
             return _fail(exc, EXIT_USAGE)
-        except CommandError as exc:
+        except ReportedError as exc:      # CommandError, a benchmark's BenchError
             return _fail(exc, exc.code)
         except ClientError as exc:
             return _fail(exc, EXIT_FAILURE)

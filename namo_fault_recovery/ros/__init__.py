@@ -13,12 +13,16 @@ the node's runtime, ``runtime/``):
 - :mod:`.diagnostics`: ``/diagnostics`` built from a snapshot;
 - :mod:`.messages`: results to and from ROS messages, and the RViz markers.
 
-Clients and benchmarks of a running node:
+Clients of a running node (the benchmarks themselves are in ``benchmarks/``):
 
-- :mod:`.client`: the typed rclpy client of a running node, used by the ROS commands;
+- :mod:`.client`: the typed rclpy client of a running node, used by the ROS commands,
+  the benchmarks and the test harnesses (the one ``/gesture_library`` subscription);
+- :mod:`.player_client`: the client of ``gesture_player`` (its play services, and what
+  the arms were commanded);
+- :mod:`.joint_state_stream`: a ``/joint_states`` stream as a robot's drivers publish
+  it, in a thread or a child process;
 - :mod:`.spun_node`: an rclpy node in a context of its own, spun by a background thread
-  (the client, the benchmarks, the demos and the tests each use one);
-- :mod:`.stream_bench`: the deadline under a ``/joint_states`` stream and a CPU burner.
+  (the clients and the tests each use one), and ``wait_until`` for what it records.
 
 The gesture player and the simulated robot:
 

@@ -28,6 +28,8 @@ import os
 import threading
 import time
 
+from .messages import duration_seconds, stamp_key
+from .spun_node import call_service, SpunClient, SpunNode, wait_on
 from ..recovery.result import GestureResult, LibraryResult
 from ..runtime import diagnostic_keys as keys
 
@@ -157,7 +159,7 @@ def _gesture(name, msg, values):
     """Return one GestureResult from its trajectory and the 'reconfiguration' values."""
     def field(key, default=None):
         return values.get(keys.gesture_key(name, key), default)
-    times = tuple(p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in msg.points)
+    times = tuple(duration_seconds(p.time_from_start) for p in msg.points)
     positions = tuple(tuple(float(a) for a in p.positions) for p in msg.points)
     pairs = field(keys.COLLIDING_PAIRS, '')
     return GestureResult(
@@ -218,11 +220,14 @@ class Inbox:
     What a client received: library versions and its node's diagnostics.
 
     Thread-safe and free of rclpy (the subscriptions' callbacks feed it; the tests can
-    too).  Every ``wait``-style predicate is called under the lock.
+    too).  Every ``wait``-style predicate is called under the lock.  ``on_library``, if
+    given, is called with ``(stamp, msg)`` after each library message is stored (outside
+    the lock): the test harness keeps its own view of the versions that way.
     """
 
-    def __init__(self, prefix):
+    def __init__(self, prefix, on_library=None):
         self.prefix = prefix
+        self._on_library = on_library
         self._cond = threading.Condition()
         self._versions = {}       # stamp ns -> {gesture: JointTrajectory}
         self._arrivals = {}       # stamp ns -> monotonic time of its latest message
@@ -232,11 +237,13 @@ class Inbox:
 
     def add_library(self, msg):
         """Take one gesture_library message (a gesture of the version its stamp names)."""
-        key = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        key = stamp_key(msg.header.stamp)
         with self._cond:
             self._versions.setdefault(key, {})[msg.header.frame_id] = msg
             self._last_arrival = self._arrivals[key] = time.monotonic()
             self._cond.notify_all()
+        if self._on_library is not None:
+            self._on_library(key, msg)
 
     def add_diagnostics(self, array):
         """Take one DiagnosticArray; keep it if it holds statuses of our node."""
@@ -248,16 +255,7 @@ class Inbox:
 
     def wait(self, predicate, timeout):
         """Return ``predicate()`` (called under the lock) once truthy, or None at timeout."""
-        end = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                value = predicate()
-                if value:
-                    return value
-                remaining = end - time.monotonic()
-                if remaining <= 0:
-                    return None
-                self._cond.wait(min(remaining, 0.05))
+        return wait_on(self._cond, predicate, timeout)
 
     def settled(self, quiet=SETTLE_SEC):
         """
@@ -283,6 +281,11 @@ class Inbox:
                     return stamp,
             return None
         return find
+
+    def version_count(self):
+        """Return how many library versions (distinct stamps) were received so far."""
+        with self._cond:
+            return len(self._versions)
 
     def newest_stamp(self):
         """Return the stamp of the newest version received so far (complete or not), or 0."""
@@ -318,7 +321,7 @@ class Inbox:
             return None
         return self.wait(find, timeout)
 
-    def library(self, stamp, diagnostics_timeout):
+    def library(self, stamp: int, diagnostics_timeout: float) -> PublishedLibrary:
         """Return version ``stamp`` as a PublishedLibrary, described if diagnostics come."""
         diagnostics = self.latest_diagnostics(lambda d: d.describes(stamp),
                                               timeout=diagnostics_timeout)
@@ -328,24 +331,30 @@ class Inbox:
         return rebuild_library(stamp, msgs, diagnostics, received)
 
 
-class RecoveryClient:
+class RecoveryClient(SpunClient):
     """A client of the ``recovery_node`` in ``namespace``, in its own rclpy Context."""
 
-    def __init__(self, namespace='/', domain_id=None, node_name=keys.NODE_NAME):
+    def __init__(self, namespace: str = '/', domain_id: int = None,
+                 node_name: str = keys.NODE_NAME, on_library=None, client_name: str = None):
+        """
+        Connect to the node ``node_name`` in ``namespace`` and ``domain_id``.
+
+        ``on_library(stamp, msg)`` is called for every gesture_library message (see
+        :class:`Inbox`): the client's one subscription serves every reader.
+        ``client_name`` names the client's own rclpy node (default: unique per client).
+        """
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
         from diagnostic_msgs.msg import DiagnosticArray
         from sensor_msgs.msg import JointState
         from trajectory_msgs.msg import JointTrajectory
 
-        from .spun_node import SpunNode
-
         self.namespace = normalise_namespace(namespace)
         self.node_fqn = keys.node_fqn(self.namespace, node_name)
-        self.inbox = Inbox(keys.status_prefix(self.node_fqn))
+        self.inbox = Inbox(keys.status_prefix(self.node_fqn), on_library)
         self.domain_id = domain_id
         self._joint_state = JointState
-        self._spun = SpunNode(f'namo_recovery_client_{os.getpid()}_{next(_COUNTER)}',
-                              domain_id, self.namespace)
+        client_name = client_name or f'namo_recovery_client_{os.getpid()}_{next(_COUNTER)}'
+        self._spun = SpunNode(client_name, domain_id, self.namespace)
         self.context, self.node = self._spun.context, self._spun.node
         latched = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
                              reliability=ReliabilityPolicy.RELIABLE,
@@ -360,31 +369,21 @@ class RecoveryClient:
 
     # --- life cycle and names ---------------------------------------------------------
 
-    def close(self):
-        """Stop spinning and shut the client's context down."""
-        self._spun.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
     @property
-    def fault_topic(self):
+    def fault_topic(self) -> str:
         """Return the resolved name of the fault topic, e.g. '/robot1/actuator_fault'."""
         return self._fault_pub.topic_name
 
     @property
-    def library_topic(self):
+    def library_topic(self) -> str:
         """Return the resolved name of the library topic."""
         return self._library_sub.topic_name
 
-    def resolve_service(self, name):
+    def resolve_service(self, name: str) -> str:
         """Return a service name resolved in the client's namespace."""
         return self.node.resolve_service_name(name)
 
-    def where(self):
+    def where(self) -> str:
         """Return 'namespace N, ROS_DOMAIN_ID=D' for messages."""
         domain = self.domain_id
         if domain is None:
@@ -393,11 +392,13 @@ class RecoveryClient:
 
     # --- reading ------------------------------------------------------------------------
 
-    def latest_diagnostics(self, predicate=None, since=None, timeout=0.0):
+    def latest_diagnostics(self, predicate=None, since: float = None,
+                           timeout: float = 0.0) -> NodeDiagnostics:
         """Return the newest diagnostics of the node matching ``predicate`` (or None)."""
         return self.inbox.latest_diagnostics(predicate, since, timeout)
 
-    def current_library(self, timeout, diagnostics_timeout=DIAGNOSTICS_SEC):
+    def current_library(self, timeout: float,
+                        diagnostics_timeout: float = DIAGNOSTICS_SEC) -> PublishedLibrary:
         """
         Return the library the node publishes now, as a PublishedLibrary.
 
@@ -411,7 +412,8 @@ class RecoveryClient:
                 f'within {timeout:g} s ({self.where()}); is the node running?')
         return self.inbox.library(found[0], diagnostics_timeout)
 
-    def next_library(self, after, timeout, diagnostics_timeout=DIAGNOSTICS_SEC):
+    def next_library(self, after: int, timeout: float,
+                     diagnostics_timeout: float = DIAGNOSTICS_SEC) -> PublishedLibrary:
         """
         Return the first complete version newer than stamp ``after``, or None.
 
@@ -421,9 +423,14 @@ class RecoveryClient:
         found = self.inbox.wait(self.inbox.newer(after), timeout)
         return None if found is None else self.inbox.library(found[0], diagnostics_timeout)
 
+    def newest_library(self, diagnostics_timeout: float = 0.0) -> PublishedLibrary:
+        """Return the newest version received so far (complete or not), or None."""
+        stamp = self.inbox.newest_stamp()
+        return self.inbox.library(stamp, diagnostics_timeout) if stamp else None
+
     # --- acting -------------------------------------------------------------------------
 
-    def publish_fault(self, joints, angles=None, timeout=5.0):
+    def publish_fault(self, joints, angles=None, timeout: float = 5.0) -> None:
         """
         Publish one fault report (``angles`` in rad, one per joint, or None).
 
@@ -440,8 +447,8 @@ class RecoveryClient:
         msg.header.stamp = self.node.get_clock().now().to_msg()
         self._fault_pub.publish(msg)
 
-    def report_fault(self, joints, angles=None, timeout=15.0,
-                     diagnostics_timeout=DIAGNOSTICS_SEC):
+    def report_fault(self, joints, angles=None, timeout: float = 15.0,
+                     diagnostics_timeout: float = DIAGNOSTICS_SEC) -> FaultOutcome:
         """
         Publish a fault and wait for its outcome: a new library or the node's rejection.
 
@@ -481,18 +488,15 @@ class RecoveryClient:
             raise NodeUnreachable(
                 f'no recovery_node found: service {client.service_name} is not available '
                 f'within {timeout:g} s ({self.where()}); is the node running?')
-        done = threading.Event()
-        future = client.call_async(Trigger.Request())
-        future.add_done_callback(lambda _: done.set())
-        if not done.wait(timeout):
-            client.remove_pending_request(future)
+        response = call_service(client, Trigger.Request(), timeout)
+        if response is None:
             raise ClientError(f'no answer from {client.service_name} within {timeout:g} s')
-        return TriggerAnswer.from_response(future.result())
+        return TriggerAnswer.from_response(response)
 
-    def reconfigure(self, timeout=15.0):
+    def reconfigure(self, timeout: float = 15.0) -> TriggerAnswer:
         """Call reconfigure_gestures (what the gesture player does); return the answer."""
         return self._trigger(RECONFIGURE_SERVICE, timeout)
 
-    def clear_faults(self, timeout=15.0):
+    def clear_faults(self, timeout: float = 15.0) -> TriggerAnswer:
         """Call clear_faults; return the answer."""
         return self._trigger(CLEAR_SERVICE, timeout)

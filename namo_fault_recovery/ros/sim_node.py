@@ -24,8 +24,6 @@ in the executor, so no callback waits for it and it never waits for a callback.
 """
 
 import math
-from pathlib import Path
-import shutil
 import sys
 import threading
 import time
@@ -50,13 +48,8 @@ _MAX_LAG = 1.0      # s behind real time before the physics lets time go
 
 def sim_command():
     """Return the command that starts the ``namo_sim`` executable (for tests and tools)."""
-    beside = Path(sys.executable).parent / NODE_NAME
-    if beside.is_file():
-        return [str(beside)]
-    found = shutil.which(NODE_NAME)
-    if found:
-        return [found]
-    return [sys.executable, '-m', 'namo_fault_recovery.ros.sim_node']
+    from ..runtime.private_node import executable_command
+    return executable_command(NODE_NAME, 'namo_fault_recovery.ros.sim_node')
 
 
 _T = ParameterType

@@ -15,6 +15,7 @@ One definition here, instead of one per caller::
 """
 
 import threading
+import time
 
 
 class SpunNode:
@@ -59,3 +60,76 @@ class SpunNode:
         self._rclpy.try_shutdown(context=self.context)
         if self._thread is not None:
             self._thread.join(timeout=5.0)
+
+
+class SpunClient:
+    """
+    A client that owns a :class:`SpunNode` (``self._spun``): ``close()`` and ``with``.
+
+    The base of :class:`.client.RecoveryClient` and :class:`.player_client.PlayerClient`.
+    """
+
+    def close(self) -> None:
+        """Stop spinning and shut the client's context down."""
+        self._spun.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def wait_until(predicate, timeout, period=0.02, lock=None):
+    """
+    Return ``predicate()`` once truthy (called under ``lock`` if given), or None.
+
+    How a caller of a spun node waits for what the node's callbacks record: polled every
+    ``period`` s for at most ``timeout`` s.
+    """
+    end = time.monotonic() + timeout
+    while True:
+        if lock is None:
+            value = predicate()
+        else:
+            with lock:
+                value = predicate()
+        if value:
+            return value
+        if time.monotonic() >= end:
+            return None
+        time.sleep(period)
+
+
+def wait_on(condition, predicate, timeout, period=0.05):
+    """
+    Return ``predicate()`` once truthy, or None after ``timeout`` s.
+
+    ``predicate`` is called holding ``condition`` (a ``threading.Condition`` that the
+    callbacks notify), woken by each notification or every ``period`` s.
+    """
+    end = time.monotonic() + timeout
+    with condition:
+        while True:
+            value = predicate()
+            if value:
+                return value
+            remaining = end - time.monotonic()
+            if remaining <= 0:
+                return None
+            condition.wait(min(remaining, period))
+
+
+def call_service(client, request, timeout):
+    """
+    Call an rclpy service ``client`` whose node another thread spins; return the response.
+
+    Returns None when no answer came within ``timeout`` s (the request is dropped).
+    """
+    done = threading.Event()
+    future = client.call_async(request)
+    future.add_done_callback(lambda _: done.set())
+    if not done.wait(timeout):
+        client.remove_pending_request(future)
+        return None
+    return future.result()

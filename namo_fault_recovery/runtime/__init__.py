@@ -17,5 +17,7 @@ fast unit tests that need no DDS.
 - :mod:`.persistence`: the state file in the order the run book needs, off the hot paths;
 - :mod:`.restore`: the checks before publishing, and the restore decision;
 - :mod:`.state_store`: the persisted fault set and library (no ROS types);
-- :mod:`.diagnostic_keys`: the ``/diagnostics`` names and keys shared by writer and readers.
+- :mod:`.diagnostic_keys`: the ``/diagnostics`` names and keys shared by writer and readers;
+- :mod:`.private_node`: the node processes that the demos, the node benchmarks and the
+  tests start (the executables' commands, a private domain, one way to stop a process).
 """

@@ -1,5 +1,5 @@
 """
-``namo-recovery bench latency``: fault -> library latency of a running (or private) node.
+Fault -> library latency of a running (or private) node (``namo-recovery bench latency``).
 
 For each of ``--count`` single-joint faults (cycling over the joints): clear the faults,
 publish the fault, time the arrival of the complete new library, then time a
@@ -9,18 +9,18 @@ node and DDS add, with the node's own figures of each library: ``publish_path_se
 (result in hand -> last gesture published), ``fault_to_request_sec`` and
 ``fault_sync_sec``.  ``--joint-states-hz`` streams ``/joint_states`` from another process
 meanwhile; ``--node-param`` sets a parameter of the private node (e.g.
-``contingency_table:=false`` to time the engine path only).
+``contingency_table:=false`` to time the engine path only).  Everything goes through
+:class:`~namo_fault_recovery.ros.client.RecoveryClient`; ROS is imported only when the
+benchmark runs.
 """
 
-import json
 import time
 
 import numpy as np
 
-from .private_node import private_domain, PrivateNode
-from .ros_common import (add_connection_arguments, CommandError, domain_id, EXIT_FAILURE,
-                         EXIT_USAGE, namespace, open_client, wrap)
+from .common import BenchError, EXIT_USAGE
 from ..runtime import diagnostic_keys as keys
+from ..runtime.private_node import private_domain, PrivateNode
 
 
 def percentiles(values):
@@ -39,9 +39,19 @@ class _Samples:
         self.figures = {key: [] for key, _ in NODE_FIGURES}
         self.failures = []
 
+    def add_library(self, client, library, t0):
+        """Add the latency of a fault's ``library`` (published at ``t0``) and its split."""
+        self.latencies.append(library.received - t0)
+        origin = _node_figures(client, library, self)
+        if library.described:
+            engine = 0.0 if origin in NO_ENGINE else library.result.wall_time
+            self.engine.append(engine)
+            self.overhead.append(self.latencies[-1] - engine)
+
     def report(self, count):
+        """Return the report dict; raise BenchError when nothing was measured."""
         if not self.latencies:
-            raise CommandError('no measurement succeeded: ' + '; '.join(self.failures[:3]))
+            raise BenchError('no measurement succeeded: ' + '; '.join(self.failures[:3]))
         report = {'faults': count, 'fault_to_library': percentiles(self.latencies),
                   'reconfigure_service': percentiles(self.round_trips),
                   'failures': self.failures}
@@ -74,95 +84,115 @@ def _node_figures(client, library, samples, timeout=1.0):
     return values.get(keys.LIBRARY_ORIGIN, '')
 
 
-def _answered(client, answer, stamp, timeout, what):
+def answered(client, answer, stamp, timeout, what):
     """Return the stamp of the version a Trigger answer names (else the next one)."""
     after = stamp if answer.library_stamp is None else answer.library_stamp - 1
     library = client.next_library(after, timeout, diagnostics_timeout=0.0)
     if library is None:
-        raise CommandError(f'{what} did not arrive within {timeout:g} s')
+        raise BenchError(f'{what} did not arrive within {timeout:g} s')
     return library.stamp
 
 
-def _faulted(client, joint, timeout):
-    """Publish a fault of ``joint``; return (its library or None, publication time)."""
+def clear_faults(client, timeout, stamp=None):
+    """Clear the faults; return the stamp of the library of the answer, once it arrived."""
+    stamp = client.inbox.newest_stamp() if stamp is None else stamp
+    answer = client.clear_faults(timeout)
+    if not answer.success:
+        raise BenchError(f'clear_faults failed: {answer.message}')
+    return answered(client, answer, stamp, timeout, 'the reference library after a clear')
+
+
+def fault_library(client, joints, angles, timeout, diagnostics_timeout=3.0):
+    """
+    Publish a fault; return (its first library or None, publication time).
+
+    Called after the library of a clear arrived: the next version is the fault's.  A
+    version whose ``/diagnostics`` never came (superseded at once by a refined one) is
+    accepted; a described one must lock the joints (a version already on its way when
+    the fault went out is not the fault's).
+    """
     stamp = client.inbox.newest_stamp()
     t0 = time.monotonic()
-    client.publish_fault([joint], None, timeout)
+    client.publish_fault(joints, angles, timeout)
     while True:
-        library = client.next_library(stamp, max(t0 + timeout - time.monotonic(), 0.0))
-        # A version already on its way when the fault went out is not the fault's.
-        if library is None or not library.described or joint in library.result.locks:
+        library = client.next_library(stamp, max(t0 + timeout - time.monotonic(), 0.0),
+                                      diagnostics_timeout=diagnostics_timeout)
+        if library is None or not library.described or set(joints) <= set(
+                library.result.locks):
             return library, t0
         stamp = library.stamp
 
 
-def _measure(args, client, samples, out):
-    current = client.current_library(args.timeout, diagnostics_timeout=0.0)
-    joints = list(current.joint_names)
-    if args.joints:
-        unknown = [j for j in args.joints if j not in joints]
-        if unknown:
-            raise CommandError(f'--joints: unknown joint {unknown[0]!r}', EXIT_USAGE)
-        joints = list(args.joints)
+def _measure(client, samples, count, joints, timeout, out, verbose=False):
+    """Run ``count`` clear -> fault -> reconfigure rounds; add them to ``samples``."""
+    current = client.current_library(timeout, diagnostics_timeout=0.0)
+    joints = _checked_joints(joints, current.joint_names)
     stamp = current.stamp
-    for i in range(args.count):
+    for i in range(count):
         joint = joints[i % len(joints)]
-        answer = client.clear_faults(args.timeout)
-        if not answer.success:
-            raise CommandError(f'clear_faults failed: {answer.message}')
-        stamp = _answered(client, answer, stamp, args.timeout,
-                          'the reference library after a clear')
-        library, t0 = _faulted(client, joint, args.timeout)
+        stamp = clear_faults(client, timeout, stamp)
+        library, t0 = fault_library(client, [joint], None, timeout)
         if library is None:
-            samples.failures.append(f'{joint}: no library within {args.timeout:g} s')
+            samples.failures.append(f'{joint}: no library within {timeout:g} s')
             continue
         stamp = library.stamp
-        samples.latencies.append(library.received - t0)
-        origin = _node_figures(client, library, samples)
-        if library.described:
-            engine = 0.0 if origin in NO_ENGINE else library.result.wall_time
-            samples.engine.append(engine)
-            samples.overhead.append(samples.latencies[-1] - engine)
+        samples.add_library(client, library, t0)
         t1 = time.monotonic()
-        answer = client.reconfigure(args.timeout)
+        answer = client.reconfigure(timeout)
         samples.round_trips.append(time.monotonic() - t1)
         if not answer.success:
             samples.failures.append(f'{joint}: {answer.message}')
         else:
-            stamp = _answered(client, answer, stamp, args.timeout,
-                              'the library of /reconfigure_gestures')
-        if args.verbose:
+            stamp = answered(client, answer, stamp, timeout,
+                             'the library of /reconfigure_gestures')
+        if verbose:
             out.write(f'{i + 1:3d} {joint:<18} fault->library '
                       f'{samples.latencies[-1] * 1000:8.1f} ms   service '
                       f'{samples.round_trips[-1] * 1000:8.1f} ms\n')
-    client.clear_faults(args.timeout)
+    client.clear_faults(timeout)
 
 
-def bench_latency(args, out):
-    """Measure fault-publish -> full-library-received latency against a node."""
-    domain = domain_id(args)
-    node = None
-    if args.start_node:
-        domain = private_domain() if domain is None else domain
-        node = PrivateNode(args, domain, namespace(args), out)
+def _checked_joints(joints, known):
+    if not joints:
+        return list(known)
+    unknown = [j for j in joints if j not in known]
+    if unknown:
+        raise BenchError(f'--joints: unknown joint {unknown[0]!r}', EXIT_USAGE)
+    return list(joints)
+
+
+def run_latency(out, count=50, joints=None, timeout=30.0, namespace='/', domain_id=None,
+                start_node=False, joint_states_hz=0.0, node_options=None, verbose=False):
+    """
+    Measure fault-publish -> full-library-received latency against a node.
+
+    With ``start_node`` a private node is started (``node_options``: a command's
+    ``robot_file``, ``gesture_file`` and ``node_params``) in ``domain_id`` (default a
+    private one).  Returns ``(report, failures)``: the report dict (raises BenchError
+    when no measurement succeeded) and the list of failed rounds.
+    """
+    from ..ros.client import RecoveryClient
+    node = stream = None
+    if start_node:
+        domain_id = private_domain() if domain_id is None else domain_id
+        node = PrivateNode.for_args(node_options, domain_id, namespace, out)
     samples = _Samples()
-    stream = None
     try:
-        if args.joint_states_hz > 0:
-            from ..ros.stream_bench import StreamProcess
-            stream = StreamProcess(args.joint_states_hz, domain)
-        with open_client(args, domain) as client:
-            _measure(args, client, samples, out)
+        if joint_states_hz > 0:
+            from ..ros.joint_state_stream import StreamProcess
+            stream = StreamProcess(joint_states_hz, domain_id)
+        with RecoveryClient(namespace, domain_id) as client:
+            _measure(client, samples, count, joints, timeout, out, verbose)
     finally:
         if stream is not None:
             stream.close()
         if node is not None:
             node.stop()
-    report = samples.report(args.count)
-    code = 0 if not samples.failures else EXIT_FAILURE
-    if args.json:
-        out.write(json.dumps(report, indent=2) + '\n')
-        return code
+    return samples.report(count), samples.failures
+
+
+def write_latency(out, report, failures):
+    """Print a latency report: p50 / p95 / max of every figure, then the failures."""
     for label, key in (('fault publish -> full library received', 'fault_to_library'),
                        ('reconfigure_gestures round trip', 'reconfigure_service'),
                        ('  of which optimisation (engine wall time)', 'engine_wall_time'),
@@ -172,33 +202,5 @@ def bench_latency(args, out):
             s = report[key]
             out.write(f"{label:<42} n={s['n']:<3} p50 {s['p50_ms']:7.1f} ms  "
                       f"p95 {s['p95_ms']:7.1f} ms  max {s['max_ms']:7.1f} ms\n")
-    for failure in samples.failures:
+    for failure in failures:
         out.write(f'failure: {failure}\n')
-    return code
-
-
-def add_latency_arguments(parser):
-    """Add the options of ``bench latency`` to ``parser``."""
-    parser.add_argument('-n', '--count', type=int, default=50, metavar='N',
-                        help='number of single-joint faults (default 50)')
-    parser.add_argument('--joints', nargs='+', metavar='JOINT',
-                        help='joints to fault in turn (default: all 14)')
-    parser.add_argument('--start-node', action='store_true',
-                        help='start a private recovery_node for the benchmark')
-    parser.add_argument('--joint-states-hz', type=float, default=0.0, metavar='HZ',
-                        help='stream /joint_states at HZ from another process meanwhile')
-    parser.add_argument('--node-param', dest='node_params', action='append', default=[],
-                        metavar='NAME:=VALUE',
-                        help='a parameter of the private node (--start-node; repeatable)')
-    parser.add_argument('--json', action='store_true', help='print one JSON document')
-    parser.add_argument('-v', '--verbose', action='store_true', help='print every sample')
-    add_connection_arguments(parser, timeout=30.0)
-    parser.set_defaults(func=wrap(bench_latency))
-
-
-def register_bench(bench_subparsers):
-    """Add ``latency`` to the subparsers of a ``bench`` command."""
-    p = bench_subparsers.add_parser(
-        'latency', help='fault -> library latency against a running recovery_node')
-    add_latency_arguments(p)
-    return p

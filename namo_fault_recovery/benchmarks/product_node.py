@@ -1,5 +1,5 @@
 """
-``namo-recovery bench product``: one benchmark of the served problem.
+``namo-recovery bench product``: one benchmark of the served problem, all its parts.
 
 The packaged library under the node's settings.  Parts (``--parts``, default all):
 
@@ -23,25 +23,29 @@ on stdout, progress on stderr, ``summary.json`` in ``--out`` (default
 ``bench_out/product``).
 """
 
+import contextlib
 import json
 import math
 from pathlib import Path
 import re
 import time
-from types import SimpleNamespace
 
 import numpy as np
 
-from .private_node import private_domain, PrivateNode
-from .ros_common import CommandError, EXIT_USAGE, wrap
+from . import common, product
+from .common import BenchError, EXIT_USAGE
+from .deadline import CpuBurner
+from .latency import clear_faults, fault_library
+from ..recovery.contingency import entry_key, table_locks
+from ..runtime.private_node import private_domain, PrivateNode
 
 PARTS = ('quality', 'table', 'latency', 'refine', 'demo')
 HIT_P95_MS = 15.0
 MISS_P95_MS = 200.0
 REFINE_WITHIN = 0.005
 REFINE_BY_SEC = 10.0
-OPTIMA_SEEDS = 256            # benchmarks.product.OPTIMA_SEEDS (not imported: heavy)
-DEMO_OPTIMA_SEEDS = 32        # benchmarks.product.DEMO_OPTIMA_SEEDS
+OPTIMA_SEEDS = product.OPTIMA_SEEDS
+DEMO_OPTIMA_SEEDS = product.DEMO_OPTIMA_SEEDS
 
 
 def _pct(values):
@@ -58,42 +62,9 @@ def _origin(client, stamp, timeout=1.0):
     return None if diag is None else diag.get(keys.RECONFIGURATION, keys.LIBRARY_ORIGIN)
 
 
-def _clear(client, timeout):
-    """Clear the faults; return once the library of the answer arrived."""
-    stamp = client.inbox.newest_stamp()
-    answer = client.clear_faults(timeout)
-    if not answer.success:
-        raise CommandError(f'clear_faults failed: {answer.message}')
-    after = stamp if answer.library_stamp is None else answer.library_stamp - 1
-    if client.next_library(after, timeout, diagnostics_timeout=0.0) is None:
-        raise CommandError(f'no library within {timeout:g} s of clear_faults')
-
-
-def _fault(client, joints, angles, timeout):
-    """
-    Publish a fault; return (its first library or None, publication time).
-
-    Called after the library of a clear arrived: the next version is the fault's.  A
-    version whose ``/diagnostics`` never came (superseded at once by a refined one) is
-    accepted, as ``bench latency`` does; a described one must lock the joints.
-    """
-    stamp = client.inbox.newest_stamp()
-    t0 = time.monotonic()
-    client.publish_fault(joints, angles, timeout)
-    while True:
-        library = client.next_library(stamp, max(t0 + timeout - time.monotonic(), 0.0),
-                                      diagnostics_timeout=1.0)
-        if library is None or not library.described or set(joints) <= set(
-                library.result.locks):
-            return library, t0
-        stamp = library.stamp
-
-
 def _start(out, extra=()):
     domain = private_domain()
-    node = PrivateNode(SimpleNamespace(robot_file=None, gesture_file=None), domain, '/',
-                       out, extra_ros_args=extra)
-    return node, domain
+    return PrivateNode(domain, '/', out, params=extra), domain
 
 
 def _wait_table(node, count, timeout, out, t0, client=None):
@@ -116,7 +87,7 @@ def _wait_table(node, count, timeout, out, t0, client=None):
                       f'the node was started\n')
             return time.monotonic() - t0, rtts
         if node.proc.poll() is not None:
-            raise CommandError('the node ended before its table was built')
+            raise BenchError('the node ended before its table was built')
         if client is None:
             time.sleep(0.25)
             continue
@@ -124,7 +95,7 @@ def _wait_table(node, count, timeout, out, t0, client=None):
         client.reconfigure(timeout=10.0)
         rtts.append(time.monotonic() - began)
         time.sleep(0.02)
-    raise CommandError(f'the node table did not reach {count} entries in {timeout:g} s')
+    raise BenchError(f'the node table did not reach {count} entries in {timeout:g} s')
 
 
 def _build_cpu(node, timeout=10.0):
@@ -144,14 +115,12 @@ def _build_cpu(node, timeout=10.0):
 
 def _latency_rounds(client, joints, timeout, burner):
     """Fault each joint in turn (clearing between); return the samples."""
-    from ..benchmarks.deadline import CpuBurner
-    import contextlib
     samples = []
     with (CpuBurner() if burner else contextlib.nullcontext()):
         for joint in joints:
-            _clear(client, timeout)
+            clear_faults(client, timeout)
             time.sleep(0.2)
-            library, t0 = _fault(client, [joint], None, timeout)
+            library, t0 = fault_library(client, [joint], None, timeout, 1.0)
             if library is None:
                 samples.append({'joint': joint, 'latency_s': None, 'origin': None})
                 continue
@@ -184,18 +153,17 @@ def _latency_summary(samples, target_ms, expect):
 
 def _refine_case(client, name, best, timeout, window):
     """Fault one refinement set; return the versions the node published in ``window``."""
-    from ..benchmarks import product
     robot, lib = product.load_models()
     faults = product.refine_faults(name)
     joints = list(faults)
     angles = None
     if any(a is not None for a in faults.values()):
         if not all(a is not None for a in faults.values()):
-            raise CommandError(f'{name}: give every angle or none')
+            raise BenchError(f'{name}: give every angle or none')
         angles = [faults[j] for j in joints]
-    _clear(client, timeout)
+    clear_faults(client, timeout)
     time.sleep(0.2)
-    library, t0 = _fault(client, joints, angles, timeout)
+    library, t0 = fault_library(client, joints, angles, timeout, 1.0)
     versions = []
     while library is not None and library.received - t0 <= window:
         # Scored from the published positions: every version counts, described or not.
@@ -232,35 +200,55 @@ def _refine_sets(cases):
     return out
 
 
+def _hit_latency(args, out, joints, conditions):
+    """Time table hits on a node with its table, once the table is built."""
+    from ..ros.client import RecoveryClient
+    started = time.monotonic()
+    node, domain = _start(out)
+    try:
+        with RecoveryClient('/', domain) as client:
+            client.current_library(args.timeout, diagnostics_timeout=0.0)
+            waited, rtts = _wait_table(node, len(product.load_models()[0].joint_names),
+                                       args.table_timeout, out, started, client)
+            build = {'wall_s': waited, 'cpu_s': _build_cpu(node), 'rtt': _pct(rtts)}
+            rtt = build['rtt']
+            out.write(f'table build: {build["cpu_s"]} s of CPU; service round trip '
+                      f'during the build over {rtt["n"]} calls: p50 '
+                      f'{rtt["p50_ms"]:.1f} / p95 {rtt["p95_ms"]:.1f} ms (targets: '
+                      f'<= 60 s of CPU, p95 <= 50 ms)\n')
+            hit = _latency_conditions(client, joints, args.timeout, conditions,
+                                      HIT_P95_MS, 'table')
+            return {'table_wait_s': waited, 'build': build, 'conditions': hit}
+    finally:
+        node.stop()
+
+
+def _refine(args, client, best_doc):
+    """Run every refinement set ``args.refine_reps`` times; return the part's results."""
+    robot, lib = product.load_models()
+    settings = product.node_settings()
+    cases = []
+    for name in product.REFINE_SETS:
+        locks = table_locks(robot, lib, product.refine_faults(name), settings)
+        best = product.best_of(best_doc, 'product', entry_key(locks))
+        if best is None:
+            raise BenchError(f'no best-known stored for {name}; run with --update-optima')
+        for rep in range(args.refine_reps):
+            case = _refine_case(client, name, best, args.timeout, args.refine_window)
+            cases.append(dict(case, rep=rep))
+    return {'window_s': args.refine_window, 'reps': args.refine_reps, 'cases': cases,
+            'sets': _refine_sets(cases)}
+
+
 def run_dds(args, out, best_doc, parts, joints):
     """Run the latency and refine parts against private nodes; return their results."""
-    from ..benchmarks import product
-    from ..recovery.contingency import entry_key, table_locks
     from ..ros.client import RecoveryClient
     results = {}
     conditions = [False] + ([] if args.no_burner else [True])
     if 'latency' in parts:
-        started = time.monotonic()
-        node, domain = _start(out)
-        try:
-            with RecoveryClient('/', domain) as client:
-                client.current_library(args.timeout, diagnostics_timeout=0.0)
-                waited, rtts = _wait_table(node, len(product.load_models()[0].joint_names),
-                                           args.table_timeout, out, started, client)
-                build = {'wall_s': waited, 'cpu_s': _build_cpu(node), 'rtt': _pct(rtts)}
-                rtt = build['rtt']
-                out.write(f'table build: {build["cpu_s"]} s of CPU; service round trip '
-                          f'during the build over {rtt["n"]} calls: p50 '
-                          f'{rtt["p50_ms"]:.1f} / p95 {rtt["p95_ms"]:.1f} ms (targets: '
-                          f'<= 60 s of CPU, p95 <= 50 ms)\n')
-                hit = _latency_conditions(client, joints, args.timeout, conditions,
-                                          HIT_P95_MS, 'table')
-                results['latency_hit'] = {'table_wait_s': waited, 'build': build,
-                                          'conditions': hit}
-        finally:
-            node.stop()
+        results['latency_hit'] = _hit_latency(args, out, joints, conditions)
     if 'latency' in parts or 'refine' in parts:
-        node, domain = _start(out, ('-p', 'contingency_table:=false'))
+        node, domain = _start(out, ('contingency_table:=false',))
         try:
             with RecoveryClient('/', domain) as client:
                 client.current_library(args.timeout, diagnostics_timeout=0.0)
@@ -269,22 +257,7 @@ def run_dds(args, out, best_doc, parts, joints):
                                                MISS_P95_MS, 'deadline')
                     results['latency_miss'] = {'conditions': miss}
                 if 'refine' in parts:
-                    robot, lib = product.load_models()
-                    settings = product.node_settings()
-                    cases = []
-                    for name in product.REFINE_SETS:
-                        locks = table_locks(robot, lib, product.refine_faults(name), settings)
-                        best = product.best_of(best_doc, 'product', entry_key(locks))
-                        if best is None:
-                            raise CommandError(f'no best-known stored for {name}; run with '
-                                               f'--update-optima')
-                        for rep in range(args.refine_reps):
-                            case = _refine_case(client, name, best, args.timeout,
-                                                args.refine_window)
-                            cases.append(dict(case, rep=rep))
-                    results['refine'] = {'window_s': args.refine_window,
-                                         'reps': args.refine_reps, 'cases': cases,
-                                         'sets': _refine_sets(cases)}
+                    results['refine'] = _refine(args, client, best_doc)
         finally:
             node.stop()
     return results
@@ -292,7 +265,6 @@ def run_dds(args, out, best_doc, parts, joints):
 
 def print_dds(out, results):
     """Print the latency and refinement tables."""
-    from ..benchmarks import common
     rows = []
     for label, key in (('table hit', 'latency_hit'), ('miss (no table)', 'latency_miss')):
         for cond, s in results.get(key, {}).get('conditions', {}).items():
@@ -324,43 +296,28 @@ def print_dds(out, results):
                                      'within 0.5% at s', 'target s', 'verdict'], rows))
 
 
-def bench_product(args, out):
-    """Run the served problem's benchmark (see the module docstring)."""
-    from ..benchmarks import common, product
-    parts = [p.strip() for p in args.parts.split(',') if p.strip()]
-    unknown = [p for p in parts if p not in PARTS]
-    if unknown:
-        raise CommandError(f'--parts: unknown part {unknown[0]!r}; expected some of '
-                           f'{",".join(PARTS)}', EXIT_USAGE)
-    for option in ('seeds', 'demo_seeds', 'jobs', 'optima_seeds', 'demo_optima_seeds',
-                   'refine_reps'):
-        if getattr(args, option) < 1:
-            raise CommandError(f"--{option.replace('_', '-')}: expected an integer >= 1",
-                               EXIT_USAGE)
-    robot = product.load_models()[0]
-    joints = list(args.joints) if args.joints else list(robot.joint_names)
-    unknown = [j for j in joints if j not in robot.joint_names]
-    if unknown:
-        raise CommandError(f'--joints: unknown joint {unknown[0]!r}', EXIT_USAGE)
-    out_dir = Path(args.out) if args.out else Path(common.DEFAULT_OUT_ROOT) / 'product'
+def _best_known(out, args, joints):
+    """Return the best-known optima document (regenerated first with --update-optima)."""
     optima_file = Path(args.optima_file) if args.optima_file else product.best_known_path()
-    summary = {'machine': common.machine_info(), 'parts': parts, 'joints': joints}
-    out.write(common.format_machine(summary['machine']) + '\n')
     if args.update_optima:
         doc = product.generate_optima(out, args.optima_seeds, args.demo_optima_seeds,
-                                      args.jobs, joints=args.joints, progress=not args.quiet)
+                                      args.jobs, joints=joints, progress=not args.quiet)
         product.write_product_optima(optima_file, doc)
         out.write(f'written: {optima_file}\n')
     try:
         best_doc = product.load_product_best_known(optima_file)
     except FileNotFoundError:
-        raise CommandError(f'{optima_file}: no best-known optima; run with --update-optima',
-                           EXIT_USAGE) from None
+        raise BenchError(f'{optima_file}: no best-known optima; run with --update-optima',
+                         EXIT_USAGE) from None
     made = best_doc.get('made', {})
     out.write(f"best-known optima: {best_doc['source']} (made {made.get('date')}, commit "
               f"{made.get('commit')}, {best_doc['libraries']['product']['seeds']} seeds per "
               f'fault set)\n')
-    summary['optima'] = {'file': best_doc['source'], 'made': made}
+    return best_doc
+
+
+def _run_parts(out, args, summary, best_doc, parts, joints):
+    """Run the parts in order; add their results to ``summary``."""
     seeds_given = args.joints or None
     try:
         if 'quality' in parts:
@@ -378,10 +335,30 @@ def bench_product(args, out):
                 out, best_doc, 'demo', args.demo_seeds, not args.no_burner, seeds_given,
                 progress=not args.quiet)
     except KeyError as exc:
-        raise CommandError(str(exc.args[0]), EXIT_USAGE) from None
+        raise BenchError(str(exc.args[0]), EXIT_USAGE) from None
+
+
+def run_product(out, args, parts):
+    """
+    Run the served problem's benchmark (see the module docstring); return the summary.
+
+    ``args`` holds the options of ``bench product`` (checked by the command line);
+    ``parts`` are some of :data:`PARTS`.  Writes ``summary.json`` in ``args.out``.
+    """
+    robot = product.load_models()[0]
+    joints = list(args.joints) if args.joints else list(robot.joint_names)
+    unknown = [j for j in joints if j not in robot.joint_names]
+    if unknown:
+        raise BenchError(f'--joints: unknown joint {unknown[0]!r}', EXIT_USAGE)
+    out_dir = Path(args.out) if args.out else Path(common.DEFAULT_OUT_ROOT) / 'product'
+    summary = {'machine': common.machine_info(), 'parts': parts, 'joints': joints}
+    out.write(common.format_machine(summary['machine']) + '\n')
+    best_doc = _best_known(out, args, args.joints)
+    summary['optima'] = {'file': best_doc['source'], 'made': best_doc.get('made', {})}
+    _run_parts(out, args, summary, best_doc, parts, joints)
     common.write_json(out_dir / 'summary.json', summary)
     out.write(f"\n{_verdicts(summary)}written: {out_dir / 'summary.json'}\n")
-    return 0
+    return summary
 
 
 def _verdicts(s):
@@ -404,44 +381,3 @@ def _verdicts(s):
                      f"{c['runs']} runs (final gaps {gaps}; target 100%): "
                      f"{'met' if c['met'] else 'MISSED'}")
     return ''.join(line + '\n' for line in lines)
-
-
-def register_bench(bench_subparsers):
-    """Add ``product`` to the subparsers of a ``bench`` command."""
-    p = bench_subparsers.add_parser(
-        'product', help='the served problem: optima, deadline quality, table, node '
-                        'latency, refinement, demo library')
-    p.add_argument('--parts', default=','.join(PARTS), metavar='LIST',
-                   help=f'comma-separated parts to run (default: {",".join(PARTS)})')
-    p.add_argument('--seeds', type=int, default=10,
-                   help='seeds per single fault for quality (default 10)')
-    p.add_argument('--demo-seeds', type=int, default=3,
-                   help='seeds per single fault for the demo library (default 3)')
-    p.add_argument('--joints', nargs='+', default=None, metavar='JOINT',
-                   help='single faults to run (default: all 14 joints)')
-    p.add_argument('--jobs', type=int, default=2,
-                   help='worker processes for the optima and the table (default 2)')
-    p.add_argument('--no-burner', action='store_true', help='skip the CPU-burner passes')
-    p.add_argument('--update-optima', action='store_true',
-                   help='regenerate the best-known optima first (see --optima-file)')
-    p.add_argument('--optima-seeds', type=int, default=OPTIMA_SEEDS,
-                   help=f'seeds per fault set for --update-optima (default {OPTIMA_SEEDS})')
-    p.add_argument('--demo-optima-seeds', type=int, default=DEMO_OPTIMA_SEEDS,
-                   help=f'seeds per fault set of the demo library (default '
-                        f'{DEMO_OPTIMA_SEEDS})')
-    p.add_argument('--optima-file', default=None, metavar='FILE',
-                   help='optima to read (and write) (default: the package config '
-                        'product_best_known.yaml)')
-    p.add_argument('--refine-window', type=float, default=12.0, metavar='SEC',
-                   help='how long to collect refined versions after a fault (default 12)')
-    p.add_argument('--refine-reps', type=int, default=3, metavar='N',
-                   help='faults per refinement set (default 3)')
-    p.add_argument('--table-timeout', type=float, default=600.0, metavar='SEC',
-                   help="how long to wait for the node's table (default 600)")
-    p.add_argument('--timeout', type=float, default=30.0, metavar='SEC',
-                   help='how long to wait for the node per step (default 30)')
-    p.add_argument('--out', default=None, metavar='DIR',
-                   help='output directory (default: bench_out/product)')
-    p.add_argument('--quiet', action='store_true', help='no progress lines on stderr')
-    p.set_defaults(func=wrap(bench_product))
-    return p

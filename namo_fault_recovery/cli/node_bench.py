@@ -1,0 +1,185 @@
+"""
+``namo-recovery bench latency | stream | product``: the benchmarks of a running node.
+
+Each command parses its options and calls its benchmark
+(:mod:`namo_fault_recovery.benchmarks.latency`, :mod:`~namo_fault_recovery.benchmarks.
+stream`, :mod:`~namo_fault_recovery.benchmarks.product_node`), imported only when it
+runs, so the rest of the command line works without ROS.
+"""
+
+import argparse
+import json
+import sys
+
+from .ros_common import (add_connection_arguments, CommandError, domain_id, EXIT_FAILURE,
+                         EXIT_USAGE, namespace, wrap)
+
+
+def _rates(text):
+    try:
+        rates = [float(x) for x in text.split(',') if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected comma-separated rates in Hz, got {text!r}')
+    if not rates or any(r < 0 for r in rates):
+        raise argparse.ArgumentTypeError(f'expected one or more rates >= 0 Hz, got {text!r}')
+    return rates
+
+
+def cmd_latency(args, out):
+    """Measure fault-publish -> full-library-received latency against a node."""
+    from ..benchmarks import latency
+    report, failures = latency.run_latency(
+        out, args.count, args.joints, args.timeout, namespace(args), domain_id(args),
+        start_node=args.start_node, joint_states_hz=args.joint_states_hz, node_options=args,
+        verbose=args.verbose)
+    if args.json:
+        out.write(json.dumps(report, indent=2) + '\n')
+    else:
+        latency.write_latency(out, report, failures)
+    return 0 if not failures else EXIT_FAILURE
+
+
+def cmd_stream(args, out):
+    """Run the stream benchmark; exit 1 when a run was not answered or missed the deadline."""
+    from ..benchmarks import stream
+    try:
+        report = stream.run_stream_bench(
+            out, rates=args.rates, burner=args.burner, faults=args.faults, reps=args.reps,
+            start_node=args.start_node, gesture_file=args.gesture_file,
+            robot_file=args.robot_file, domain_id=args.domain_id, out_dir=args.out,
+            node_params=args.node_params, timeout=args.timeout, verbose=args.verbose)
+    except stream.BenchError as exc:
+        sys.stderr.write(f'namo-recovery: error: {exc}\n')
+        return EXIT_FAILURE
+    except KeyboardInterrupt:
+        sys.stderr.write('namo-recovery: interrupted\n')
+        return 130
+    return EXIT_FAILURE if stream.missed_runs(report) else 0
+
+
+def cmd_product(args, out):
+    """Run the served problem's benchmark (benchmarks.product_node)."""
+    from ..benchmarks import product_node
+    parts = [p.strip() for p in args.parts.split(',') if p.strip()]
+    unknown = [p for p in parts if p not in product_node.PARTS]
+    if unknown:
+        raise CommandError(f'--parts: unknown part {unknown[0]!r}; expected some of '
+                           f'{",".join(product_node.PARTS)}', EXIT_USAGE)
+    for option in ('seeds', 'demo_seeds', 'jobs', 'optima_seeds', 'demo_optima_seeds',
+                   'refine_reps'):
+        if getattr(args, option) < 1:
+            raise CommandError(f"--{option.replace('_', '-')}: expected an integer >= 1",
+                               EXIT_USAGE)
+    product_node.run_product(out, args, parts)
+    return 0
+
+
+def _add_latency(bench_subparsers):
+    """Add ``latency``: fault -> library latency (benchmarks.latency)."""
+    p = bench_subparsers.add_parser(
+        'latency', help='fault -> library latency against a running recovery_node')
+    p.add_argument('-n', '--count', type=int, default=50, metavar='N',
+                   help='number of single-joint faults (default 50)')
+    p.add_argument('--joints', nargs='+', metavar='JOINT',
+                   help='joints to fault in turn (default: all 14)')
+    p.add_argument('--start-node', action='store_true',
+                   help='start a private recovery_node for the benchmark')
+    p.add_argument('--joint-states-hz', type=float, default=0.0, metavar='HZ',
+                   help='stream /joint_states at HZ from another process meanwhile')
+    p.add_argument('--node-param', dest='node_params', action='append', default=[],
+                   metavar='NAME:=VALUE',
+                   help='a parameter of the private node (--start-node; repeatable)')
+    p.add_argument('--json', action='store_true', help='print one JSON document')
+    p.add_argument('-v', '--verbose', action='store_true', help='print every sample')
+    add_connection_arguments(p, timeout=30.0)
+    p.set_defaults(func=wrap(cmd_latency))
+    return p
+
+
+def _add_stream(bench_subparsers):
+    """Add ``stream``: the deadline while /joint_states streams (benchmarks.stream)."""
+    p = bench_subparsers.add_parser(
+        'stream', help='deadline and fault -> library latency of recovery_node while '
+                       '/joint_states streams (idle, 100 Hz, 500 Hz, 500 Hz + CPU burner)')
+    p.add_argument('--start-node', action='store_true',
+                   help='start a private recovery_node (fresh state directory) for the run')
+    p.add_argument('--gesture-file', metavar='F', default=None,
+                   help='with --start-node: the gesture library the node loads '
+                        '(default: the packaged one)')
+    p.add_argument('--robot-file', metavar='F', default=None,
+                   help='with --start-node: the robot model the node loads')
+    p.add_argument('--node-param', dest='node_params', action='append', default=[],
+                   metavar='NAME:=VALUE',
+                   help='with --start-node: a parameter of the node (repeatable), e.g. '
+                        'contingency_table:=false so that every run is a live search')
+    p.add_argument('--rates', type=_rates, default=[0.0, 100.0, 500.0], metavar='HZ,...',
+                   help='/joint_states rates, 0 = idle (default 0,100,500)')
+    p.add_argument('--burner', action=argparse.BooleanOptionalAction, default=True,
+                   help='add a condition at the fastest rate with a CPU burner pinned to '
+                        'another core (default on)')
+    p.add_argument('--faults', nargs='+', metavar='JOINT',
+                   default=[f'right_arm_joint{i}' for i in range(1, 8)],
+                   help='joints faulted in turn, faults cleared between '
+                        '(default right_arm_joint1..7)')
+    p.add_argument('--reps', type=int, default=1, metavar='N',
+                   help='passes over the fault joints per condition (default 1)')
+    p.add_argument('--out', metavar='DIR', default=None,
+                   help='write stream_bench.json there')
+    p.add_argument('--timeout', type=float, default=60.0, metavar='SEC',
+                   help='how long to wait for the node per step (default 60 s)')
+    p.add_argument('--domain-id', type=int, default=None, metavar='N',
+                   help='ROS domain id (default: $ROS_DOMAIN_ID; a private one with '
+                        '--start-node)')
+    p.add_argument('-v', '--verbose', action='store_true', help='print every run')
+    p.set_defaults(func=cmd_stream)
+    return p
+
+
+def _add_product(bench_subparsers):
+    """Add ``product``: the served problem, every part (benchmarks.product_node)."""
+    from ..benchmarks.product import DEMO_OPTIMA_SEEDS, OPTIMA_SEEDS
+    from ..benchmarks.product_node import PARTS
+    p = bench_subparsers.add_parser(
+        'product', help='the served problem: optima, deadline quality, table, node '
+                        'latency, refinement, demo library')
+    p.add_argument('--parts', default=','.join(PARTS), metavar='LIST',
+                   help=f'comma-separated parts to run (default: {",".join(PARTS)})')
+    p.add_argument('--seeds', type=int, default=10,
+                   help='seeds per single fault for quality (default 10)')
+    p.add_argument('--demo-seeds', type=int, default=3,
+                   help='seeds per single fault for the demo library (default 3)')
+    p.add_argument('--joints', nargs='+', default=None, metavar='JOINT',
+                   help='single faults to run (default: all 14 joints)')
+    p.add_argument('--jobs', type=int, default=2,
+                   help='worker processes for the optima and the table (default 2)')
+    p.add_argument('--no-burner', action='store_true', help='skip the CPU-burner passes')
+    p.add_argument('--update-optima', action='store_true',
+                   help='regenerate the best-known optima first (see --optima-file)')
+    p.add_argument('--optima-seeds', type=int, default=OPTIMA_SEEDS,
+                   help=f'seeds per fault set for --update-optima (default {OPTIMA_SEEDS})')
+    p.add_argument('--demo-optima-seeds', type=int, default=DEMO_OPTIMA_SEEDS,
+                   help=f'seeds per fault set of the demo library (default '
+                        f'{DEMO_OPTIMA_SEEDS})')
+    p.add_argument('--optima-file', default=None, metavar='FILE',
+                   help='optima to read (and write) (default: the package config '
+                        'product_best_known.yaml)')
+    p.add_argument('--refine-window', type=float, default=12.0, metavar='SEC',
+                   help='how long to collect refined versions after a fault (default 12)')
+    p.add_argument('--refine-reps', type=int, default=3, metavar='N',
+                   help='faults per refinement set (default 3)')
+    p.add_argument('--table-timeout', type=float, default=600.0, metavar='SEC',
+                   help="how long to wait for the node's table (default 600)")
+    p.add_argument('--timeout', type=float, default=30.0, metavar='SEC',
+                   help='how long to wait for the node per step (default 30)')
+    p.add_argument('--out', default=None, metavar='DIR',
+                   help='output directory (default: bench_out/product)')
+    p.add_argument('--quiet', action='store_true', help='no progress lines on stderr')
+    p.set_defaults(func=wrap(cmd_product))
+    return p
+
+
+def register(bench_subparsers):
+    """Add ``latency``, ``stream`` and ``product`` to the ``bench`` subcommands."""
+    _add_latency(bench_subparsers)
+    _add_stream(bench_subparsers)
+    _add_product(bench_subparsers)

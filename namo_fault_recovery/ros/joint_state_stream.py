@@ -1,0 +1,165 @@
+"""
+A ``/joint_states`` stream, as a robot's drivers publish it, for the node benchmarks.
+
+:class:`JointStateStream` publishes from a thread of the caller's node (the stress
+tests); :class:`StreamProcess` runs :func:`stream_main` as a child process, so that the
+stream never shares the measuring client's interpreter (``bench stream``, ``bench
+latency --joint-states-hz``).
+"""
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+from .spun_node import SpunNode
+
+
+def reference_pose(robot=None, library=None):
+    """
+    Return ``(names, positions)``: the 14 arm joints at the library's first keyframe.
+
+    That is the pose a robot standing ready to gesture reports on ``/joint_states``;
+    names come from the robot model (right arm first).
+    """
+    from ..model.gestures import load_library
+    from ..model.robot import load_robot
+    robot = robot or load_robot()
+    library = library or load_library(robot)
+    names = list(robot.joint_names)
+    positions = [float(a) for a in library.gestures[0].keyframes[0].positions()]
+    return names, positions
+
+
+class JointStateStream:
+    """
+    Publish ``sensor_msgs/JointState`` on ``/joint_states`` at ``rate`` Hz in a thread.
+
+    Sent at absolute times (``start + k / rate``) so that a late wake-up does not lower
+    the rate; ``nan_every`` > 0 replaces one position by NaN in every n-th message (a
+    driver glitch the node must reject without disturbing anything else).
+    """
+
+    def __init__(self, node, rate, names, positions, nan_every=0, topic='/joint_states',
+                 qos=None):
+        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+        from sensor_msgs.msg import JointState
+        self._type = JointState
+        self._node = node
+        self.rate = float(rate)
+        self.names = list(names)
+        self.positions = [float(p) for p in positions]
+        self.nan_every = int(nan_every)
+        qos = qos or QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
+                                reliability=ReliabilityPolicy.BEST_EFFORT)
+        self.publisher = node.create_publisher(JointState, topic, qos)
+        self.sent = 0
+        self.sent_nan = 0
+        self.started = None
+        self.stopped = None
+        self._stop = threading.Event()
+        self._thread = None
+
+    def start(self):
+        """Start publishing (returns at once)."""
+        self._thread = threading.Thread(target=self._run, name='joint_states', daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self):
+        """Stop publishing and wait for the thread."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc):
+        self.stop()
+        return False
+
+    @property
+    def achieved_rate(self):
+        """Return the messages per second actually sent so far."""
+        if self.started is None:
+            return 0.0
+        end = self.stopped or time.monotonic()
+        return self.sent / max(end - self.started, 1e-9)
+
+    def _run(self):
+        period = 1.0 / self.rate
+        self.started = time.monotonic()
+        k = 0
+        while not self._stop.is_set():
+            k += 1
+            positions = list(self.positions)
+            nan = self.nan_every > 0 and k % self.nan_every == 0
+            if nan:
+                positions[k % len(positions)] = float('nan')
+            msg = self._type(name=self.names, position=positions)
+            msg.header.stamp = self._node.get_clock().now().to_msg()
+            try:
+                self.publisher.publish(msg)
+            except Exception:  # noqa: B902 - the context was shut down under us
+                break
+            self.sent += 1
+            self.sent_nan += int(nan)
+            delay = self.started + k * period - time.monotonic()
+            if delay > 0:
+                self._stop.wait(delay)
+        self.stopped = time.monotonic()
+
+
+def stream_main(argv=None):
+    """Run a stand-alone ``/joint_states`` publisher until SIGTERM (the bench's driver)."""
+    parser = argparse.ArgumentParser(prog='namo_fault_recovery.ros.joint_state_stream')
+    parser.add_argument('--rate', type=float, required=True)
+    parser.add_argument('--domain-id', type=int, default=None)
+    args = parser.parse_args(argv)
+    spun = SpunNode(f'namo_joint_state_stream_{os.getpid()}', args.domain_id)
+    done = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    signal.signal(signal.SIGINT, lambda *_: done.set())
+    names, positions = reference_pose()
+    with JointStateStream(spun.node, args.rate, names, positions) as stream:
+        done.wait()
+    sys.stdout.write(json.dumps({'sent': stream.sent,
+                                 'rate_hz': round(stream.achieved_rate, 1)}) + '\n')
+    spun.close()
+    return 0
+
+
+class StreamProcess:
+    """The stream publisher as a child process (a robot's drivers are other processes)."""
+
+    def __init__(self, rate, domain_id):
+        """Start publishing at ``rate`` Hz in ``domain_id`` (None: ``$ROS_DOMAIN_ID``)."""
+        self.rate = rate
+        cmd = [sys.executable, '-m', 'namo_fault_recovery.ros.joint_state_stream',
+               '--rate', str(rate)]
+        if domain_id is not None:
+            cmd += ['--domain-id', str(domain_id)]
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                                     env=dict(os.environ, PYTHONUNBUFFERED='1'))
+        self.report = {}
+
+    def close(self):
+        """Stop the stream; return its report (``sent``, ``rate_hz``), {} if it gave none."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+        try:
+            text, _ = self.proc.communicate(timeout=15)
+            self.report = json.loads(text.decode().strip().splitlines()[-1])
+        except (subprocess.TimeoutExpired, ValueError, IndexError):
+            self.proc.kill()
+            self.proc.wait()
+        return self.report
+
+
+if __name__ == '__main__':
+    sys.exit(stream_main())
