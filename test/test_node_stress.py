@@ -30,8 +30,8 @@ import time
 
 from namo_fault_recovery import load_robot
 from namo_fault_recovery.cli.main import main
-from namo_fault_recovery.runtime.inputs import BadInput, parse_fault
 from namo_fault_recovery.ros.joint_state_stream import JointStateStream, reference_pose
+from namo_fault_recovery.runtime.inputs import BadInput, parse_fault
 from node_harness import (BareSubscriber, DiagnosticsProbe, NodeProcess, RosClient,
                           statuses_values, stress_domain)
 import pytest
