@@ -8,15 +8,24 @@ and needs no ROS::
     robot = load_robot()
     library = load_library(robot)
 
-Subpackages, one per concern:
+Subpackages, one per concern, from the bottom layer up (a module imports its own layer
+and those below it, never one above; ``test/test_layout.py`` checks it):
 
-- :mod:`.model`: the robot, its kinematics and its gestures;
+- :mod:`.model`: the robot, its kinematics, its gestures and the score weights;
 - :mod:`.objective`: the similarity score and the collision model;
 - :mod:`.optimize`: population optimisers (Problem / Algorithm / minimize);
-- :mod:`.recovery`: fault set and settings to an adapted library (the engine);
-- :mod:`.ros`: the node, messages, persistence (the only place rclpy is used);
-- :mod:`.cli`: the ``namo-recovery`` command line;
-- :mod:`.benchmarks`: the benchmarks that print figures.
+- :mod:`.recovery`: fault set and settings to an adapted library (the engine, its one
+  result type and its one settings declaration);
+- :mod:`.sim`: the simulated Namo's physics (MuJoCo);
+- :mod:`.playback`: the gesture player's core (timing, stuck-joint detection);
+- :mod:`.runtime`: the node's runtime, free of ROS (run book, intake, dispatcher,
+  engine process, contingency keeper, persistence, private node processes);
+- :mod:`.ros`: the modules that import rclpy or a message package (the nodes, the
+  messages, the clients), and only those;
+- :mod:`.benchmarks`: every benchmark that prints figures;
+- :mod:`.cli`: the ``namo-recovery`` command line, which parses and calls.
+
+Root modules: :mod:`.errors` (the one-line errors), :mod:`.resources` and :mod:`.files`.
 
 The names below are imported lazily, so that ``import namo_fault_recovery`` (and with it
 the start of ``recovery_node``) costs nothing until they are used.

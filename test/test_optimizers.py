@@ -135,8 +135,12 @@ def test_minimize_runs_on_the_callers_clock():
     res = minimize(sphere_problem(), ABC(max_cycles=10 ** 6), clock=clock, seed=0)
     assert res.status == STATUS_CANCELLED
     assert clock.reason == STATUS_DONE     # the caller's clock is left untouched
-    with pytest.raises(TypeError, match='deadline'):   # the deadline is the clock's
+    with pytest.raises(TypeError, match=r'deadline=; pass clock=Clock\(deadline_sec, cancel'):
         minimize(sphere_problem(), ABC(), deadline=1.0, clock=Clock(None))
+    with pytest.raises(TypeError, match=r'cancel=, deadline=; pass clock='):
+        minimize(sphere_problem(), ABC(), deadline=1.0, cancel=lambda: False)
+    with pytest.raises(TypeError, match=r'unexpected keyword budget=$'):
+        minimize(sphere_problem(), ABC(), budget=1.0)
     with pytest.raises(TypeError, match='clock: expected a Clock or None, got float'):
         minimize(sphere_problem(), ABC(), 1.0)
 
@@ -178,3 +182,10 @@ def test_presets_match_the_paper():
     assert (b.population, b.step_size, b.elimination_events, b.reproduction_steps,
             b.chemotactic_steps, b.swim_length, b.p_eliminate) == (10, 0.5, 2, 6, 10, 15, 0.3)
     assert GradientDescent.paper(0.05).learning_rate == 0.05
+
+
+def test_the_old_name_of_options_still_answers_with_a_warning():
+    algo = ABC(max_cycles=7)
+    with pytest.warns(DeprecationWarning, match='use Algorithm.options'):
+        assert algo.settings() == algo.options()
+    assert algo.options()['max_cycles'] == 7

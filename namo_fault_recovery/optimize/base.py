@@ -8,6 +8,7 @@ every sub-problem (e.g. all gestures of the library at once).
 
 from dataclasses import dataclass, field
 import time
+import warnings
 from typing import Callable, Optional
 
 import numpy as np
@@ -215,6 +216,12 @@ class Algorithm:
         """Return the constructor's arguments as a plain dict (for reports)."""
         return {k: v for k, v in vars(self).items() if not k.startswith('_')}
 
+    def settings(self) -> dict:
+        """Return :meth:`options` (the name of version 0.1, deprecated)."""
+        warnings.warn('Algorithm.settings() is deprecated; use Algorithm.options()',
+                      DeprecationWarning, stacklevel=2)
+        return self.options()
+
 
 def best_of(points, values):
     """Return each sub-problem's best point (batch, D) and value (batch,) of a population."""
@@ -270,15 +277,21 @@ class StepTimer:
 
 
 def minimize(problem: Problem, algorithm: Algorithm, clock: Optional[Clock] = None,
-             seed: Optional[int] = None) -> OptimizeResult:
+             seed: Optional[int] = None, **removed) -> OptimizeResult:
     """
     Minimise ``problem`` with ``algorithm`` until it is done or ``clock`` expires.
 
     ``clock`` (a :class:`Clock`; None: no deadline) owns the deadline and the cancel
     flag: the run ends at its end and honours its cancel (the caller's clock itself is
     left untouched).  ``seed`` makes the run reproducible (None draws one, reported in
-    ``res.seed``).
+    ``res.seed``).  The keywords ``deadline`` and ``cancel`` of version 0.1 are refused
+    with a message that says what replaces them.
     """
+    if removed:
+        names = ', '.join(f'{k}=' for k in sorted(removed))
+        hint = ('; pass clock=Clock(deadline_sec, cancel) instead'
+                if set(removed) <= {'deadline', 'cancel'} else '')
+        raise TypeError(f'minimize: unexpected keyword {names}{hint}')
     if not isinstance(problem, Problem):
         raise TypeError(f'problem: expected a Problem, got {type(problem).__name__}')
     if not isinstance(algorithm, Algorithm):

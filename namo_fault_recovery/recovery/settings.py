@@ -99,8 +99,8 @@ class RecoverySettings:
         cli_help='budget for the whole library in s (default %(default)g; 0: no deadline)')
     lock_strategy: str = setting(
         'average', 'lock angle of a joint reported without a position: the mean over the '
-        "gestures of its arm (the paper's), where /joint_states last saw it, or the best "
-        'for the whole library', choices=LOCK_STRATEGIES)
+        "gestures of its arm (the paper's), where /joint_states last saw it (the mean if "
+        'never seen), or the best for the whole library', choices=LOCK_STRATEGIES)
     optimizer: str = setting(
         'abc', "optimiser: abc, the paper's artificial bee colony; the others for "
         'comparison', choices=tuple(ALGORITHMS), aliases=('--algorithm',))

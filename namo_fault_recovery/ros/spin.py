@@ -78,15 +78,16 @@ def run_node(name, build, args=None, config_errors=(), interrupted=lambda: False
         executor = SingleThreadedExecutor()
         if interrupted():
             raise ExternalShutdownException()
-        node = build()
+        try:
+            node = build()
+        except config_errors as exc:   # only while building: a callback's error is not one
+            if interrupted():          # a start-up cut short by Ctrl-C or SIGTERM
+                return 0
+            _config_error(name, exc)
+            return EXIT_CONFIG
         executor.add_node(node)
         if not interrupted():
             spin_until_shutdown(executor, node.context)
-    except config_errors as exc:
-        if interrupted():              # a start-up cut short by Ctrl-C or SIGTERM
-            return 0
-        _config_error(name, exc)
-        return EXIT_CONFIG
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:  # noqa: B902
