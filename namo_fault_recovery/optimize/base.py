@@ -8,8 +8,8 @@ every sub-problem (e.g. all gestures of the library at once).
 
 from dataclasses import dataclass, field
 import time
-import warnings
 from typing import Callable, Optional
+import warnings
 
 import numpy as np
 
