@@ -3,8 +3,8 @@
 import math
 
 from namo_fault_recovery import load_library, load_robot
-from namo_fault_recovery.playback.monitor import MonitorSettings, Playback, StuckJointDetector
-from namo_fault_recovery.playback.timing import plan_motion, TimingSettings
+from namo_fault_recovery.playback.monitor import MonitorThresholds, Playback, StuckJointDetector
+from namo_fault_recovery.playback.timing import plan_motion, PlayTiming
 import numpy as np
 import pytest
 
@@ -26,7 +26,7 @@ def plan(name, start=None, locks=None, limits=LIMITS, **kw):
     times, frames = gesture_arrays(name)
     start = np.zeros(14) if start is None else start
     return plan_motion(NAMES, start, times, frames, limits, locks=locks,
-                       settings=TimingSettings(**kw))
+                       timing=PlayTiming(**kw))
 
 
 def test_velocity_limits_loaded_with_defaults_and_validated(tmp_path):
@@ -178,9 +178,9 @@ def test_whole_arm_lagging_is_not_blamed_on_one_joint():
 
 def test_settings_refuse_nonsense():
     with pytest.raises(ValueError, match='fault_hold'):
-        MonitorSettings(fault_hold=0.0)
+        MonitorThresholds(fault_hold=0.0)
     with pytest.raises(ValueError, match='approach_velocity'):
-        TimingSettings(approach_velocity=0.0)
+        PlayTiming(approach_velocity=0.0)
 
 
 def test_detection_benchmark_on_the_physics():

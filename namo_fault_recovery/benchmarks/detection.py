@@ -28,8 +28,8 @@ import time
 import numpy as np
 
 from ..objective.score import ScoreWeights, SimilarityScore
-from ..playback.monitor import MonitorSettings, Playback
-from ..playback.timing import plan_motion, TimingSettings
+from ..playback.monitor import MonitorThresholds, Playback
+from ..playback.timing import plan_motion, PlayTiming
 
 RATE = 100.0         # Hz: command and measurement loop
 
@@ -40,8 +40,8 @@ def _arrays(gesture):
     return times, frames
 
 
-def play_on_sim(sim, robot, times, frames, locks=None, monitor=MonitorSettings(),
-                timing=TimingSettings(), limit=30.0):
+def play_on_sim(sim, robot, times, frames, locks=None, monitor=MonitorThresholds(),
+                timing=PlayTiming(), limit=30.0):
     """
     Play one motion on ``sim`` from where it is; return (outcome, plan, elapsed, trace).
 
@@ -52,7 +52,7 @@ def play_on_sim(sim, robot, times, frames, locks=None, monitor=MonitorSettings()
     lower = np.concatenate([robot.arms[s].lower for s in ('right', 'left')])
     upper = np.concatenate([robot.arms[s].upper for s in ('right', 'left')])
     plan = plan_motion(names, sim.positions(), times, frames, limits, locks=locks,
-                       lower=lower, upper=upper, settings=timing)
+                       lower=lower, upper=upper, timing=timing)
     playback = Playback(plan, [names[:7], names[7:]], monitor)
     steps = max(1, int(round(1.0 / (RATE * sim.timestep))))
     trace = []
@@ -142,7 +142,7 @@ def _normal_play(robot, sim, gesture, times, frames, monitor):
 
 
 def run(robot, library, sim_factory, gestures=None, joints=None, recover_gestures=('wai',),
-        deadline=1.0, seed=0, monitor=MonitorSettings(), progress=None):
+        deadline=1.0, seed=0, monitor=MonitorThresholds(), progress=None):
     """Run the benchmark; return a JSON-ready dict of every figure."""
     gestures = list(gestures or library.names)
     joints = list(joints or robot.joint_names)

@@ -81,7 +81,7 @@ def bench_detection(args, out):
     from ..benchmarks import detection
     from ..model.gestures import load_library
     from ..model.robot import load_robot
-    from ..playback.monitor import MonitorSettings
+    from ..playback.monitor import MonitorThresholds
     robot = load_robot(args.robot_file)
     library = load_library(robot, args.gesture_file)
     for name in (args.gesture or []) + (args.recover or []):
@@ -91,8 +91,8 @@ def bench_detection(args, out):
     for joint in args.joint or []:
         if joint not in robot.joint_names:
             raise UsageError(f'--joint: unknown joint {joint!r}')
-    monitor = MonitorSettings(fault_threshold=math.radians(args.threshold_deg),
-                              fault_hold=args.hold_sec, tracking_lag=args.lag_sec)
+    monitor = MonitorThresholds(fault_threshold=math.radians(args.threshold_deg),
+                                fault_hold=args.hold_sec, tracking_lag=args.lag_sec)
     doc = detection.run_on_sim(robot, library, gestures=args.gesture, joints=args.joint,
                                recover_gestures=args.recover or ('wai',), seed=args.seed,
                                monitor=monitor,

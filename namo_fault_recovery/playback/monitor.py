@@ -23,7 +23,7 @@ _WINDOW_SAMPLES = 11
 
 
 @dataclass(frozen=True)
-class MonitorSettings:
+class MonitorThresholds:
     """Detection and completion parameters (named as the node parameters)."""
 
     fault_threshold: float = math.radians(5.0)   # rad off the command
@@ -45,7 +45,7 @@ class StuckJointDetector:
     """Detect joints that do not follow their command, from measured samples."""
 
     def __init__(self, joint_names, groups, command, duration,
-                 settings=MonitorSettings()):
+                 thresholds=MonitorThresholds()):
         """
         Watch ``joint_names`` (the columns of the measured samples).
 
@@ -54,7 +54,7 @@ class StuckJointDetector:
         ``duration`` seconds.
         """
         self.joint_names = tuple(joint_names)
-        self.settings = settings
+        self.thresholds = thresholds
         self._command = command
         index = {j: i for i, j in enumerate(self.joint_names)}
         self._group_of = {}
@@ -64,14 +64,14 @@ class StuckJointDetector:
                 self._group_of[i] = [m for m in members if m != i]
         whole = np.atleast_2d(command(np.linspace(0.0, duration, 200)))
         self._start = whole[0]
-        self._movers = np.ptp(whole, axis=0) > settings.fault_threshold
+        self._movers = np.ptp(whole, axis=0) > thresholds.fault_threshold
         self._moved = np.zeros(len(self.joint_names), dtype=bool)
         self._off_since = {}
         self.reported = {}      # joint name -> (time, measured angle)
 
     def errors(self, t, measured):
         """Return each joint's distance (rad) to its commands over the last ``lag`` s."""
-        lag = self.settings.tracking_lag
+        lag = self.thresholds.tracking_lag
         window = np.linspace(max(0.0, t - lag), t, _WINDOW_SAMPLES) if lag > 0 else [t]
         cmd = np.atleast_2d(self._command(np.asarray(window)))
         low, high = cmd.min(axis=0), cmd.max(axis=0)
@@ -81,16 +81,16 @@ class StuckJointDetector:
     def update(self, t, measured):
         """Feed one measured pose at time ``t``; return the newly detected faults."""
         errors = self.errors(t, measured)
-        off = errors > self.settings.fault_threshold
-        past = np.atleast_1d(self._command(max(0.0, t - self.settings.tracking_lag)))
-        self._moved |= np.abs(past - self._start) > self.settings.fault_threshold
+        off = errors > self.thresholds.fault_threshold
+        past = np.atleast_1d(self._command(max(0.0, t - self.thresholds.tracking_lag)))
+        self._moved |= np.abs(past - self._start) > self.thresholds.fault_threshold
         new = []
         for i, name in enumerate(self.joint_names):
             if not off[i]:
                 self._off_since.pop(i, None)
                 continue
             since = self._off_since.setdefault(i, t)
-            if name in self.reported or t - since < self.settings.fault_hold - 1e-9:
+            if name in self.reported or t - since < self.thresholds.fault_hold - 1e-9:
                 continue
             if not self._others_track(i, off):
                 continue
@@ -119,12 +119,12 @@ class Outcome:
 class Playback:
     """One play of a planned motion: feed measured poses, get an Outcome once it ends."""
 
-    def __init__(self, plan, groups, settings=MonitorSettings()):
+    def __init__(self, plan, groups, thresholds=MonitorThresholds()):
         """Watch ``plan`` (a PlannedMotion) whose joints are split into ``groups``."""
         self.plan = plan
-        self.settings = settings
+        self.thresholds = thresholds
         self.detector = StuckJointDetector(plan.joint_names, groups, plan.command_at,
-                                           plan.duration, settings)
+                                           plan.duration, thresholds)
         self.outcome = None
         self.faults = []
 
@@ -142,14 +142,14 @@ class Playback:
         if t < self.plan.duration:
             return None
         off = np.abs(measured - self.plan.final)
-        if np.all(off <= self.settings.goal_tolerance):
+        if np.all(off <= self.thresholds.goal_tolerance):
             self.outcome = Outcome(True, f'finished in {t:.2f} s (planned '
                                    f'{self.plan.duration:.2f} s, stretch {self.plan.stretch:.2f})')
-        elif t > self.plan.duration + self.settings.goal_time:
+        elif t > self.plan.duration + self.thresholds.goal_time:
             worst = int(np.argmax(off))
             self.outcome = Outcome(False, f'timeout: {self.plan.joint_names[worst]} still '
                                    f'{math.degrees(off[worst]):.1f} deg off its goal '
-                                   f'{self.settings.goal_time:g} s after the end of the motion')
+                                   f'{self.thresholds.goal_time:g} s after the end of the motion')
         return self.outcome
 
     def abort(self, reason):

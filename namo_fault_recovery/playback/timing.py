@@ -25,7 +25,7 @@ _MAX_PASSES = 30
 
 
 @dataclass(frozen=True)
-class TimingSettings:
+class PlayTiming:
     """The player's timing parameters (named as the node parameters)."""
 
     approach_velocity: float = 0.5       # rad/s, as play_motion2's default
@@ -139,7 +139,7 @@ def _stretch(times, points, limits):
 
 
 def plan_motion(joint_names, start, keyframe_times, keyframes, velocity_limits,
-                locks=None, lower=None, upper=None, settings=TimingSettings()):
+                locks=None, lower=None, upper=None, timing=PlayTiming()):
     """
     Return the PlannedMotion that plays ``keyframes`` from the measured pose ``start``.
 
@@ -169,8 +169,8 @@ def plan_motion(joint_names, start, keyframe_times, keyframes, velocity_limits,
         frames = np.clip(frames, lower, upper)
 
     approach = float(np.max(np.abs(frames[0] - start)))
-    first = max(kf_times[0], approach / settings.approach_velocity,
-                settings.approach_min_duration, MIN_SEGMENT)
+    first = max(kf_times[0], approach / timing.approach_velocity,
+                timing.approach_min_duration, MIN_SEGMENT)
     times = np.concatenate([[0.0], first + kf_times - kf_times[0]])
     points = np.vstack([start, frames])
     # Merge keyframes closer than MIN_SEGMENT (a repeated time) into one waypoint.
@@ -179,7 +179,7 @@ def plan_motion(joint_names, start, keyframe_times, keyframes, velocity_limits,
 
     nominal = times[-1]
     times, spline = _stretch(times, points, limits)
-    grid = np.arange(0.0, times[-1], settings.sample_period)[1:]
+    grid = np.arange(0.0, times[-1], timing.sample_period)[1:]
     sample_t = np.union1d(grid, times)
     sample_t = sample_t[np.concatenate([[True], np.diff(sample_t) > 1e-6])]
     sample_t[-1] = times[-1]

@@ -32,10 +32,11 @@ from typing import Optional
 
 import numpy as np
 
+from . import keyframes as keyframe_search
 from .budget import FINISH_RESERVE, PUBLISH_RESERVE, TYPICAL_SHARE, VQ_SHARE
 from .figures import columns, describe_motion, no_worse_than_locked
-from .keyframes import (apply_locks, DEFAULT_EXPANSION_THRESHOLD, free_layout, joint_set,
-                        locked_sets, PoseProblem, reconfigure_library)
+from .keyframes import (apply_locks, free_layout, joint_set, locked_sets, PoseProblem,
+                        reconfigure_library)
 from .kriging import OrdinaryKriging
 from .locks import frozen_arms, resolve_locks
 from .result import LibraryResult
@@ -487,7 +488,8 @@ def _chain_with_expansion(ctx, m, layouts, continuity_weight, clock, rng):
         reach = ctx.scorer.tip_error(q_r, q_l, m.ids).max()
         if best is None or f.mean() < best[6]:
             best = (q_r, q_l, nfev, stage, layout, 'converged', f.mean())
-        if reach <= DEFAULT_EXPANSION_THRESHOLD:
+        # Read at the call: one threshold for both searches (a test may change it).
+        if reach <= keyframe_search.DEFAULT_EXPANSION_THRESHOLD:
             break
         start_r, start_l = q_r, q_l
     if best is None:

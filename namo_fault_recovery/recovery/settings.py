@@ -186,7 +186,7 @@ def _weight_rows():
     return rows
 
 
-def _rows(engine, weights):
+def _rows(engine_rows, weight_rows):
     """Return the table: the node's own settings around the engine's, in parameter order."""
     return (
         Setting('robot_file', str, '', 'arm model YAML (DH, joint names, limits); empty = '
@@ -195,11 +195,11 @@ def _rows(engine, weights):
                 "packaged library (Namo's 4 paper gestures as motions); "
                 'config/demo_motions.yaml adds the dense 100-point circle',
                 read_only=True),
-        *engine,
+        *engine_rows,
         Setting('seed', int, -1, 'random seed for reproducible runs; -1 draws one per run '
                 '(reported on /diagnostics)',
                 limits=(-1, 2 ** 31 - 1), rerun=True),
-        *weights,
+        *weight_rows,
         Setting('state_dir', str, DEFAULT_STATE_DIR, 'directory where the fault set, the '
                 'last library and the contingency table persist (~ and $VARS expanded)',
                 read_only=True),

@@ -38,8 +38,8 @@ from .messages import duration_msg, stamp_key, status_values, trajectory_angles
 from .spin import run_node
 from ..model.robot import load_robot
 from ..playback.book import GestureTrack, parse_lock_angle, PlayerBook
-from ..playback.monitor import MonitorSettings, Outcome, Playback
-from ..playback.timing import plan_motion, TimingSettings
+from ..playback.monitor import MonitorThresholds, Outcome, Playback
+from ..playback.timing import plan_motion, PlayTiming
 
 NODE_NAME = 'gesture_player'
 RECOVERY_PREFIX = 'recovery_node: '
@@ -62,11 +62,11 @@ def _declare(node):
         if not joints or unknown:
             raise ValueError(f'{name}.joints: expected joints of the robot, got {joints!r}')
         groups[name] = list(joints)
-    timing = TimingSettings(
+    timing = PlayTiming(
         approach_velocity=node.declare_parameter('approach_velocity', 0.5).value,
         approach_min_duration=node.declare_parameter('approach_min_duration', 0.0).value,
         sample_period=node.declare_parameter('sample_period', 0.05).value)
-    monitor = MonitorSettings(
+    monitor = MonitorThresholds(
         fault_threshold=math.radians(node.declare_parameter('fault_threshold_deg', 5.0).value),
         fault_hold=node.declare_parameter('fault_hold_sec', 0.3).value,
         tracking_lag=node.declare_parameter('tracking_lag_sec', 0.25).value,

@@ -47,14 +47,14 @@ def _serve(conn, robot_file, gesture_file, current):
     library = load_library(robot, gesture_file)
     cache = {}
 
-    def quantisations(distortion_mm, clock=None):
+    def quantisations(vq_distortion_mm, clock=None):
         """Typical points per threshold; computed within the run's clock, kept if whole."""
-        if distortion_mm in cache:
-            return cache[distortion_mm]
-        found = typical_points(robot, library, distortion_mm, clock=clock)
+        if vq_distortion_mm in cache:
+            return cache[vq_distortion_mm]
+        found = typical_points(robot, library, vq_distortion_mm, clock=clock)
         if not any(q is not None and q.note for q in found.values()):
             cache.clear()
-            cache[distortion_mm] = found      # complete: reuse it in every later run
+            cache[vq_distortion_mm] = found      # complete: reuse it in every later run
         return found
 
     # Warm-up: pay the one-off costs (first allocations, caches) before any fault.
