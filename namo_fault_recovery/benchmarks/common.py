@@ -188,8 +188,8 @@ def case_problems(robot, library, gesture, faults, weights=None):
         locked[side].append(j)
     moving = [s for s in ARMS if s in targets[0].arms and locked[s]]
     free = tuple((s, j) for s in moving for j in range(N_JOINTS) if j not in locked[s])
-    problem = PoseProblem(robot, scorer, np.arange(len(targets)), base['right'],
-                          base['left'], free)
+    problem = PoseProblem(robot, scorer, np.arange(len(targets)),
+                          (base['right'], base['left']), free)
     return problem, locks
 
 
