@@ -279,8 +279,9 @@ def _solve_once(robot, scorer, collision, batch, algo, clock, rng, stats=None):
                              for ref in refs])
         anchor = designed if batch.stay_close else None
         problem = PoseProblem(robot, scorer, batch.target_ids[members],
-                              (batch.right[members], batch.left[members]), free, collision=collision, x0=x0,
-                              anchor=anchor, continuity=batch.stay_close)
+                              (batch.right[members], batch.left[members]), free,
+                              collision=collision, x0=x0, anchor=anchor,
+                              continuity=batch.stay_close)
         start = problem.evaluate(problem.x0[:, None, :])[:, 0]
         group_clock = clock.child(share=1.0 / n_left)
         res = minimize(problem, algo, clock=group_clock, seed=int(rng.integers(2 ** 63)))
@@ -399,7 +400,8 @@ def reconfigure_library(robot, library, faults, settings, *,
     mm off (staged DOF expansion).  ``options`` (:class:`SearchOptions`) holds what the
     motion adaptation adds: ``stay_close``, ``share_branches`` and the ``lock_start``
     of ``lock_strategy='optimal'`` (see :func:`_optimise_locks`).  Returns a
-    :class:`~.result.LibraryResult`, a pure function of the inputs and ``seed`` (None draws one) up to where a deadline cuts.
+    :class:`~.result.LibraryResult`, a pure function of the inputs and ``seed`` (None
+    draws one) up to where a deadline cuts.
     """
     start = time.monotonic()
     reference = robot

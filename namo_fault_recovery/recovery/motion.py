@@ -434,8 +434,9 @@ def _consistent(ctx, ids, design, solved, layout, continuity_weight, clock):
         before = solved[rest].copy()
         anchor = design[rest, col] + solved[:-1, col] - design[:-1, col]
         problem = PoseProblem(ctx.model, ctx.scorer, ids[rest],
-                              (solved[rest, :N_JOINTS], solved[rest, N_JOINTS:]), layout, x0=solved[rest][:, col],
-                              anchor=anchor, continuity=continuity_weight)
+                              (solved[rest, :N_JOINTS], solved[rest, N_JOINTS:]), layout,
+                              x0=solved[rest][:, col], anchor=anchor,
+                              continuity=continuity_weight)
         starts = problem.clip(np.stack((solved[rest][:, col], anchor), axis=1))
         x, f = polish(problem, starts, clock, maxiter=20, ftol=1e-6)
         nfev += problem.nfev
