@@ -114,8 +114,9 @@ def test_packaged_optima_cover_the_28_cases(robot, library):
 def test_optimum_bench_gaps(robot, library, tmp_path):
     out = io.StringIO()
     cases = [('side_invite', 'right_arm_joint7')]
-    doc = optimum.run_optimum(robot, library, out, cases, starts=4, keys=('ga-paper',), seeds=1,
-                              write=tmp_path / 'o.yaml', progress=False)
+    doc = optimum.run_optimum(robot, library, out, cases, optimum.Multistart(starts=4),
+                              keys=('ga-paper',), seeds=1, write=tmp_path / 'o.yaml',
+                              progress=False)
     text = out.getvalue()
     assert 'gap to the best-known optimum' in text
     assert len(doc['gaps']) == 1 and _finite(doc['gaps'][0]['gaps'][0])

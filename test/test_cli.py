@@ -6,7 +6,9 @@ from pathlib import Path
 import subprocess
 import sys
 
-from namo_fault_recovery.cli.main import main
+from namo_fault_recovery.benchmarks.common import ModelFiles
+from namo_fault_recovery.cli.main import build_parser, main
+from namo_fault_recovery.runtime.private_node import NodeTarget
 import pytest
 
 
@@ -79,3 +81,14 @@ def test_console_entry_point_runs_as_a_process():
     assert proc.returncode == 2
     assert proc.stderr.startswith('namo-recovery: error:')
     assert 'Traceback' not in proc.stderr
+
+
+def test_node_benchmarks_get_their_node_and_models_as_one_object_each():
+    args = build_parser().parse_args(
+        ['bench', 'stream', '--start-node', '--gesture-file', 'g.yaml', '--robot-file',
+         'r.urdf', '--node-param', 'contingency_table:=false', '--domain-id', '5'])
+    assert NodeTarget.from_args(args) == NodeTarget(True, 5, 'r.urdf', 'g.yaml',
+                                                    ('contingency_table:=false',))
+    assert ModelFiles.from_args(args) == ModelFiles('r.urdf', 'g.yaml')
+    running = NodeTarget.from_args(build_parser().parse_args(['bench', 'latency']))
+    assert running.start(out=io.StringIO()) == (None, None)

@@ -11,7 +11,7 @@ from namo_fault_recovery.optimize.base import Clock
 from namo_fault_recovery.recovery import keyframes as keyframes_module
 from namo_fault_recovery.recovery import motion as motion_module
 from namo_fault_recovery.recovery.engine import RecoverySettings
-from namo_fault_recovery.recovery.keyframes import reconfigure_library
+from namo_fault_recovery.recovery.keyframes import reconfigure_library, SearchOptions
 from namo_fault_recovery.recovery.kriging import fit_spherical, OrdinaryKriging
 from namo_fault_recovery.recovery.kriging import SphericalVariogram, variogram_cloud
 from namo_fault_recovery.recovery.motion import adapt_library, typical_points
@@ -332,7 +332,8 @@ def test_collisions_are_checked_at_every_point_of_the_motion(robot, circle, seed
             robot, sub, {'right_arm_joint1': 1.2},
             PAPER.with_changes(trajectory_method='kriging', collision_check=True),
             clock=Clock(None), seed=int(np.random.default_rng(seed).integers(2 ** 63)),
-            stay_close=motion_module.DEFAULT_STAY_CLOSE, share_branches=())
+            options=SearchOptions(stay_close=motion_module.DEFAULT_STAY_CLOSE,
+                                  share_branches=()))
         assert tuple(picks) == g.typical_indices
         assert g.collides and not engine['circle'].collides
         assert 'right_forearm-torso' in g.colliding_pairs

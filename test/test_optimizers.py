@@ -1,8 +1,8 @@
 """The optimisers: improvement, reproducibility, deadlines and clear errors."""
 
-from namo_fault_recovery.optimize import (ABC, BFOA, GA, GradientDescent, make_algorithm, minimize,
-                                          polish, Problem, STATUS_CANCELLED, STATUS_DEADLINE,
-                                          STATUS_DONE)
+from namo_fault_recovery.optimize import (ABC, BFOA, CellSignal, GA, GradientDescent,
+                                          make_algorithm, minimize, polish, Problem,
+                                          STATUS_CANCELLED, STATUS_DEADLINE, STATUS_DONE)
 from namo_fault_recovery.optimize.base import Clock
 from namo_fault_recovery.recovery.engine import RecoverySettings
 from namo_fault_recovery.recovery.keyframes import reconfigure_library
@@ -159,6 +159,7 @@ def test_polish_walks_to_the_floor():
     (lambda: GA(population=0), 'GA population'),
     (lambda: GA(crossover_rate=1.5), r'GA crossover_rate: expected a number in \[0.0, 1.0\]'),
     (lambda: BFOA(p_eliminate=-0.1), 'BFOA p_eliminate'),
+    (lambda: BFOA(signal=CellSignal(w_repel=-1.0)), 'BFOA w_repel'),
     (lambda: GradientDescent(learning_rate=0), 'GD learning_rate'),
     (lambda: make_algorithm('pso'), "unknown algorithm 'pso'; expected one of abc, ga"),
     (lambda: make_algorithm('abc', 'fast'), "unknown preset 'fast'"),
@@ -169,6 +170,12 @@ def test_polish_walks_to_the_floor():
 def test_bad_settings_raise_clear_errors(make, message):
     with pytest.raises(ValueError, match=message):
         make()
+
+
+def test_bfoa_reports_its_cell_signal_by_name():
+    options = BFOA(signal=CellSignal(d_attract=0.1)).options()
+    assert options['d_attract'] == 0.1 and options['w_repel'] == 0.3
+    assert 'signal' not in options
 
 
 def test_presets_match_the_paper():

@@ -36,7 +36,7 @@ def _problem(robot, gesture, points, start=None, collision=False, **kw):
     start = design.copy() if start is None else start[:points]
     start[:, 3] = 0.0
     checker = CollisionModel(robot, targets, robot.capsules) if collision else None
-    return TrajectoryProblem(robot, scorer, np.arange(points), start[:, :7], start[:, 7:],
+    return TrajectoryProblem(robot, scorer, np.arange(points), (start[:, :7], start[:, 7:]),
                              FREE, collision=checker, **kw)
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import sys
 import tempfile
 import time
+from typing import Optional
 
 import numpy as np
 
@@ -70,6 +71,23 @@ PAPER_LINEUP = ('ga-paper', 'bfoa-paper', 'abc-paper', 'abc-default')
 PAPER_THREE = ('ga-paper', 'bfoa-paper', 'abc-paper')
 
 _MODELS = {}
+
+
+@dataclass(frozen=True)
+class ModelFiles:
+    """A benchmark's robot model and gesture library files (None: the packaged ones)."""
+
+    robot_file: Optional[str] = None
+    gesture_file: Optional[str] = None
+
+    @classmethod
+    def from_args(cls, args):
+        """Return a command's ``--robot-file`` and ``--gesture-file``."""
+        return cls(getattr(args, 'robot_file', None), getattr(args, 'gesture_file', None))
+
+    def load(self):
+        """Return ``(robot, library)`` (see :func:`models`)."""
+        return models(self.robot_file, self.gesture_file)
 
 
 def models(robot_file=None, gesture_file=None):
@@ -188,8 +206,8 @@ def case_problems(robot, library, gesture, faults, weights=None):
         locked[side].append(j)
     moving = [s for s in ARMS if s in targets[0].arms and locked[s]]
     free = tuple((s, j) for s in moving for j in range(N_JOINTS) if j not in locked[s])
-    problem = PoseProblem(robot, scorer, np.arange(len(targets)), base['right'],
-                          base['left'], free)
+    problem = PoseProblem(robot, scorer, np.arange(len(targets)),
+                          (base['right'], base['left']), free)
     return problem, locks
 
 

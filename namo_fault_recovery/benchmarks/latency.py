@@ -20,7 +20,7 @@ import numpy as np
 
 from .common import BenchError, EXIT_USAGE
 from ..runtime import diagnostic_keys as keys
-from ..runtime.private_node import private_domain, PrivateNode
+from ..runtime.private_node import NodeTarget
 
 
 def percentiles(values):
@@ -161,21 +161,20 @@ def _checked_joints(joints, known):
     return list(joints)
 
 
-def run_latency(out, count=50, joints=None, timeout=30.0, namespace='/', domain_id=None,
-                start_node=False, joint_states_hz=0.0, node_options=None, verbose=False):
+def run_latency(out, count=50, joints=None, timeout=30.0, namespace='/',
+                target=NodeTarget(), joint_states_hz=0.0, verbose=False):
     """
     Measure fault-publish -> full-library-received latency against a node.
 
-    With ``start_node`` a private node is started (``node_options``: a command's
-    ``robot_file``, ``gesture_file`` and ``node_params``) in ``domain_id`` (default a
-    private one).  Returns ``(report, failures)``: the report dict (raises BenchError
-    when no measurement succeeded) and the list of failed rounds.
+    ``target`` (:class:`~..runtime.private_node.NodeTarget`) is the node: with
+    ``start_node`` a private one is started (its ``robot_file``, ``gesture_file`` and
+    ``node_params``) in ``domain_id`` (default a private one).  Returns
+    ``(report, failures)``: the report dict (raises BenchError when no measurement
+    succeeded) and the list of failed rounds.
     """
     from ..ros.client import RecoveryClient
-    node = stream = None
-    if start_node:
-        domain_id = private_domain() if domain_id is None else domain_id
-        node = PrivateNode.for_args(node_options, domain_id, namespace, out)
+    stream = None
+    node, domain_id = target.start(namespace, out)
     samples = _Samples()
     try:
         if joint_states_hz > 0:

@@ -182,6 +182,16 @@ def deadline_cases(robot):
                     ('elbow locked at 0, with expansion', {'faults': {ELBOW: 0.0}})]
 
 
+def _deadline_legend(out, motion, designed):
+    """Print what the columns of the motion-deadline table mean."""
+    out.write(f'\nmet: deadline met by the whole library (auto, node settings); wall: its '
+              f"recover() time; tip / pp tip: the {motion}'s mean fingertip error (mm), auto "
+              f'within the deadline / per point without one (same locks); diff: tip - pp '
+              f'tip (target <= +1 mm); step / pp st: largest joint step (deg), designed '
+              f'{designed:.2f} (target <= {1.5 * designed:.2f}); score: mean similarity '
+              f'score; coll: the adapted motion collides somewhere.\n')
+
+
 def bench_motion_deadline(out, out_dir, seed=0, deadline=1.0, robot_file=None,
                           gesture_file=None, motion='circle', cases=None):
     """
@@ -230,12 +240,7 @@ def bench_motion_deadline(out, out_dir, seed=0, deadline=1.0, robot_file=None,
                   f'{ref.tip_error_mm:7.2f} {row["tip_error_vs_per_point_mm"]:+6.2f} '
                   f'{g.max_jump_deg:5.2f} {ref.max_jump_deg:5.2f} {g.score_mean:6.2f} '
                   f'{ref.score_mean:6.2f} {"yes" if g.collides else "no":>4s}\n')
-    out.write(f'\nmet: deadline met by the whole library (auto, node settings); wall: its '
-              f"recover() time; tip / pp tip: the {motion}'s mean fingertip error (mm), auto "
-              f'within the deadline / per point without one (same locks); diff: tip - pp '
-              f'tip (target <= +1 mm); step / pp st: largest joint step (deg), designed '
-              f'{designed:.2f} (target <= {1.5 * designed:.2f}); score: mean similarity '
-              f'score; coll: the adapted motion collides somewhere.\n')
+    _deadline_legend(out, motion, designed)
     os.makedirs(out_dir, exist_ok=True)
     path = os.path.join(out_dir, 'motion_deadline.json')
     with open(path, 'w', encoding='utf-8') as stream:

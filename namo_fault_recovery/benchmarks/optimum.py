@@ -298,12 +298,22 @@ def _print_gaps(out, robot, gaps, keys, seeds):
                   f'with more starts\n')
 
 
-def run_optimum(robot, library, out, cases, starts=1000, seed=0, maxiter=300, write=None,
+@dataclass(frozen=True)
+class Multistart:
+    """The dense multistart local search: ``starts`` random starts, ``seed``, ``maxiter``."""
+
+    starts: int = 1000
+    seed: int = 0
+    maxiter: int = 300
+
+
+def run_optimum(robot, library, out, cases, search=Multistart(), write=None,
                 keys=common.PAPER_LINEUP, seeds=3, use_stored=False, progress=True):
     """
     Compute (or, with ``use_stored``, load) the optima and print them with the gaps.
 
-    ``write`` is a path to store the YAML (None: do not store).  Returns a dict with the
+    ``search`` (:class:`Multistart`) finds the optima; ``write`` is a path to store the
+    YAML (None: do not store).  Returns a dict with the
     optima and the gap rows.
     """
     info = common.machine_info()
@@ -316,12 +326,14 @@ def run_optimum(robot, library, out, cases, starts=1000, seed=0, maxiter=300, wr
         optima = {c: stored.cases[c] for c in cases if c in stored}
         out.write(f'best-known optima loaded from {stored.source}\n')
     else:
-        optima = compute_optima(robot, library, cases, starts, seed, maxiter, progress)
+        optima = compute_optima(robot, library, cases, search.starts, search.seed,
+                                search.maxiter, progress)
         out.write(f'best-known optima by dense multistart local search: reference start + '
-                  f'{starts} random starts per case (seed {seed})\n')
+                  f'{search.starts} random starts per case (seed {search.seed})\n')
     _print_optima(out, robot, optima)
     if write is not None and not use_stored:
-        doc = optima_document(robot, library, optima, starts, seed, maxiter)
+        doc = optima_document(robot, library, optima, search.starts, search.seed,
+                              search.maxiter)
         write_optima(write, doc)
         out.write(f'written: {write}\n')
     gaps = []

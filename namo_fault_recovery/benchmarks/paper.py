@@ -12,8 +12,10 @@ resumed.  The outputs are ``runs.csv`` (every run), ``summary.csv`` and
 """
 
 from concurrent.futures import as_completed, ProcessPoolExecutor
+from dataclasses import dataclass
 import math
 from pathlib import Path
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -54,11 +56,12 @@ def run_case(task):
     """
     Run the missing seeds of one case and save it; return ``(key, gesture, joint, n_run)``.
 
-    ``task`` is a tuple ``(key, gesture, joint, seeds, deadline, robot_file,
-    gesture_file, path)``; a module-level function so that worker processes can run it.
+    ``task`` is a tuple ``(key, gesture, joint, seeds, deadline, files, path)`` (``files``:
+    a :class:`~.common.ModelFiles`); a module-level function so that worker processes
+    can run it.
     """
-    key, gesture, joint, seeds, deadline, robot_file, gesture_file, path = task
-    robot, library = common.models(robot_file, gesture_file)
+    key, gesture, joint, seeds, deadline, files, path = task
+    robot, library = files.load()
     spec = common.lookup_spec(key)
     signature = _signature(spec, deadline)
     doc = _load_case(path, signature) or {
@@ -80,22 +83,40 @@ def run_case(task):
 _COST = {'abc-paper': 4, 'bfoa-paper': 3, 'gd-paper-lr0.1': 2, 'gd-paper-lr0.05': 2}
 
 
-def run_paper(out, out_dir, reps=100, jobs=1, keys=common.PAPER_LINEUP, gestures=None,
-              joints=None, seed_base=0, deadline=None, robot_file=None, gesture_file=None,
-              plots=True, progress=True):
+@dataclass(frozen=True)
+class PaperRun:
+    """
+    What the comparison runs: ``reps`` seeds from ``seed_base`` of the algorithms ``keys``.
+
+    ``gestures`` / ``joints`` select the cases (None: all); ``jobs`` worker processes
+    run them.  ``deadline`` (s) applies to each per-gesture run (None: the algorithms
+    run their full iteration counts, as in the paper).
+    """
+
+    reps: int = 100
+    jobs: int = 1
+    keys: Sequence[str] = common.PAPER_LINEUP
+    gestures: Optional[Sequence[str]] = None
+    joints: Optional[Sequence[str]] = None
+    seed_base: int = 0
+    deadline: Optional[float] = None
+
+
+def run_paper(out, out_dir, run: PaperRun = PaperRun(),
+              files: common.ModelFiles = common.ModelFiles(), plots=True, progress=True):
     """
     Run (or resume) the comparison and write and print its tables; return the summary.
 
-    ``deadline`` (s) applies to each per-gesture run (None: the algorithms run their
-    full iteration counts, as in the paper).
+    ``run`` (:class:`PaperRun`) says what runs; ``files`` are the models.
     """
-    robot, library = common.models(robot_file, gesture_file)
-    cases = common.select_cases(robot, library, gestures, joints)
-    keys = [common.lookup_spec(k).key for k in keys]
-    seeds = [seed_base + r for r in range(reps)]
+    robot, library = files.load()
+    cases = common.select_cases(robot, library, run.gestures, run.joints)
+    keys = [common.lookup_spec(k).key for k in run.keys]
+    seeds = [run.seed_base + r for r in range(run.reps)]
+    deadline, jobs = run.deadline, run.jobs
     out_dir = Path(out_dir)
     info = common.machine_info()
-    tasks = [(k, g, j, seeds, deadline, robot_file, gesture_file, case_path(out_dir, k, g, j))
+    tasks = [(k, g, j, seeds, deadline, files, case_path(out_dir, k, g, j))
              for k in keys for g, j in cases]
     tasks.sort(key=lambda t: -_COST.get(t[0], 1))
     prog = common.Progress(len(tasks), 'paper') if progress else None
@@ -116,7 +137,7 @@ def run_paper(out, out_dir, reps=100, jobs=1, keys=common.PAPER_LINEUP, gestures
                 prog.step(note=f'{key} {g} {j}: {n} new runs')
 
     runs = {}
-    for k, g, j, _, _, _, _, path in tasks:
+    for k, g, j, _, _, _, path in tasks:
         doc = _load_case(path, _signature(common.lookup_spec(k), deadline))
         wanted = set(seeds)
         runs[(k, g, j)] = sorted((r for r in doc['runs'] if r['seed'] in wanted),
@@ -124,7 +145,7 @@ def run_paper(out, out_dir, reps=100, jobs=1, keys=common.PAPER_LINEUP, gestures
     summary = summarise(robot, runs, keys, cases)
     summary['machine'] = info
     summary['machine_end'] = common.machine_info()
-    summary['config'] = {'reps': reps, 'seeds': [seeds[0], seeds[-1]] if seeds else [],
+    summary['config'] = {'reps': run.reps, 'seeds': [seeds[0], seeds[-1]] if seeds else [],
                          'algorithms': {k: _signature(common.lookup_spec(k), deadline)
                                         for k in keys},
                          'jobs': jobs, 'new_runs': fresh, 'out_dir': str(out_dir)}

@@ -291,22 +291,21 @@ def write_product_optima(path, doc):
 # --- parts 2 and 6: quality at the deadline ----------------------------------------
 
 def _quality_runs(robot, lib, settings, quant, best_doc, which, faults_of, cond, seeds,
-                  seed_base, prog):
-    """Run every fault set ``seeds`` times under one condition; return the runs."""
+                  prog):
+    """Run every fault set once per seed of ``seeds`` under one condition; return the runs."""
     runs = []
     for key, faults in faults_of.items():
         best = best_of(best_doc, which, key)
         if best is None:
             raise KeyError(f'{PRODUCT_BEST_KNOWN_FILE}: no optimum stored for '
                            f'[{which}] {key}; regenerate with --update-optima')
-        for k in range(seeds):
+        for seed in seeds:
             t0 = time.monotonic()
-            res = recover(robot, lib, faults, settings, seed=seed_base + k,
-                          quantisations=quant)
+            res = recover(robot, lib, faults, settings, seed=seed, quantisations=quant)
             wall = time.monotonic() - t0
             scores = {g.name: g.score_after for g in res.gestures}
             gaps = {g: gap(scores[g], best[g]) for g in best}
-            runs.append({'condition': cond, 'fault': key, 'seed': seed_base + k,
+            runs.append({'condition': cond, 'fault': key, 'seed': seed,
                          'wall_s': wall, 'deadline_met': res.deadline_met,
                          'scores': scores, 'gaps': gaps,
                          'worst_gap': max(gaps.values())})
@@ -367,7 +366,7 @@ def run_quality(out, best_doc, which='product', seeds=10, burner=True, joints=No
             if ctx is not None:
                 burner_cpu = ctx.cpu
             runs += _quality_runs(robot, lib, settings, quant, best_doc, which, faults_of,
-                                  cond, seeds, seed_base, prog)
+                                  cond, range(seed_base, seed_base + seeds), prog)
     summary = {'library': which, 'file': LIBRARIES[which], 'seeds': seeds,
                'seed_base': seed_base, 'deadline_sec': settings.deadline_sec,
                'burner_cpu': burner_cpu, 'target_within': QUALITY_WITHIN,

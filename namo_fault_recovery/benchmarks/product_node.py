@@ -37,7 +37,7 @@ from .common import BenchError, EXIT_USAGE
 from .deadline import CpuBurner
 from .latency import clear_faults, fault_library
 from ..recovery.contingency import entry_key, table_locks
-from ..runtime.private_node import private_domain, PrivateNode
+from ..runtime.private_node import NodeTarget
 
 PARTS = ('quality', 'table', 'latency', 'refine', 'demo')
 HIT_P95_MS = 15.0
@@ -63,8 +63,7 @@ def _origin(client, stamp, timeout=1.0):
 
 
 def _start(out, extra=()):
-    domain = private_domain()
-    return PrivateNode(domain, '/', out, params=extra), domain
+    return NodeTarget(start_node=True).start('/', out, extra)
 
 
 def _wait_table(node, count, timeout, out, t0, client=None):

@@ -69,15 +69,15 @@ def _best_known(best, robot, library):
 
 
 def run_speed(out, out_dir, reps=100, joints=None, seed_base=0, deadline=1.0,
-              robot_file=None, gesture_file=None, progress=True, best=None,
-              sequential_reps=10):
+              files=common.ModelFiles(), progress=True, best=None, sequential_reps=10):
     """
     Run the speed benchmark, write ``runs.csv``/``summary.json`` and print the figures.
 
     ``deadline`` applies to our default only; the paper ABC runs unbounded.  ``best`` is
-    a :class:`~.optimum.BestKnownOptima` (None: the packaged file).
+    a :class:`~.optimum.BestKnownOptima` (None: the packaged file); ``files`` a
+    :class:`~.common.ModelFiles`.
     """
-    robot, library = common.models(robot_file, gesture_file)
+    robot, library = files.load()
     cases = common.select_cases(robot, library, None, joints)
     joint_list = list(dict.fromkeys(j for _, j in cases))
     specs = {k: common.lookup_spec(k) for k in KEYS}

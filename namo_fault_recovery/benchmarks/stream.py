@@ -25,7 +25,7 @@ import time
 
 from .common import BenchError, machine_info
 from .deadline import CpuBurner
-from ..runtime.private_node import private_domain, PrivateNode
+from ..runtime.private_node import NodeTarget
 
 DEFAULT_RATES = (0, 100, 500)
 DEFAULT_FAULTS = tuple(f'right_arm_joint{i}' for i in range(1, 8))
@@ -266,26 +266,22 @@ def _measure(client, report, conditions, faults, reps, timeout, out, verbose):
 
 
 def run_stream_bench(out, rates=DEFAULT_RATES, burner=True, faults=DEFAULT_FAULTS, reps=1,
-                     start_node=False, gesture_file=None, robot_file=None, domain_id=None,
-                     node_params=(), out_dir=None, timeout=60.0, verbose=False):
+                     target=NodeTarget(), out_dir=None, timeout=60.0, verbose=False):
     """
     Run every condition against the node; print one table each; return the report dict.
 
-    With ``start_node`` a private node (fresh state directory, ``gesture_file``) is
-    started for the run and stopped at the end; otherwise the node already running in
-    ``domain_id`` (default ``$ROS_DOMAIN_ID``) is measured.  ``out_dir`` receives
-    ``stream_bench.json``.
+    ``target`` (:class:`~..runtime.private_node.NodeTarget`) is the node: with
+    ``start_node`` a private one (fresh state directory, ``gesture_file``) is started for
+    the run and stopped at the end; otherwise the node already running in ``domain_id``
+    (default ``$ROS_DOMAIN_ID``) is measured.  ``out_dir`` receives ``stream_bench.json``.
     """
     from ..ros.client import RecoveryClient
     rates = [float(r) for r in rates]
     if any(r < 0 for r in rates) or not rates:
         raise BenchError('--rates: expected one or more rates >= 0 (Hz)')
-    node = None
-    if start_node:
-        domain_id = private_domain() if domain_id is None else domain_id
-        node = PrivateNode(domain_id, out=out, robot_file=robot_file,
-                           gesture_file=gesture_file, params=node_params)
-    report = {'machine': machine_info(), 'gesture_file': gesture_file or '(node default)',
+    node, domain_id = target.start(out=out)
+    report = {'machine': machine_info(),
+              'gesture_file': target.gesture_file or '(node default)',
               'faults': list(faults), 'reps': reps, 'slack_sec': SLACK_SEC,
               'conditions': {}}
     info = report['machine']

@@ -55,7 +55,7 @@ def out_dir_of(args, name):
 
 def cmd_bench_paper(args, out):
     """Reproduce the paper's Tables 3-6 (resumable; see benchmarks.paper)."""
-    from ..benchmarks import paper
+    from ..benchmarks import common, paper
     reps = args.reps if args.reps is not None else (paper.QUICK_REPS if args.quick else 100)
     _positive_int('--reps', reps)
     _positive_int('--jobs', args.jobs)
@@ -66,9 +66,9 @@ def cmd_bench_paper(args, out):
     if args.deadline is not None and not (math.isfinite(args.deadline) and args.deadline > 0):
         raise _usage(f'--deadline: expected a number of seconds > 0, got {args.deadline}')
     out_dir = out_dir_of(args, 'paper-quick' if args.quick else 'paper')
-    paper.run_paper(out, out_dir, reps=reps, jobs=args.jobs, keys=keys, gestures=args.gestures,
-                    joints=joints, seed_base=args.seed_base, deadline=args.deadline,
-                    robot_file=args.robot_file, gesture_file=args.gesture_file,
+    run = paper.PaperRun(reps=reps, jobs=args.jobs, keys=keys, gestures=args.gestures,
+                         joints=joints, seed_base=args.seed_base, deadline=args.deadline)
+    paper.run_paper(out, out_dir, run, common.ModelFiles.from_args(args),
                     plots=not args.no_plots, progress=not args.quiet)
     return 0
 
@@ -90,8 +90,8 @@ def cmd_bench_optimum(args, out):
     if write is not None and args.stored:
         raise _usage('--write/--write-to: nothing to write with --stored')
     try:
-        doc = optimum.run_optimum(robot, library, out, cases, starts=args.starts,
-                                  seed=args.seed, maxiter=args.maxiter, write=write, keys=keys,
+        search = optimum.Multistart(starts=args.starts, seed=args.seed, maxiter=args.maxiter)
+        doc = optimum.run_optimum(robot, library, out, cases, search, write=write, keys=keys,
                                   seeds=args.seeds, use_stored=args.stored,
                                   progress=not args.quiet)
     except FileNotFoundError as exc:
@@ -104,7 +104,7 @@ def cmd_bench_optimum(args, out):
 
 def cmd_bench_speed(args, out):
     """Time the whole library: our default against the paper ABC, with quality."""
-    from ..benchmarks import speed
+    from ..benchmarks import common, speed
     _positive_int('--reps', args.reps)
     _positive_int('--sequential-reps', args.sequential_reps, 0)
     robot, library = models_of(args)
@@ -113,8 +113,8 @@ def cmd_bench_speed(args, out):
         raise _usage(f'--deadline: expected a number of seconds > 0, got {args.deadline}')
     speed.run_speed(out, out_dir_of(args, 'speed'), reps=args.reps, joints=args.joints,
                     seed_base=args.seed_base, deadline=args.deadline,
-                    robot_file=args.robot_file, gesture_file=args.gesture_file,
-                    progress=not args.quiet, sequential_reps=args.sequential_reps)
+                    files=common.ModelFiles.from_args(args), progress=not args.quiet,
+                    sequential_reps=args.sequential_reps)
     return 0
 
 

@@ -11,8 +11,9 @@ import argparse
 import json
 import sys
 
-from .ros_common import (add_connection_arguments, CommandError, domain_id, EXIT_FAILURE,
-                         EXIT_USAGE, namespace, wrap)
+from .ros_common import (add_connection_arguments, CommandError, EXIT_FAILURE, EXIT_USAGE,
+                         namespace, wrap)
+from ..runtime.private_node import NodeTarget
 
 
 def _rates(text):
@@ -29,9 +30,8 @@ def cmd_latency(args, out):
     """Measure fault-publish -> full-library-received latency against a node."""
     from ..benchmarks import latency
     report, failures = latency.run_latency(
-        out, args.count, args.joints, args.timeout, namespace(args), domain_id(args),
-        start_node=args.start_node, joint_states_hz=args.joint_states_hz, node_options=args,
-        verbose=args.verbose)
+        out, args.count, args.joints, args.timeout, namespace(args),
+        NodeTarget.from_args(args), joint_states_hz=args.joint_states_hz, verbose=args.verbose)
     if args.json:
         out.write(json.dumps(report, indent=2) + '\n')
     else:
@@ -45,9 +45,8 @@ def cmd_stream(args, out):
     try:
         report = stream.run_stream_bench(
             out, rates=args.rates, burner=args.burner, faults=args.faults, reps=args.reps,
-            start_node=args.start_node, gesture_file=args.gesture_file,
-            robot_file=args.robot_file, domain_id=args.domain_id, out_dir=args.out,
-            node_params=args.node_params, timeout=args.timeout, verbose=args.verbose)
+            target=NodeTarget.from_args(args), out_dir=args.out, timeout=args.timeout,
+            verbose=args.verbose)
     except stream.BenchError as exc:
         sys.stderr.write(f'namo-recovery: error: {exc}\n')
         return EXIT_FAILURE

@@ -217,16 +217,7 @@ class SimilarityScore:
         less than eps) so that quasi-Newton polishing converges quickly.
         """
         n = target.shape[0]
-        lms, jacs = {}, {}
-        for side, q in (('right', q_right), ('left', q_left)):
-            if q is None:
-                lms[side] = take_landmarks(self._ref_l if side == 'left' else self._ref_r, target)
-            elif isinstance(q, ArmLandmarks):
-                lms[side] = q
-            elif isinstance(q, tuple):
-                lms[side], jacs[side] = q
-            else:
-                lms[side], jacs[side] = batch_forward_jacobian(self.robot, q, side)
+        lms, jacs = self._landmarks_and_jacobians(q_right, q_left, target)
         w = self._w[target]
         total = np.zeros(n)
         grads = {side: np.zeros((n, 7)) for side in ('right', 'left')}
@@ -264,6 +255,20 @@ class SimilarityScore:
                         grads[side] += sign * coef * np.einsum(
                             'nc,nic->ni', unit, jacs[side].positions[:, row])
         return total, grads['right'], grads['left']
+
+    def _landmarks_and_jacobians(self, q_right, q_left, target):
+        """Return each arm's landmarks, and the Jacobians of the arms that move."""
+        lms, jacs = {}, {}
+        for side, q in (('right', q_right), ('left', q_left)):
+            if q is None:
+                lms[side] = take_landmarks(self._ref_l if side == 'left' else self._ref_r, target)
+            elif isinstance(q, ArmLandmarks):
+                lms[side] = q
+            elif isinstance(q, tuple):
+                lms[side], jacs[side] = q
+            else:
+                lms[side], jacs[side] = batch_forward_jacobian(self.robot, q, side)
+        return lms, jacs
 
     def _arm_terms_grad(self, lm, side, target, jac):
         ref_pos, ref_rot = self._ref_stack[side]

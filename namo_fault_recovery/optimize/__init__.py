@@ -20,14 +20,15 @@ wall-clock deadline and cancel flag of the caller) and returns an
 from .base import (Algorithm, Clock, minimize, OptimizeResult, Problem, STATUS_CANCELLED,
                    STATUS_DEADLINE, STATUS_DONE)
 from .bee_colony import ABC
-from .bfoa import BFOA
+from .bfoa import BFOA, CellSignal
 from .ga import GA
 from .gd import GradientDescent
 from .polish import polish
 from .registry import ALGORITHMS, make_algorithm, PRESETS
 
 __all__ = [
-    'ABC', 'ALGORITHMS', 'Algorithm', 'BFOA', 'Clock', 'GA', 'GradientDescent', 'OptimizeResult',
+    'ABC', 'ALGORITHMS', 'Algorithm', 'BFOA', 'CellSignal', 'Clock', 'GA', 'GradientDescent',
+    'OptimizeResult',
     'PRESETS', 'Problem', 'STATUS_CANCELLED', 'STATUS_DEADLINE', 'STATUS_DONE',
     'make_algorithm', 'minimize', 'polish',
 ]

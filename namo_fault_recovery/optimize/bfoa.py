@@ -14,19 +14,41 @@ the attraction and repulsion cancel exactly, so J_cc is identically zero.  It is
 computed, so other options behave as Passino describes.
 """
 
+from dataclasses import dataclass
+from typing import Optional
+
 import numpy as np
 
 from .base import Algorithm, best_of, check_float, check_int, remember_best, StepTimer
 
 
+@dataclass(frozen=True)
+class CellSignal:
+    """
+    The cell-to-cell signal's attraction depth and width and repulsion height and width.
+
+    Passino's swarming term; the paper's values (0.4, 0.3, 0.4, 0.3) cancel exactly.
+    """
+
+    d_attract: float = 0.4
+    w_attract: float = 0.3
+    h_repel: float = 0.4
+    w_repel: float = 0.3
+
+    def __post_init__(self):
+        for name in ('d_attract', 'w_attract', 'h_repel', 'w_repel'):
+            object.__setattr__(self, name,
+                               check_float(f'BFOA {name}', getattr(self, name), 0.0, 1e6))
+
+
 class BFOA(Algorithm):
-    """BFOA options; the defaults are the paper's Table 3 preset."""
+    """BFOA options; the defaults are the paper's Table 3 preset (``signal``: a CellSignal)."""
 
     name = 'bfoa'
 
     def __init__(self, population=10, step_size=0.5, elimination_events=2,
                  reproduction_steps=6, chemotactic_steps=10, swim_length=15,
-                 p_eliminate=0.3, d_attract=0.4, w_attract=0.3, h_repel=0.4, w_repel=0.3):
+                 p_eliminate=0.3, signal: Optional[CellSignal] = None):
         self.population = check_int('BFOA population', population, 2)
         self.step_size = check_float('BFOA step_size', step_size, 0.0, 10.0, low_open=True)
         self.elimination_events = check_int('BFOA elimination_events', elimination_events, 1)
@@ -34,10 +56,10 @@ class BFOA(Algorithm):
         self.chemotactic_steps = check_int('BFOA chemotactic_steps', chemotactic_steps, 1)
         self.swim_length = check_int('BFOA swim_length', swim_length, 0)
         self.p_eliminate = check_float('BFOA p_eliminate', p_eliminate, 0.0, 1.0)
-        self.d_attract = check_float('BFOA d_attract', d_attract, 0.0, 1e6)
-        self.w_attract = check_float('BFOA w_attract', w_attract, 0.0, 1e6)
-        self.h_repel = check_float('BFOA h_repel', h_repel, 0.0, 1e6)
-        self.w_repel = check_float('BFOA w_repel', w_repel, 0.0, 1e6)
+        signal = CellSignal() if signal is None else signal
+        # Kept flat, so that options() reports the same names as before.
+        self.d_attract, self.w_attract = signal.d_attract, signal.w_attract
+        self.h_repel, self.w_repel = signal.h_repel, signal.w_repel
 
     @classmethod
     def paper(cls):

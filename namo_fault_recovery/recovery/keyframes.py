@@ -21,8 +21,9 @@ top of the paper's method:
 """
 
 import copy
+from dataclasses import dataclass
 import time
-from typing import Optional
+from typing import Optional, Union
 
 import numpy as np
 
@@ -48,11 +49,28 @@ SHARE_SWEEPS = 3           # restart sweeps at most (each spreads a branch a lit
 SHARE_POLISHED = 1         # of those restarts, the best-scoring ones are polished
 
 
+@dataclass(frozen=True)
+class SearchOptions:
+    """
+    How the motion adaptation asks the keyframe search to run (the paper's run: defaults).
+
+    ``stay_close`` (per deg^2) penalises moving away from the reference pose, so that
+    neighbouring keyframes stay on one redundant branch.  ``share_branches`` (True,
+    False, or gesture names) restarts each keyframe of a motion from its other
+    keyframes' solutions (:func:`_share_branches`).  ``lock_start`` maps joints to the
+    start of ``lock_strategy='optimal'`` (None: the library average).
+    """
+
+    stay_close: float = 0.0
+    share_branches: Union[bool, tuple] = True
+    lock_start: Optional[dict] = None
+
+
 class PoseProblem(Problem):
     """
     The free joints of some arms, for a batch of targets, scored against each target.
 
-    ``base_right``/``base_left`` (B, 7) are the starting poses (reference angles with
+    ``base`` is the pair (right, left) of (B, 7) starting poses (reference angles with
     failed joints at their locks); ``free`` is a tuple of ``(arm, joint index)`` giving
     the variables.  With a ``collision`` model the capsule penalty is added to the score.
     ``smooth`` (mm or deg) rounds the kinks of the score for the gradient-based polish.
@@ -61,8 +79,8 @@ class PoseProblem(Problem):
     point leads, so that successive keyframes stay on one branch of the redundancy.
     """
 
-    def __init__(self, robot, scorer, target_ids, base_right, base_left, free,
-                 collision=None, smooth=0.01, x0=None, anchor=None, continuity=0.0):
+    def __init__(self, robot, scorer, target_ids, base, free, collision=None, smooth=0.01,
+                 x0=None, anchor=None, continuity=0.0):
         if not free:
             raise ValueError('PoseProblem: no free joint to optimise')
         self.robot = robot
@@ -70,8 +88,7 @@ class PoseProblem(Problem):
         self.collision = collision
         self.smooth = float(smooth)
         self.target_ids = np.asarray(target_ids, dtype=int)
-        self.base = {'right': np.array(base_right, dtype=float),
-                     'left': np.array(base_left, dtype=float)}
+        self.base = {side: np.array(pose, dtype=float) for side, pose in zip(ARMS, base)}
         self.free = tuple(free)
         self.columns = {side: [(k, j) for k, (s, j) in enumerate(self.free) if s == side]
                         for side in ARMS}
@@ -91,7 +108,7 @@ class PoseProblem(Problem):
         """Return the same problem for some of its rows only (``rows``: indices)."""
         rows = np.asarray(rows, dtype=int)
         return PoseProblem(self.robot, self.scorer, self.target_ids[rows],
-                           self.base['right'][rows], self.base['left'][rows], self.free,
+                           (self.base['right'][rows], self.base['left'][rows]), self.free,
                            self.collision, self.smooth, self.x0[rows],
                            None if self.anchor is None else self.anchor[rows],
                            self.continuity / _DEG2 if self.anchor is not None else 0.0)
@@ -261,9 +278,10 @@ def _solve_once(robot, scorer, collision, batch, algo, clock, rng, stats=None):
         designed = np.array([[ref[0 if s == 'right' else 1][j] for s, j in free]
                              for ref in refs])
         anchor = designed if batch.stay_close else None
-        problem = PoseProblem(robot, scorer, batch.target_ids[members], batch.right[members],
-                              batch.left[members], free, collision=collision, x0=x0,
-                              anchor=anchor, continuity=batch.stay_close)
+        problem = PoseProblem(robot, scorer, batch.target_ids[members],
+                              (batch.right[members], batch.left[members]), free,
+                              collision=collision, x0=x0, anchor=anchor,
+                              continuity=batch.stay_close)
         start = problem.evaluate(problem.x0[:, None, :])[:, 0]
         group_clock = clock.child(share=1.0 / n_left)
         res = minimize(problem, algo, clock=group_clock, seed=int(rng.integers(2 ** 63)))
@@ -359,8 +377,7 @@ def joint_set(robot, names):
 def reconfigure_library(robot, library, faults, settings, *,
                         seed: Optional[int] = None, clock: Optional[Clock] = None,
                         measured=None, optimizer_overrides=None, gestures=None,
-                        stay_close=0.0, lock_start=None,
-                        share_branches=True) -> LibraryResult:
+                        options: SearchOptions = SearchOptions()) -> LibraryResult:
     """
     Reconfigure every gesture (or those named in ``gestures``) for a fault set.
 
@@ -380,13 +397,11 @@ def reconfigure_library(robot, library, faults, settings, *,
 
     A gesture's designed ``joints`` are searched first, and its ``expand`` stages add
     joints while a keyframe's fingertip stays more than ``DEFAULT_EXPANSION_THRESHOLD``
-    mm off (staged DOF expansion).  ``stay_close`` (per deg^2) penalises moving away
-    from the reference pose, so that neighbouring keyframes stay on one redundant
-    branch.  ``share_branches`` (True, False, or gesture names) restarts each keyframe
-    of a motion from its other keyframes' solutions (:func:`_share_branches`).  With
-    ``lock_strategy='optimal'`` see :func:`_optimise_locks`; its start is the library
-    average, or ``lock_start[joint]``.  Returns a :class:`~.result.LibraryResult`, a pure
-    function of the inputs and ``seed`` (None draws one) up to where a deadline cuts.
+    mm off (staged DOF expansion).  ``options`` (:class:`SearchOptions`) holds what the
+    motion adaptation adds: ``stay_close``, ``share_branches`` and the ``lock_start``
+    of ``lock_strategy='optimal'`` (see :func:`_optimise_locks`).  Returns a
+    :class:`~.result.LibraryResult`, a pure function of the inputs and ``seed`` (None
+    draws one) up to where a deadline cuts.
     """
     start = time.monotonic()
     reference = robot
@@ -398,13 +413,13 @@ def reconfigure_library(robot, library, faults, settings, *,
     algo = make_algorithm(settings.optimizer, settings.optimizer_preset,
                           **(optimizer_overrides or {}))
     locks, notes, optimal = _start_locks(robot, library, faults, settings.lock_strategy,
-                                         measured, lock_start)
+                                         measured, options.lock_start)
     selected = list(library) if gestures is None else [library[g] for g in gestures]
     # The optimisers stop early enough to leave time for what follows them (scoring the
     # result, the collision check).
     search = clock.child(reserve=ENGINE_RESERVE)
-    setup = _Setup(robot, reference, selected, locks, settings, algo, stay_close,
-                   share_branches)
+    setup = _Setup(robot, reference, selected, locks, settings, algo, options.stay_close,
+                   options.share_branches)
     setup.faults, setup.seed = dict(faults), seed
     setup.budget = None if clock.end is None else clock.end - clock.start
     notes += setup.notes

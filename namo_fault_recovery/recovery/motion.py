@@ -36,7 +36,7 @@ from . import keyframes as keyframe_search
 from .budget import FINISH_RESERVE, PUBLISH_RESERVE, TYPICAL_SHARE, VQ_SHARE
 from .figures import columns, describe_motion, no_worse_than_locked
 from .keyframes import (apply_locks, free_layout, joint_set, locked_sets, PoseProblem,
-                        reconfigure_library)
+                        reconfigure_library, SearchOptions)
 from .kriging import OrdinaryKriging
 from .locks import frozen_arms, resolve_locks
 from .result import LibraryResult
@@ -113,14 +113,14 @@ class _Job:
                                                           for i in self.picks[g.name]])
                                         for g in library), library.source)
 
-    def engine_options(self):
+    def engine_options(self, lock_start=None):
         """Return the keyword arguments of the typical points' keyframe search."""
+        # A motion explored at its typical points is made consistent by _consistent;
+        # one explored at every keyframe shares its branches.
+        shared = tuple(g.name for g in self.library if self.quantisations.get(g.name) is None)
         return {'optimizer_overrides': self.optimizer_overrides,
-                'stay_close': self.stay_close,
-                # A motion explored at its typical points is made consistent by
-                # _consistent; one explored at every keyframe shares its branches.
-                'share_branches': tuple(g.name for g in self.library
-                                        if self.quantisations.get(g.name) is None)}
+                'options': SearchOptions(stay_close=self.stay_close, share_branches=shared,
+                                         lock_start=lock_start)}
 
 
 def adapt_library(robot, library, faults, settings, *,
@@ -212,9 +212,9 @@ def _adapt_optimal(job, faults, measured, seed, search):
     # The engine starts from the same averages, over the whole motions.
     screen = reconfigure_library(
         robot, job.sub, {j: (None if a is None else averages[j]) for j, a in faults.items()},
-        job.settings, lock_start=averages, clock=search.child(share=0.5),
+        job.settings, clock=search.child(share=0.5),
         seed=int(np.random.default_rng([seed, 1]).integers(2 ** 63)),
-        **job.engine_options())
+        **job.engine_options(lock_start=averages))
     chosen = screen.locks
     if all(chosen[j] == averages[j] for j in joints):
         cut = any(n.startswith('optimal lock') and 'deadline' in n for n in screen.notes)
@@ -434,9 +434,10 @@ def _consistent(ctx, ids, design, solved, layout, continuity_weight, clock):
             break
         before = solved[rest].copy()
         anchor = design[rest, col] + solved[:-1, col] - design[:-1, col]
-        problem = PoseProblem(ctx.model, ctx.scorer, ids[rest], solved[rest, :N_JOINTS],
-                              solved[rest, N_JOINTS:], layout, x0=solved[rest][:, col],
-                              anchor=anchor, continuity=continuity_weight)
+        problem = PoseProblem(ctx.model, ctx.scorer, ids[rest],
+                              (solved[rest, :N_JOINTS], solved[rest, N_JOINTS:]), layout,
+                              x0=solved[rest][:, col], anchor=anchor,
+                              continuity=continuity_weight)
         starts = problem.clip(np.stack((solved[rest][:, col], anchor), axis=1))
         x, f = polish(problem, starts, clock, maxiter=20, ftol=1e-6)
         nfev += problem.nfev
@@ -526,8 +527,8 @@ def _chain(ctx, m, layout, continuity_weight, clock, rng, start_r, start_l):
             prev = np.concatenate((q_r[t - 1], q_l[t - 1]))[col]
             anchor = prev + design_free[t] - design_free[t - 1]
             x0 = anchor
-        problem = PoseProblem(ctx.model, scorer, ids[t:t + 1], base_r[t:t + 1],
-                              base_l[t:t + 1], layout, x0=[x0],
+        problem = PoseProblem(ctx.model, scorer, ids[t:t + 1],
+                              (base_r[t:t + 1], base_l[t:t + 1]), layout, x0=[x0],
                               anchor=None if anchor is None else [anchor],
                               continuity=continuity_weight)
         if clock.remaining() <= 0:

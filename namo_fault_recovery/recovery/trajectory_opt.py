@@ -51,7 +51,7 @@ class TrajectoryProblem:
     """
     The free joints of one motion's T points as one bounded problem of T x D variables.
 
-    ``start_right``/``start_left`` (T, 7) are the warm start (the Kriging result, locks
+    ``start`` is the pair (right, left) of (T, 7) warm starts (the Kriging result, locks
     applied): they also give every joint that is not free, so that the locked joints
     keep their lock.  ``layout`` is a tuple of ``(arm, joint index)``, the free joints
     (the same at every point).  ``target_ids`` (T,) are the points' rows in ``scorer``,
@@ -61,7 +61,7 @@ class TrajectoryProblem:
     hinge penalty applies (None: no hinge).
     """
 
-    def __init__(self, robot, scorer, target_ids, start_right, start_left, layout, *,
+    def __init__(self, robot, scorer, target_ids, start, layout, *,
                  smoothness=DEFAULT_SMOOTHNESS, step_cap_deg=None,
                  step_penalty=DEFAULT_STEP_PENALTY, collision=None, smooth=DEFAULT_SMOOTH):
         if not layout:
@@ -75,8 +75,7 @@ class TrajectoryProblem:
         self.collision = collision
         self.smooth = float(smooth)
         self.target_ids = np.asarray(target_ids, dtype=int)
-        self.start = {'right': np.array(start_right, dtype=float),
-                      'left': np.array(start_left, dtype=float)}
+        self.start = {side: np.array(pose, dtype=float) for side, pose in zip(ARMS, start)}
         self.layout = tuple(layout)
         self.n_points = len(self.target_ids)
         self.dim = len(self.layout)
@@ -324,6 +323,6 @@ def optimise_motion(robot, scorer, target_ids, start_right, start_left, layout, 
     cap of the step hinge.  The other arguments are those of :class:`TrajectoryProblem`
     (with the default smoothness and step penalty) and :func:`optimise_trajectory`.
     """
-    problem = TrajectoryProblem(robot, scorer, target_ids, start_right, start_left, layout,
+    problem = TrajectoryProblem(robot, scorer, target_ids, (start_right, start_left), layout,
                                 step_cap_deg=designed_step_deg(design), collision=collision)
     return optimise_trajectory(problem, clock)

@@ -9,6 +9,7 @@ temporary directory and its output to a log that is shown when it does not stop
 cleanly.  Free of ROS: only subprocesses.
 """
 
+from dataclasses import dataclass
 import os
 from pathlib import Path
 import shutil
@@ -16,6 +17,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+from typing import Optional
 
 STOP_TIMEOUT_SEC = 15.0    # SIGINT, then this long for a clean exit, then SIGKILL
 
@@ -133,3 +135,36 @@ class PrivateNode:
 
     def __exit__(self, *exc):
         self.stop()
+
+
+@dataclass(frozen=True)
+class NodeTarget:
+    """
+    The node a benchmark measures: one already running, or a private one it starts.
+
+    ``start_node`` False measures the node running in ``domain_id`` (None:
+    ``$ROS_DOMAIN_ID``).  True starts a private node in ``domain_id`` (None: a private
+    one) that loads ``robot_file`` and ``gesture_file`` (None: the packaged ones) with
+    the ``NAME:=VALUE`` parameters ``node_params``.
+    """
+
+    start_node: bool = False
+    domain_id: Optional[int] = None
+    robot_file: Optional[str] = None
+    gesture_file: Optional[str] = None
+    node_params: tuple = ()
+
+    @classmethod
+    def from_args(cls, args):
+        """Return a command's target (``--start-node``, ``--domain-id``, files, params)."""
+        return cls(bool(getattr(args, 'start_node', False)), getattr(args, 'domain_id', None),
+                   getattr(args, 'robot_file', None), getattr(args, 'gesture_file', None),
+                   tuple(getattr(args, 'node_params', None) or ()))
+
+    def start(self, namespace='/', out=None, extra_params=()):
+        """Return ``(PrivateNode or None, domain id)``: the node started, where to reach it."""
+        if not self.start_node:
+            return None, self.domain_id
+        domain = private_domain() if self.domain_id is None else self.domain_id
+        return PrivateNode(domain, namespace, out, self.robot_file, self.gesture_file,
+                           list(self.node_params) + list(extra_params)), domain
