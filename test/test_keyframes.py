@@ -5,6 +5,7 @@ import json
 from pathlib import Path
 
 from namo_fault_recovery.cli.main import main
+from namo_fault_recovery.model.gestures import load_library
 from namo_fault_recovery.objective.score import gesture_targets, SimilarityScore
 from namo_fault_recovery.optimize.base import Clock
 from namo_fault_recovery.recovery.engine import RecoverySettings
@@ -208,3 +209,22 @@ def test_cli_solve_text_and_errors(capsys):
         assert main(argv, io.StringIO()) == 2
         err = capsys.readouterr().err
         assert message in err and err.count('\n') == 1
+
+
+def test_the_keyframe_search_measures_the_figures_of_its_result(robot):
+    # The keyframe search's GestureResult carries the same figures as a whole motion's:
+    # no field is left at a default that would read as "0 mm" or "0 evaluations".
+    library = load_library(robot)          # the packaged library: the Bye wave is a motion
+    report = reconfigure_library(robot, library, {'right_arm_joint2': None}, PAPER, seed=0,
+                                 clock=Clock(None))
+    bye = report['bye']
+    design = np.array([kf.positions() for kf in library['bye'].keyframes])
+    designed_step = float(np.degrees(np.abs(np.diff(design, axis=0))).max())
+    assert bye.max_jump_designed_deg == pytest.approx(designed_step)
+    q = np.array(bye.positions)
+    assert bye.max_jump_deg == pytest.approx(float(np.degrees(np.abs(np.diff(q, axis=0))).max()))
+    for g in report.gestures:
+        assert g.tip_error_before_mm > g.tip_error_mm >= 0.0, g.name
+        assert g.tip_error_max_mm >= g.tip_error_mm
+        assert g.nfev > 0 and g.wall_time == report.wall_time > 0
+    assert abs(sum(g.nfev for g in report.gestures) - report.nfev) <= len(report.gestures)

@@ -62,7 +62,8 @@ def describe_motion(ctx, motion, picks) -> GestureResult:
     Return the :class:`GestureResult` of one adapted motion (``motion``: a ``_Motion``).
 
     ``ctx`` holds the run's models, scorer and collision checker; ``picks`` are the
-    motion's typical points.  ``wall_time`` is left for the caller.
+    motion's typical points.  ``wall_time`` is the run's, set by the caller when the run
+    ends (:func:`.motion.adapt_library`).
     """
     m, gesture = motion, motion.gesture
     before = ctx.scorer.evaluate(m.base_r, m.base_l, m.ids)

@@ -28,6 +28,7 @@ from typing import Optional, Union
 import numpy as np
 
 from .budget import ENGINE_RESERVE, STAGE1_SHARE
+from .figures import largest_jump
 from .locks import clamp_lock, resolve_locks
 from .result import GestureResult, LibraryResult
 from ..model.kinematics import ArmLandmarks, batch_forward, batch_forward_jacobian, take_landmarks
@@ -620,6 +621,26 @@ def _take(out, c, n_t):
     return {key: value[rows] for key, value in out.items()}
 
 
+def _path_figures(setup, out, ks):
+    """
+    Return the fingertip and joint-step figures of one gesture's rows ``ks``.
+
+    The same figures as a whole motion's (:func:`.figures.describe_motion`), over the
+    keyframes this search solved: fingertip distance to the designed keyframe (mm, the
+    worse hand) and the largest joint step between successive keyframes (deg).
+    """
+    scorer, rows = setup.scorer, np.asarray(ks)
+    design = np.concatenate((setup.ref_r[rows], setup.ref_l[rows]), axis=1)
+    base = np.concatenate((out['base_right'][rows], out['base_left'][rows]), axis=1)
+    best = np.concatenate((out['right'][rows], out['left'][rows]), axis=1)
+    err_before = scorer.tip_error(out['base_right'][rows], out['base_left'][rows], rows)
+    err_after = scorer.tip_error(out['right'][rows], out['left'][rows], rows)
+    return {'tip_error_before_mm': float(err_before.mean()),
+            'tip_error_mm': float(err_after.mean()), 'tip_error_max_mm': float(err_after.max()),
+            'max_jump_designed_deg': largest_jump(design),
+            'max_jump_before_deg': largest_jump(base), 'max_jump_deg': largest_jump(best)}
+
+
 def _library_result(setup, locks, out, notes, wall, nfev):
     """Describe one lock set's solved rows as a :class:`~.result.LibraryResult`."""
     robot, scorer, checker, settings = setup.robot, setup.scorer, setup.checker, setup.settings
@@ -660,7 +681,9 @@ def _library_result(setup, locks, out, notes, wall, nfev):
             expansion_stage=int(max(out['expansion'][k] for k in ks)),
             score_before_mean=float(np.mean([before[k] for k in ks])),
             score_mean=float(np.mean([after[k] for k in ks])),
-            typical_points=len(ks), typical_indices=tuple(range(len(ks)))))
+            typical_points=len(ks), typical_indices=tuple(range(len(ks))),
+            nfev=int(round(nfev * len(ks) / max(1, len(targets)))),
+            **_path_figures(setup, out, ks)))
     deadline_met = not any(g.status in ('deadline', 'cancelled') for g in results)
     return LibraryResult(
         gestures=tuple(results), faults=setup.faults,

@@ -166,11 +166,12 @@ def adapt_library(robot, library, faults, settings, *,
                                           measured)
         out = _with_notes(_adapt(job, locks, seed, search), lock_notes)
     out = _with_notes(out, notes)
-    gestures = tuple(no_worse_than_locked(robot, library[g.name], g, out.locks, settings)
+    wall = float(time.monotonic() - start)
+    gestures = tuple(replace(no_worse_than_locked(robot, library[g.name], g, out.locks,
+                                                  settings), wall_time=wall)
                      for g in out.gestures)
     budget = None if clock.end is None else float(clock.end - clock.start)
-    return replace(out, gestures=gestures, faults=faults,
-                   wall_time=float(time.monotonic() - start), deadline=budget,
+    return replace(out, gestures=gestures, faults=faults, wall_time=wall, deadline=budget,
                    success=out.success and all(np.isfinite(g.score_after) for g in gestures),
                    origin='unbounded' if budget is None else 'deadline')
 

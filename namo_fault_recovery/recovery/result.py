@@ -77,7 +77,8 @@ class GestureResult:
       the healthy arm joined (None when no keyframe search ran for this gesture);
     - ``expansion_stage``: staged DOF expansion stages used (0: the designed joints);
       ``free_joints``: the joint names searched (after any expansion or stage 2);
-    - ``nfev``: objective evaluations spent on this gesture;
+    - ``nfev``: objective evaluations spent on this gesture (a batched evaluation of
+      the whole library counts for each gesture in proportion to its rows);
     - ``wall_time``: seconds of the whole run (the same for every gesture);
     - ``status``: ``converged``, ``deadline``, ``cancelled``, ``frozen`` or
       ``unchanged``; ``message``: one line for a person;
