@@ -2,7 +2,7 @@
 
 from namo_fault_recovery.optimize.base import Clock
 from namo_fault_recovery.recovery.engine import recover, RecoverySettings
-from namo_fault_recovery.recovery.keyframes import reconfigure_library
+from namo_fault_recovery.recovery.keyframes import reconfigure_library, SearchOptions
 from namo_fault_recovery.recovery.locks import clamp_lock, resolve_locks
 from namo_fault_recovery.recovery.motion import adapt_library
 import numpy as np
@@ -170,12 +170,13 @@ def test_optimal_engine_includes_the_start_and_solves_it_as_the_fixed_run(robot,
     # is solved exactly as the fixed-lock run solves it, so optimal ties or wins.
     joint = 'right_arm_joint2'
     node = RecoverySettings(bimanual='auto', collision_check=True)
-    kw = {'seed': 3, 'stay_close': 1e-3, 'clock': Clock(None)}
+    kw = {'seed': 3, 'clock': Clock(None)}
     start = {joint: 0.3}
-    fixed = reconfigure_library(robot, library, start, node, **kw)
+    fixed = reconfigure_library(robot, library, start, node,
+                                options=SearchOptions(stay_close=1e-3), **kw)
     optimal = reconfigure_library(robot, library, {joint: None},
-                                  node.with_changes(lock_strategy='optimal'), lock_start=start,
-                                  **kw)
+                                  node.with_changes(lock_strategy='optimal'),
+                                  options=SearchOptions(stay_close=1e-3, lock_start=start), **kw)
     assert optimal.total_score <= fixed.total_score
     assert any('at the start 17.19 deg' in n for n in optimal.notes)
     if optimal.locks[joint] == 0.3:

@@ -249,7 +249,7 @@ class GesturePlayer(Node):
         start = [self._measured[j] for j in self._joints]
         return plan_motion(self._joints, start, track.times, track.positions[:, columns],
                            limits, locks=self._book.locks(dict(self._measured)),
-                           lower=lower, upper=upper, settings=self._timing)
+                           lower=lower, upper=upper, timing=self._timing)
 
     @staticmethod
     def _trajectory(plan, joints):
