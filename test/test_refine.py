@@ -2,12 +2,15 @@
 
 from dataclasses import replace
 import json
+import multiprocessing
+import os
 import time
 
 from namo_fault_recovery.optimize.base import Clock
 from namo_fault_recovery.recovery.engine import recover, RecoverySettings
 from namo_fault_recovery.recovery.refine import refinement_faults, refinements
 from namo_fault_recovery.runtime.contingency_keeper import ContingencyKeeper, TABLE_FILE
+from namo_fault_recovery.runtime.engine_process import die_with_parent
 from namo_fault_recovery.runtime.run_book import RunBook
 from namo_fault_recovery.runtime.state_store import Fault
 
@@ -98,3 +101,56 @@ def test_the_keeper_builds_persists_and_reuses_its_table(robot, product_library,
             == replace(hit, faults={})
     finally:
         again.stop()
+
+
+def _state(pid):
+    """Return the process state letter of ``pid`` (``T``: stopped)."""
+    with open(f'/proc/{pid}/stat') as stat:
+        return stat.read().rsplit(')', 1)[1].split()[0]
+
+
+def _report_parent(conn, parent_pid):
+    die_with_parent(parent_pid)
+    conn.send('alive')
+
+
+def test_a_child_whose_parent_is_already_gone_exits_at_once():
+    ctx = multiprocessing.get_context('spawn')
+    for parent_pid, alive in ((os.getpid(), True), (1, False)):
+        mine, theirs = ctx.Pipe()
+        proc = ctx.Process(target=_report_parent, args=(theirs, parent_pid))
+        proc.start()
+        theirs.close()
+        proc.join(timeout=60.0)
+        assert proc.exitcode == 0
+        try:
+            said = mine.recv()
+        except EOFError:
+            said = None
+        assert (said == 'alive') is alive
+
+
+def test_the_keeper_stops_its_builder_only_once_it_is_armed(robot, product_library, tmp_path):
+    # A builder stopped before it armed its death signal would outlive a killed node: a
+    # pause at once after the start leaves it running until it is armed.
+    logs = []
+    keeper = ContingencyKeeper(robot, product_library, tmp_path, lambda *a: logs.append(a),
+                               seeds=(0,))
+    try:
+        keeper.configure(RecoverySettings())
+        end = time.monotonic() + 60.0
+        while keeper.builder_pid is None and time.monotonic() < end:
+            time.sleep(0.001)
+        pid = keeper.builder_pid
+        keeper.pause()
+        while not keeper.armed and time.monotonic() < end:
+            time.sleep(0.05)
+        assert keeper.armed, logs                   # it was not stopped while starting
+        keeper.resume()
+        keeper.pause()
+        time.sleep(0.2)
+        assert _state(pid) == 'T'                   # armed, it is stopped for a live run
+        keeper.resume()
+        assert _state(pid) != 'T'
+    finally:
+        keeper.stop()

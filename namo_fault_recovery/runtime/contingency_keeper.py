@@ -31,10 +31,11 @@ TABLE_FILE = 'contingency_table.json'
 BUILD_SEEDS = (0, 1, 2, 3)
 
 
-def _build(conn, robot, library, settings, plan, seeds):
+def _build(conn, robot, library, settings, plan, seeds, parent_pid=None):
     """Child: build each fault set of ``plan`` at the lowest priority; send each entry."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)     # Ctrl-C is the node's to handle
-    die_with_parent()
+    die_with_parent(parent_pid)
+    conn.send(('armed', None, None, 0.0))            # from now on it may be stopped
     try:
         os.nice(19)
     except OSError:
@@ -69,7 +70,7 @@ class ContingencyKeeper:
         self._proc = None
         self._conn = None
         self._reader = None
-        self._paused = False
+        self._paused = self._armed = False  # armed: the builder set its death signal
         self.building = False
 
     # --- lookup ---------------------------------------------------------------------
@@ -178,12 +179,12 @@ class ContingencyKeeper:
         parent, child = self._ctx.Pipe()
         proc = self._ctx.Process(target=_build, name='namo-recovery-table', daemon=True,
                                  args=(child, self._robot, self._library, settings, plan,
-                                       self._seeds))
+                                       self._seeds, os.getpid()))
         proc.start()
         child.close()
         with self._lock:
             self._proc, self._conn, self.building = proc, parent, True
-            self._paused = False
+            self._paused = self._armed = False
         self._reader = threading.Thread(target=self._receive, args=(parent, proc),
                                         name='table-builder', daemon=True)
         self._reader.start()
@@ -199,6 +200,11 @@ class ContingencyKeeper:
                 kind, locks, result, cpu = conn.recv()
             except (EOFError, OSError):
                 return                               # stopped (a new plan, or the node)
+            if kind == 'armed':
+                with self._lock:
+                    if self._proc is proc:
+                        self._armed = True
+                continue
             if kind == 'done':
                 with self._lock:
                     if self._proc is proc:
@@ -222,6 +228,17 @@ class ContingencyKeeper:
         except OSError as exc:
             self._log('warning', f'contingency table: cannot write {self._path}: {exc}')
 
+    @property
+    def builder_pid(self):
+        """Return the pid of the builder process, None when none runs."""
+        proc = self._proc
+        return None if proc is None else proc.pid
+
+    @property
+    def armed(self):
+        """Return whether the builder armed its death signal (only then is it ever stopped)."""
+        return self._armed
+
     # --- the live run comes first ---------------------------------------------------
 
     def pause(self):
@@ -236,6 +253,10 @@ class ContingencyKeeper:
         with self._lock:
             proc = self._proc
             if proc is None or self._paused == paused or not proc.is_alive():
+                return
+            if paused and not self._armed:
+                # Still starting: stopped now, it could never arm its death signal, and
+                # a node killed meanwhile would leave it stopped for ever.
                 return
             try:
                 os.kill(proc.pid, signum)
@@ -267,3 +288,6 @@ class ContingencyKeeper:
         if self._thread is not None:
             self._thread.join(timeout=5.0)
         self._stop_builder()
+        reader = self._reader
+        if reader is not None:
+            reader.join(timeout=5.0)     # an entry received is saved before stop returns

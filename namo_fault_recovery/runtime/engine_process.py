@@ -25,18 +25,26 @@ class EngineError(RuntimeError):
     """The engine process failed a run (the message says why)."""
 
 
-def die_with_parent():
-    """Ask Linux to kill this (child) process when its parent dies, even by SIGKILL."""
+def die_with_parent(parent_pid=None):
+    """
+    Ask Linux to kill this (child) process when its parent dies, even by SIGKILL.
+
+    The request is made by the child once it runs, so a parent that died while the
+    child was still starting would never deliver the signal: with ``parent_pid`` (the
+    parent's pid, taken before the start) the child then exits at once.
+    """
     try:
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
     except (OSError, AttributeError):
         pass            # not Linux: the pipe's EOF still ends the child
+    if parent_pid is not None and os.getppid() != parent_pid:
+        os._exit(0)     # the parent is already gone: nobody is left to read our answers
 
 
-def _serve(conn, robot_file, gesture_file, current):
+def _serve(conn, robot_file, gesture_file, current, parent_pid=None):
     """Child main loop: load the models, warm up, then answer requests until told to stop."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)     # Ctrl-C is the parent's to handle
-    die_with_parent()
+    die_with_parent(parent_pid)
     from ..model.gestures import load_library
     from ..model.robot import load_robot
     from ..optimize.base import Clock
@@ -134,7 +142,7 @@ class EngineProcess:
         """Start the child (returns at once; :meth:`run` waits until it is ready)."""
         parent, child = self._ctx.Pipe()
         self._proc = self._ctx.Process(
-            target=_serve, args=(child, *self._files, self._current),
+            target=_serve, args=(child, *self._files, self._current, os.getpid()),
             name='namo-recovery-engine', daemon=True)
         self._proc.start()
         child.close()
