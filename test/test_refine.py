@@ -23,8 +23,8 @@ def test_each_refinement_is_better_and_keeps_the_locks(robot, product_library):
                               clock=Clock(20.0), seeds=range(1, 4)):
         assert better.origin == 'refined' and better.locks == published.locks
         # The deadline is the published result's; the refinement's time is apart.
-        assert (better.deadline, better.deadline_met) == (published.deadline,
-                                                           published.deadline_met)
+        assert better.deadline == published.deadline
+        assert better.deadline_met == published.deadline_met
         assert 0.0 < better.refined_after < 20.0
         assert better.faults == published.faults
         assert better.total_score < totals[-1] * (1 - 1e-3)
