@@ -5,13 +5,15 @@ import math
 import threading
 
 from namo_fault_recovery.recovery.engine import RecoverySettings
-from namo_fault_recovery.recovery.result import reference_result
+from namo_fault_recovery.recovery.result import (GestureResult, LibraryResult,
+                                                 reference_result, summary)
 from namo_fault_recovery.ros import diagnostics
+from namo_fault_recovery.ros.node import reconfigure_answer
 from namo_fault_recovery.ros.parameters import check_parameter, node_config, parameter_specs
 from namo_fault_recovery.runtime.fault_intake import Clear, FaultIntake, Report
 from namo_fault_recovery.runtime.inputs import BadInput, MAX_REASON, parse_fault
 from namo_fault_recovery.runtime.restore import check_result, restore_decision
-from namo_fault_recovery.runtime.run_book import RunBook
+from namo_fault_recovery.runtime.run_book import Outcome, RunBook
 from namo_fault_recovery.runtime.state_store import Fault, PersistedState
 import pytest
 
@@ -313,3 +315,72 @@ def test_latest_worker_runs_the_newest_item_and_drops_the_superseded():
     finally:
         worker.stop()
     assert seen == [(2, 'stamp')]
+
+
+# --- what a deadline result and a refined one say -----------------------------------------
+
+def _deadline_result():
+    wai = GestureResult(name='wai', times=(0.0,), positions=((0.0,) * 14,), score_before=61.96,
+                        score_after=25.67, wall_time=0.08, status='converged')
+    return LibraryResult(gestures=(wai,), faults={'right_arm_joint2': None},
+                         locks={'right_arm_joint2': 0.0}, wall_time=0.08, deadline=1.0,
+                         deadline_met=True, origin='deadline')
+
+
+def _refined_result():
+    first = _deadline_result()
+    wai = replace(first.gestures[0], score_after=25.12, wall_time=0.09)
+    return replace(first, gestures=(wai,), wall_time=0.09, origin='refined',
+                   refined_after=7.761, refines_version=4)
+
+
+def test_a_deadline_result_says_its_run_time_and_its_deadline():
+    text = summary(_deadline_result())
+    assert text.startswith('reconfigured 1/1 gestures in 0.080 s (deadline 1.000 s met) '
+                           'for right_arm_joint2 at 0.00 deg by a live search: '), text
+    assert text.endswith('wai 61.96 -> 25.67 in 0.080 s'), text
+    missed = summary(replace(_deadline_result(), deadline_met=False, success=False))
+    assert '(deadline 1.000 s MISSED, best found so far used)' in missed, missed
+
+
+def test_a_refined_result_says_the_refinement_time_and_the_deadline_apart():
+    text = summary(_refined_result())
+    assert text.startswith('reconfigured 1/1 gestures refined 7.761 s after the deadline '
+                           'result (deadline 1.000 s met by version 4) for '
+                           'right_arm_joint2 at 0.00 deg: '), text
+    assert 'deadline 7.761' not in text and 'in 0.090 s (' not in text, text
+    assert text.endswith('wai 61.96 -> 25.12 in 0.090 s'), text
+    answer = reconfigure_answer(Outcome(True, _refined_result(), 5, 1_000_000_001))
+    assert answer.startswith(text) and answer.endswith('[library version 5, stamp 1.000000001]')
+    unknown = summary(replace(_refined_result(), refines_version=0, deadline_met=False))
+    assert '(deadline 1.000 s missed by the deadline result)' in unknown, unknown
+
+
+def test_a_refined_result_keeps_its_figures_through_the_state_file_format():
+    refined = _refined_result()
+    doc = refined.to_dict()
+    assert (doc['deadline'], doc['refined_after'], doc['refines_version']) == (1.0, 7.761, 4)
+    assert LibraryResult.from_dict(doc) == refined
+    # A file written before the fields: its refined version names no misread deadline.
+    old = {k: v for k, v in doc.items() if k not in ('refined_after', 'refines_version')}
+    old['deadline'] = 7.761                # what such files held: the refinement's budget
+    text = summary(LibraryResult.from_dict(old))
+    assert 'refined in the background after the deadline result' in text, text
+    assert '7.761' not in text, text
+
+
+def test_diagnostics_of_a_refined_library_give_the_refinement_time(robot):
+    settings = node_config(_defaults()).settings
+    snap = diagnostics.Snapshot(
+        faults={'right_arm_joint2': Fault()}, fault_version=1, current=_refined_result(),
+        version=5, stamp_ns=5, pending=False, running=False, failed=None, settings=settings)
+    out = {s.name: s for s in diagnostics.statuses(robot, snap, 'recovery_node: ')}
+    status = out['recovery_node: reconfiguration']
+    recon = {kv.key: kv.value for kv in status.values}
+    assert recon['library_origin'] == 'refined' and recon['deadline_met'] == 'true'
+    assert float(recon['refined_after_sec']) == pytest.approx(7.761)
+    assert 'refined 7.761 s after the deadline result' in status.message
+    snap = replace(snap, current=_deadline_result())
+    out = {s.name: s for s in diagnostics.statuses(robot, snap, 'recovery_node: ')}
+    assert 'refined_after_sec' not in {kv.key for kv in
+                                       out['recovery_node: reconfiguration'].values}

@@ -6,7 +6,8 @@ it over DDS only, through the interface of msg_docs/interfaces.md:
 
 1. ``/joint_states`` streamed at 500 Hz (also with NaN readings) while each right-arm
    joint fails in turn: every answer succeeds within the deadline (the node's own
-   ``deadline_met``) and improves every gesture.
+   ``deadline_met``) and improves every gesture.  A flood of 1,000 NaN joint states
+   writes at most one log line a second, and the lines count every rejection.
 2. A burst of over 1,000 fault reports within about a second, mixed with junk: none is
    lost (final fault set, arrival order and locks as sent; every junk report counted).
 3. 50 concurrent service callers: every call is answered, naming a library version.
@@ -23,6 +24,7 @@ business (``namo-recovery bench stream``), these tests assert outcomes.
 
 import io
 import json
+import math
 import random
 import re
 import signal
@@ -177,6 +179,66 @@ def _deadline_and_scores(joint, answer, statuses):
     if worse:
         line += '; made worse: ' + ', '.join(worse)
     return [line]
+
+
+# --- 1b. a flood of bad joint states ----------------------------------------------------
+
+FLOOD_MESSAGES = 1000
+FLOOD_HZ = 400.0                  # 1,000 messages in about 2.5 s
+PARSE_PERIOD = 0.1                # s: the node parses the latest joint state this often
+REJECTED_LINE = re.compile(r'rejected /joint_states: .*?'
+                           r'(?: \((\d+) more suppressed in the last \d+\.\d s\))?$')
+
+
+def rejection_lines(text):
+    """Return the node's log lines of rejected /joint_states and the rejections they count."""
+    lines = [line for line in text.splitlines() if 'rejected /joint_states: ' in line]
+    counted = 0
+    for line in lines:
+        match = REJECTED_LINE.search(line)
+        counted += 1 + int(match.group(1) or 0) if match else 1
+    return lines, counted
+
+
+def test_a_nan_joint_state_flood_logs_one_line_a_second_and_counts_every_rejection(tmp_path):
+    """
+    1,000 NaN /joint_states: at most one log line per second, and none left uncounted.
+
+    Every message carries a NaN, so every sample the node parses is rejected.  Its log
+    may hold at most ceil(window) + 1 such lines, the window being the span the node can
+    see the flood (first to last message, plus one parse period), the last line being the
+    count held back when the flood stopped; the lines (one each, plus the count each
+    names as suppressed) add up to ``rejected_total`` on /diagnostics exactly.
+    """
+    names, positions = reference_pose()
+    with Running(tmp_path, 0, args=['-p', 'contingency_table:=false']) as (node, client):
+        client.wait_library(timeout=LONG, what='the reference library')
+        stream = JointStateStream(client.node, FLOOD_HZ, names, positions, nan_every=1)
+        client.wait_subscribers(stream.publisher, timeout=LONG)
+        with stream:
+            end = time.monotonic() + LONG
+            while stream.sent < FLOOD_MESSAGES and time.monotonic() < end:
+                time.sleep(0.002)
+        window = stream.stopped - stream.started + PARSE_PERIOD
+        quiet = stream.stopped + 3 * PARSE_PERIOD    # the last sample parsed by then
+        end = time.monotonic() + LONG
+        while True:      # until the lines count every rejection (or LONG s)
+            time.sleep(PARSE_PERIOD)
+            inputs = values(client.wait_diag(lambda s: 'inputs' in s, timeout=LONG), 'inputs')
+            total = int(inputs['rejected_total'])
+            lines, counted = rejection_lines(node.stderr + node.stdout)
+            if time.monotonic() > end or (
+                    time.monotonic() > quiet and total > 0 and counted == total):
+                break
+        assert node.alive(), node.describe()
+    figures = (f'{stream.sent} NaN messages in {window - PARSE_PERIOD:.2f} s: '
+               f'{len(lines)} log lines counting {counted} rejections, '
+               f'rejected_total {total}')
+    print(figures)
+    assert stream.sent >= FLOOD_MESSAGES, figures
+    assert total > 0, figures
+    assert len(lines) <= math.ceil(window) + 1, figures + '\n' + '\n'.join(lines)
+    assert counted == total, figures + '\n' + '\n'.join(lines)
 
 
 # --- 2. burst ----------------------------------------------------------------------------

@@ -25,6 +25,10 @@ def test_each_refinement_is_better_and_keeps_the_locks(robot, product_library):
     for better in refinements(robot, product_library, published, SETTINGS,
                               clock=Clock(20.0), seeds=range(1, 4)):
         assert better.origin == 'refined' and better.locks == published.locks
+        # The deadline is the published result's; the refinement's time is apart.
+        assert better.deadline == published.deadline
+        assert better.deadline_met == published.deadline_met
+        assert 0.0 < better.refined_after < 20.0
         assert better.faults == published.faults
         assert better.total_score < totals[-1] * (1 - 1e-3)
         totals.append(better.total_score)
@@ -50,7 +54,7 @@ def test_a_refined_version_only_for_the_current_published_generation():
     run = book.next_run(timeout=1.0)
     assert not book.refining(run.generation)           # not published yet
     book.publish(run.generation, 'first', lambda r: 10)
-    assert book.refining(run.generation)
+    assert book.refining(run.generation) == 1          # the version it refines
     assert book.publish_refined(run.generation, 'better', lambda r: 11)
     assert (book.current, book.version, book.stamp_ns) == ('better', 2, 11)
     book.set_faults({'right_arm_joint2': Fault()})     # a new fault supersedes it

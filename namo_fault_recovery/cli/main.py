@@ -114,6 +114,8 @@ def solve_document(result, robot, library):
       ``trajectory_method``, ``vq_distortion_mm``, ``continuity_weight``, ``weights``);
     - ``deadline``: the budget in s (null: no deadline); ``deadline_met``, ``cancelled``,
       ``success``; ``wall_time`` (s); ``nfev`` (objective evaluations of the run);
+      ``origin`` (how the library was made); ``refined_after`` and ``refines_version``
+      (a node's refined version only: null and 0 here);
     - ``faults``: joint -> requested lock angle (rad; null: chosen by the strategy);
       ``locks``: joint -> lock angle used (rad); ``locks_deg``: the same in degrees;
       ``frozen_arms``; ``notes``; ``tool_mm``, ``tool_arm``;

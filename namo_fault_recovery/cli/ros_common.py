@@ -118,7 +118,10 @@ def gesture_table(result):
         lines.append(f'{g.name:<14}{g.score_before:>10.2f}{g.score_after:>10.2f}'
                      f'{g.wall_time:>10.3f}  {g.status}')
     lines.append(f'library time {result.wall_time:.4f} s, deadline {result.deadline:g} s '
-                 f"{'met' if result.deadline_met else 'MISSED'}")
+                 f"{'met' if result.deadline_met else 'MISSED'}"
+                 + (f' by the deadline result; refined {result.refined_after:.3f} s after it'
+                    if result.origin == 'refined' and result.refined_after is not None
+                    else ''))
     if result.frozen_arms:
         lines.append(f"frozen arm(s): {' '.join(result.frozen_arms)}")
     return '\n'.join(lines) + '\n'

@@ -7,8 +7,9 @@ the background.  :func:`refinements` runs :func:`~.engine.recover` again with fu
 seeds, each try with its own budget derived from one caller-owned
 :class:`~namo_fault_recovery.optimize.base.Clock` (its cancel flag ends it at once when
 a new fault arrives), and yields every library better than the best so far by more than
-``min_gain`` (relative), with ``origin='refined'``.  It ends when the seeds or the
-clock run out, or after ``patience`` tries in a row without a gain (converged)::
+``min_gain`` (relative), with ``origin='refined'``, the published result's deadline
+and ``refined_after`` (seconds since the refinement started).  It ends when the seeds
+or the clock run out, or after ``patience`` tries in a row without a gain (converged)::
 
     for better in refinements(robot, library, published, settings, clock=Clock(10.0)):
         publish(better)
@@ -77,8 +78,12 @@ def refinements(robot, library, published, settings, *, clock=None, seeds=None,
         if math.isfinite(total) and total < best - min_gain * max(abs(best), 1e-9):
             best = total
             idle = 0
-            # A try cut short by its own budget is still a valid, better library.
+            # A try cut short by its own budget is still a valid, better library.  Its
+            # budget is the refinement's, not a deadline: the version keeps the deadline
+            # of the result it refines, and says how long after it the refinement was.
             yield replace(result, origin='refined', faults=dict(published.faults),
-                          success=not result.cancelled)
+                          success=not result.cancelled, deadline=published.deadline,
+                          deadline_met=published.deadline_met,
+                          refined_after=time.monotonic() - clock.start)
         else:
             idle += 1

@@ -12,6 +12,9 @@ them all).  The main ones:
 - ``score_after``: the worst keyframe score of the published gesture;
 - ``wall_time``: seconds from the start of the run to the end of the engine's work (the
   same value for every gesture of one library);
+- ``deadline`` / ``deadline_met``: the deadline a fault set was answered within; a
+  refined version keeps its deadline result's, and ``refined_after`` says how long after
+  that result the refinement found it;
 - ``status``: ``converged``, ``deadline``, ``cancelled``, ``frozen`` or ``unchanged``.
 
 The stages of the engine build these types too: the keyframe search
@@ -209,10 +212,17 @@ class LibraryResult:
     - ``faults``: the fault set it was computed for (joint -> requested lock angle in
       rad, or None when the lock strategy chose it); ``locks``: the lock angles actually
       used (rad); ``frozen_arms``: arms all of whose joints are locked;
-    - ``wall_time``: seconds of the run; ``deadline``: the run's budget in seconds (None:
-      no deadline); ``deadline_met``: no gesture was cut short by it or by a cancel;
-      ``cancelled``: a cancel request cut the run short; ``success``: the deadline was
-      met and every gesture has a finite score;
+    - ``wall_time``: seconds of the run (of a refined version: of the one search that
+      found it); ``deadline``: the run's budget in seconds (None: no deadline);
+      ``deadline_met``: no gesture was cut short by it or by a cancel; a refined version
+      keeps both of the deadline result it refines (its searches' own budgets are the
+      refinement's, not a deadline); ``cancelled``: a cancel request cut the run short;
+      ``success``: the deadline was met and every gesture has a finite score;
+    - ``refined_after``: of a refined version, seconds from the start of the
+      refinement (the deadline result just published) to the end of the search that
+      found it (None otherwise, and in files written before it was a field);
+      ``refines_version``: the library version number of that deadline result, in
+      the node that refined it (0: unknown);
     - ``settings``: the :class:`~.engine.RecoverySettings` of the run, as a dict named
       like the node's parameters; ``seed``: the seed the run used (None: not recorded);
       ``notes``: what a person should know about the run (lock choice, skipped stages);
@@ -240,6 +250,8 @@ class LibraryResult:
     notes: tuple = ()
     nfev: int = 0
     origin: str = 'deadline'
+    refined_after: Optional[float] = None
+    refines_version: int = 0
 
     @property
     def names(self) -> tuple:
@@ -269,7 +281,8 @@ class LibraryResult:
             'settings': dict(self.settings),
             'tool_mm': self.tool_mm, 'tool_arm': self.tool_arm,
             'seed': self.seed, 'notes': list(self.notes), 'nfev': self.nfev,
-            'origin': self.origin,
+            'origin': self.origin, 'refined_after': self.refined_after,
+            'refines_version': self.refines_version,
         }
 
     @classmethod
@@ -306,6 +319,8 @@ class LibraryResult:
                 notes=tuple(str(n) for n in notes),
                 nfev=int(doc.get('nfev', 0)),
                 origin=str(doc.get('origin', 'deadline')),
+                refined_after=optional_number(doc.get('refined_after')),
+                refines_version=int(doc.get('refines_version', 0)),
             )
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             if isinstance(exc, MalformedResult):
@@ -329,8 +344,37 @@ def reference_result(library, deadline: Optional[float] = 0.0, settings: Optiona
 
 ORIGIN_TEXT = {'deadline': ' by a live search',
                'unbounded': ' by a search without deadline',
-               'table': ' from the contingency table',
-               'refined': ' refined in the background after the deadline result'}
+               'table': ' from the contingency table'}    # refined: in timing_text
+
+
+def deadline_text(result: LibraryResult) -> str:
+    """Return how the deadline went, e.g. ``deadline 1.000 s met`` or ``no deadline``."""
+    if result.deadline is None:
+        return 'no deadline'
+    if result.origin == 'refined':        # the deadline result's, named by its version
+        by = (f'version {result.refines_version}' if result.refines_version else
+              'the deadline result')
+        met = 'met' if result.deadline_met else 'missed'
+        return f'deadline {result.deadline:.3f} s {met} by {by}'
+    return (f'deadline {result.deadline:.3f} s '
+            f"{'met' if result.deadline_met else 'MISSED, best found so far used'}")
+
+
+def timing_text(result: LibraryResult) -> str:
+    """
+    Return when a library version was made, for :func:`summary`.
+
+    A version found by the refinement reports the refinement's time and the deadline
+    (met by the first version) apart: ``refined 7.761 s after the deadline result
+    (deadline 1.000 s met by version 4)``; any other version its run and its deadline:
+    ``in 0.080 s (deadline 1.000 s met)``.
+    """
+    if result.origin != 'refined':
+        return f'in {result.wall_time:.3f} s ({deadline_text(result)})'
+    if result.refined_after is None:      # written before refined_after was a field
+        return 'refined in the background after the deadline result'
+    return (f'refined {result.refined_after:.3f} s after the deadline result '
+            f'({deadline_text(result)})')
 
 
 def summary(result: LibraryResult) -> str:
@@ -344,19 +388,13 @@ def summary(result: LibraryResult) -> str:
         changes.append(f'a {result.tool_mm:g} mm tool in the {result.tool_arm} hand')
     locks = ', '.join(changes)
     finite = sum(1 for g in result.gestures if math.isfinite(g.score_after))
-    if result.deadline is None:
-        timing = 'no deadline'
-    else:
-        timing = (f'deadline {result.deadline:.3f} s '
-                  f"{'met' if result.deadline_met else 'MISSED, best found so far used'}")
     parts = [f'{g.name} {g.score_before:.2f} -> {g.score_after:.2f} in {g.wall_time:.3f} s'
              + ('' if g.status in ('converged', 'unchanged') else f' ({g.status})')
              + (' (both arms)' if g.stage == 2 else '')
              + (f" COLLIDES ({', '.join(g.colliding_pairs)})" if g.collides else '')
              for g in result.gestures]
     text = (f"{'reconfigured' if result.success else 'FAILED to fully reconfigure'} "
-            f'{finite}/{len(result.gestures)} gestures in {result.wall_time:.3f} s '
-            f'({timing}) for {locks}')
+            f'{finite}/{len(result.gestures)} gestures {timing_text(result)} for {locks}')
     text += ORIGIN_TEXT.get(result.origin, '')
     if result.frozen_arms:
         text += f"; frozen arm(s): {', '.join(result.frozen_arms)}"

@@ -207,7 +207,10 @@ def rebuild_library(stamp, msgs, diagnostics, received):
         success=values.get(keys.SUCCESS, keys.TRUE) == keys.TRUE,
         settings=settings,
         tool_mm=_number(values, keys.TOOL_LENGTH_MM) if keys.TOOL_LENGTH_MM in values else 0.0,
-        tool_arm=values.get(keys.TOOL_ARM, 'right'))
+        tool_arm=values.get(keys.TOOL_ARM, 'right'),
+        origin=values.get(keys.LIBRARY_ORIGIN, 'deadline'),
+        refined_after=(_number(values, keys.REFINED_AFTER_SEC)
+                       if keys.REFINED_AFTER_SEC in values else None))
     first = next(iter(msgs.values()))
     version = values.get(keys.LIBRARY_VERSION)
     return PublishedLibrary(stamp=stamp, joint_names=tuple(first.joint_names), result=result,

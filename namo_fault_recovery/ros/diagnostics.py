@@ -163,6 +163,8 @@ def reconfiguration_status(snap, up_to_date, hw, prefix):
               (dk.FROZEN_ARMS, ' '.join(current.frozen_arms)),
               (dk.SEED, '' if current.seed is None else current.seed),
               (dk.TOOL_LENGTH_MM, f'{current.tool_mm:g}'), (dk.TOOL_ARM, current.tool_arm)]
+    if current.refined_after is not None:
+        pairs.append((dk.REFINED_AFTER_SEC, _seconds(current.refined_after)))
     for g in current.gestures:
         fields = [(dk.SCORE_BEFORE, f'{g.score_before:.6g}'),
                   (dk.SCORE_AFTER, f'{g.score_after:.6g}'),

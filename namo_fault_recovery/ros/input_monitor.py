@@ -5,7 +5,9 @@ Joint states arrive at 100-500 Hz.  :meth:`InputMonitor.joint_state` only keeps 
 serialized sample (O(1), no parsing on the executor); :meth:`InputMonitor.measured`
 deserializes and validates it when the angles are needed (a fault report, the 10 Hz
 tick).  Rejected inputs are counted and the last few kept, each reason truncated, so that
-memory and ``/diagnostics`` stay bounded under any stream of bad input.
+memory and ``/diagnostics`` stay bounded under any stream of bad input; the log gets at
+most one line per kind of input (its topic) and second, which counts the ones held back
+(:class:`~..runtime.log_throttle.LogThrottle`), while ``rejected_total`` counts them all.
 """
 
 from collections import deque
@@ -17,6 +19,7 @@ from sensor_msgs.msg import JointState
 
 from ..errors import shorten
 from ..runtime.inputs import BadInput, parse_joint_state
+from ..runtime.log_throttle import DEFAULT_PERIOD, LogThrottle
 
 MAX_REJECTIONS_SHOWN = 10
 MAX_REASON = 300
@@ -25,9 +28,11 @@ MAX_REASON = 300
 class InputMonitor:
     """Latest joint state, measured angles and rejected inputs (thread-safe)."""
 
-    def __init__(self, robot, on_reject):
+    def __init__(self, robot, on_reject, log_period=DEFAULT_PERIOD):
         self._robot = robot
-        self._on_reject = on_reject        # on_reject(source, reason): log it
+        # on_reject(line): log ``line``, the rate-limited text (None: held back, counted)
+        self._on_reject = on_reject
+        self._log = LogThrottle(log_period)
         self._lock = threading.Lock()
         self._raw = None
         self._measured = {}
@@ -73,7 +78,13 @@ class InputMonitor:
         with self._lock:
             self.rejected_total += 1
             self.rejections.append((time.time(), source, reason))
-        self._on_reject(source, reason)
+        self._on_reject(self._log.admit(source, f'rejected {source}: {reason}; previous '
+                                                f'state kept'))
+
+    def flush_log(self):
+        """Report the rejections held back whose period is over (call it periodically)."""
+        for line in self._log.flush():
+            self._on_reject(line)
 
     def accepted(self):
         """Record that an input was accepted: older rejections are no longer recent."""

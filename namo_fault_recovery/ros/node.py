@@ -228,9 +228,9 @@ class RecoveryNode(Node):
         self.get_logger().error(f'fault intake: {type(exc).__name__}: {shorten(exc)}; '
                                 f'the batch of reports was not applied')
 
-    def _log_rejection(self, source, reason):
-        self.get_logger().warning(f'rejected {source}: {reason}; previous state kept',
-                                  throttle_duration_sec=0.2)
+    def _log_rejection(self, line):
+        if line is not None:             # None: held back, counted in a later line
+            self.get_logger().warning(line)
         self._diag_dirty = True
 
     def _on_fault(self, msg):
@@ -350,6 +350,7 @@ class RecoveryNode(Node):
         """Steady 10 Hz: refresh the measured angles, publish diagnostics when due."""
         if self._inputs.pending_state():
             self._inputs.measured()
+        self._inputs.flush_log()         # the rejections held back after a flood
         now = time.monotonic()
         if self._diag_dirty or now - self._last_diag >= self._diag_period:
             self._diag_dirty = False

@@ -14,6 +14,8 @@ fast unit tests that need no DDS.
   by a low-priority background process and kept in ``state_dir``;
 - :mod:`.answer_pacer`: service answers released a few at a time;
 - :mod:`.latest_worker`: one delayed thread for the newest item (the RViz markers);
+- :mod:`.log_throttle`: at most one log line per kind of rejected input and second, with
+  the count of those held back;
 - :mod:`.persistence`: the state file in the order the run book needs, off the hot paths;
 - :mod:`.restore`: the checks before publishing, and the restore decision;
 - :mod:`.state_store`: the persisted fault set and library (no ROS types);

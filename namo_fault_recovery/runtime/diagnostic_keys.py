@@ -63,6 +63,8 @@ FAULT_TO_REQUEST_SEC = 'fault_to_request_sec'
 # Last fault batch: the synced write of the fault set (overlaps the engine run).
 FAULT_SYNC_SEC = 'fault_sync_sec'
 DEADLINE_MET = 'deadline_met'
+# A refined library: s from the refinement's start (its deadline result) to this version.
+REFINED_AFTER_SEC = 'refined_after_sec'
 SUCCESS = 'success'
 FROZEN_ARMS = 'frozen_arms'         # space-separated sides
 SEED = 'seed'

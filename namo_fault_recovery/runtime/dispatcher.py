@@ -10,6 +10,7 @@ A run with no structure change (no fault and no tool) needs no engine: the refer
 library is published at once.
 """
 
+from dataclasses import replace
 import math
 import threading
 import time
@@ -119,12 +120,14 @@ class Dispatcher:
 
     def _refine(self, run, result, config):
         """Keep improving ``run``'s library in the engine until done or superseded."""
-        if not self._book.refining(run.generation):
+        version = self._book.refining(run.generation)     # the deadline result's
+        if not version:
             return
 
         def improved(better):
             if check_result(self._robot, self._library, better, run.faults):
                 return                            # never publish a library that fails it
+            better = replace(better, refines_version=version)
             if self._publish_refined(run.generation, run.faults, better):
                 self._log('info', f'refined: {summary(better)}')
 

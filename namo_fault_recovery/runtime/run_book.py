@@ -172,16 +172,18 @@ class RunBook:
 
     def refining(self, generation):
         """
-        Mark ``generation``'s published library as being refined; return False if stale.
+        Mark ``generation``'s published library as being refined; return its version.
 
-        While it refines, a new request cancels it (``on_request``) as it would a run.
+        Returns the library version number of that published library (0 if stale,
+        nothing to refine).  While it refines, a new request cancels it
+        (``on_request``) as it would a run.
         """
         with self._cond:
             if generation != self._requested or self._published != generation \
                     or self.stopping:
-                return False
+                return 0
             self._running = generation
-            return True
+            return self.version
 
     def publish_refined(self, generation, result, publish):
         """
