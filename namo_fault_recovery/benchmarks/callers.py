@@ -8,7 +8,11 @@ answered at once may lose answers; the node paces them
 each call is a run that the waiting callers join:
 
 - ``rounds`` times: ``clients`` clients call ``/reconfigure_gestures`` once each, all at
-  once; then one client sends ``outstanding`` calls without waiting for any;
+  once; then one client, answered once before, sends ``outstanding`` calls without
+  waiting for any; then a brand-new client does the same.  A brand-new client's calls
+  wait in its request writer (depth 10) until the node has matched it, and only the
+  last 10 are then delivered: those lost calls never reach the node (counted apart,
+  ``unanswered_fresh``);
 - ``single`` calls in a row from one client: the round trip of a lone caller, which the
   pacing must not delay.
 
@@ -24,9 +28,9 @@ from ..runtime.private_node import NodeTarget
 FAULT = ('right_arm_joint2', 0.3)
 
 
-def _crowd(client, clients, calls, timeout):
+def _crowd(client, clients, calls, timeout, answered_once=False):
     """Return the figures of one crowd: answered, calls, seconds to the last answer."""
-    times = client.crowd_call(clients, calls, timeout)
+    times = client.crowd_call(clients, calls, timeout, answered_once=answered_once)
     done = [t for t in times if t is not None]
     return {'answered': len(done), 'calls': len(times),
             'last_answer_sec': max(done) if len(done) == len(times) else None,
@@ -38,10 +42,12 @@ def _measure(client, clients, outstanding, rounds, single, timeout):
     client.current_library(timeout, diagnostics_timeout=0.0)
     client.publish_fault([FAULT[0]], [FAULT[1]], timeout)
     client.reconfigure(timeout)          # ordered after the fault: the fault is in
-    report = {'fault': f'{FAULT[0]} at {FAULT[1]} rad', 'crowds': [], 'outstanding': []}
+    report = {'fault': f'{FAULT[0]} at {FAULT[1]} rad', 'crowds': [], 'outstanding': [],
+              'outstanding_fresh': []}
     for _ in range(rounds):
         report['crowds'].append(_crowd(client, clients, 1, timeout))
-        report['outstanding'].append(_crowd(client, 1, outstanding, timeout))
+        report['outstanding'].append(_crowd(client, 1, outstanding, timeout, True))
+        report['outstanding_fresh'].append(_crowd(client, 1, outstanding, timeout))
     trips = []
     for _ in range(single):
         start = time.monotonic()
@@ -72,6 +78,8 @@ def run_callers(out, clients=50, outstanding=20, rounds=3, single=20, timeout=30
             node.stop()
     report['unanswered'] = sum(c['calls'] - c['answered']
                                for c in report['crowds'] + report['outstanding'])
+    report['unanswered_fresh'] = sum(c['calls'] - c['answered']
+                                     for c in report['outstanding_fresh'])
     write_callers(out, report, timeout)
     return report
 
@@ -92,6 +100,8 @@ def write_callers(out, report, timeout):
         outstanding = report['outstanding'][i]
         _line(out, f"round {i + 1}: 1 client, {outstanding['calls']} calls", outstanding,
               timeout)
+        fresh = report['outstanding_fresh'][i]
+        _line(out, f'round {i + 1}: same, a brand-new client', fresh, timeout)
     single = report.get('single_caller')
     if single:
         out.write(f"lone caller, {single['n']} calls in a row: round trip p50 "

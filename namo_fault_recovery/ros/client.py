@@ -502,14 +502,17 @@ class RecoveryClient(SpunClient):
         return self._trigger(CLEAR_SERVICE, timeout)
 
     def crowd_call(self, clients: int, calls: int = 1, timeout: float = 30.0,
-                   service: str = RECONFIGURE_SERVICE) -> list:
+                   service: str = RECONFIGURE_SERVICE, answered_once: bool = False) -> list:
         """
         Call ``service`` from ``clients`` new clients, ``calls`` each, all at once.
 
         What a crowd of callers does: each client has rclpy's default service QoS (depth
         10, as ``ros2 service call``), and all of them share this client's executor.
-        Returns, per call in order, the seconds from the sending of the first call to its
-        answer, or None if none came within ``timeout`` s.  The clients are destroyed.
+        ``answered_once``: each client first makes one call and waits for its answer, so
+        that the node has discovered it (a new client's first calls wait in its request
+        writer, of that depth, until the node matched it).  Returns, per call in order,
+        the seconds from the sending of the first call to its answer, or None if none
+        came within ``timeout`` s.  The clients are destroyed.
         """
         from std_srvs.srv import Trigger
         made = [self.node.create_client(Trigger, service) for _ in range(clients)]
@@ -518,6 +521,9 @@ class RecoveryClient(SpunClient):
                 if not client.wait_for_service(timeout_sec=timeout):
                     raise NodeUnreachable(f'service {client.service_name} is not available '
                                           f'within {timeout:g} s ({self.where()})')
+                if answered_once and call_service(client, Trigger.Request(), timeout) is None:
+                    raise ClientError(f'no answer from {client.service_name} within '
+                                      f'{timeout:g} s')
             answered = {}
             lock = threading.Lock()
 

@@ -28,7 +28,7 @@ import time
 from typing import Callable
 
 BURST = 4             # answers sent back to back after a quiet moment
-GAP = 0.010           # s per answer after that: slower than a reader of 50 clients takes
+GAP = 0.025           # s per answer after that: slower than a busy reader of 50 clients takes
 SENT_TIMEOUT = 0.5    # s: a released answer not reported sent by then no longer holds others
 _EPSILON = 1e-9       # of a token: rounding of the refill
 
