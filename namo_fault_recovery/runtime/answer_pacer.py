@@ -19,7 +19,8 @@ The pacer bounds what any reader can find unread:
 
 In any L seconds at most ``burst + 1 + L / gap`` answers go out, so a reader that takes a
 sample per ``gap`` never holds more than ``burst + 1`` (5: half the default depth).  A lone
-caller is answered at once; 50 callers together within about ``50 * gap`` seconds.
+caller is answered at once; 50 callers together within about ``50 * gap`` seconds
+(1.5 s; with 10 ms one crowd of 50 in 7 lost answers while the machine was busy).
 """
 
 from collections import deque
