@@ -214,22 +214,69 @@ def test_diagnostics_from_a_snapshot(robot, library):
 
 # --- answer pacer -----------------------------------------------------------------------------
 
-def test_answer_pacer_releases_every_answer_in_order_and_a_few_at_a_time():
+def test_answer_bucket_lets_a_burst_go_then_one_per_gap():
+    from namo_fault_recovery.runtime.answer_pacer import Bucket
+    burst, gap = 4, 0.01
+    bucket, now, sends = Bucket(burst, gap), 100.0, []
+    for _ in range(50):                  # a greedy sender: each answer as soon as allowed
+        now += bucket.wait(now)
+        assert bucket.wait(now) == 0.0
+        bucket.take(now)
+        sends.append(now)
+    assert sends[:burst] == [100.0] * burst and sends[burst] > 100.0
+    for i, start in enumerate(sends):     # what a reader can find in any window
+        for span in (0.0, gap / 2, gap, 5 * gap, 0.2):
+            count = sum(1 for t in sends[i:] if t <= start + span + 1e-12)
+            assert count <= burst + span / gap + 1e-9, (start, span, count)
+    assert abs(sends[-1] - (100.0 + (50 - burst) * gap)) < 1e-9
+    now = sends[-1] + 10 * gap                          # quiet: the burst is back, no more
+    assert bucket.wait(now) == 0.0
+    for _ in range(burst):
+        bucket.take(now)
+    assert bucket.wait(now) > 0.0
+
+
+def test_answer_pacer_releases_every_answer_in_order_one_at_a_time():
     from namo_fault_recovery.runtime.answer_pacer import AnswerPacer
-    released, wakes = [], []
-    pacer = AnswerPacer(lambda: wakes.append(len(released)), batch=4, gap=0.001)
+    released, problems, sent = [], [], []
+    ready = threading.Condition()
+
+    def release(k):
+        with ready:
+            if len(released) != len(sent):   # the previous answer not reported sent yet
+                problems.append(k)
+            released.append(k)
+            ready.notify()
+
+    wakes = []
+    pacer = AnswerPacer(lambda: wakes.append(1), burst=4, gap=0.0005, sent_timeout=30.0)
     for k in range(50):
+        pacer.submit(lambda k=k: release(k))
+    pacer.start()
+    with ready:                          # the executor's part: send each answer, say so
+        while len(sent) < 50:
+            assert ready.wait_for(lambda: len(released) > len(sent), timeout=30.0)
+            sent.append(released[len(sent)])
+            pacer.sent()
+    pacer.stop()
+    assert released == list(range(50)) and not problems and len(wakes) == 50
+    pacer.submit(lambda: released.append('late'))      # after stop: released at once
+    assert released[-1] == 'late'
+
+
+def test_answer_pacer_goes_on_when_an_answer_is_never_reported_sent():
+    from namo_fault_recovery.runtime.answer_pacer import AnswerPacer
+    released = []
+    pacer = AnswerPacer(lambda: None, burst=4, gap=0.0005, sent_timeout=0.01)
+    for k in range(5):
         pacer.submit(lambda k=k: released.append(k))
     pacer.start()
-    for _ in range(500):
-        if len(released) == 50:
+    for _ in range(3000):
+        if len(released) == 5:
             break
         threading.Event().wait(0.01)
     pacer.stop()
-    assert released == list(range(50))
-    assert len(wakes) >= 50 // 4 and all(b - a <= 4 for a, b in zip([0] + wakes, wakes))
-    pacer.submit(lambda: released.append('late'))      # after stop: released at once
-    assert released[-1] == 'late'
+    assert released == list(range(5))
 
 
 # --- background state writer ------------------------------------------------------------------

@@ -23,6 +23,8 @@ returns a plain dict (written as JSON) and prints its figures:
   (``bench latency``);
 - :mod:`.stream`: the node's deadline and latency while ``/joint_states`` streams and a
   CPU burner runs (``bench stream``);
+- :mod:`.callers`: crowds of default-QoS service callers, every call answered?
+  (``bench callers``);
 - :mod:`.common`: models, cases, statistics and output files shared by the above;
 - :mod:`.paper_data`: the paper's published tables, to print beside ours;
 - :mod:`.plotting`: the figures (matplotlib, optional), and the ``plot`` command's run.

@@ -8,7 +8,8 @@ The commands parse their options and call the package: the benchmarks in
 - :mod:`.main`: the parser and the offline commands (``show``, ``score``, ``solve``);
 - :mod:`.bench`: ``bench paper | optimum | speed | deadline`` and ``plot``;
 - :mod:`.beyond`: the benchmarks of the extensions beyond the paper;
-- :mod:`.node_bench`: ``bench latency | stream | product``, the benchmarks of a node;
+- :mod:`.node_bench`: ``bench latency | stream | product | callers``, the benchmarks of
+  a node;
 - :mod:`.node_commands`: ``fault``, ``clear``, ``reconfigure``, ``library`` against a
   running node;
 - :mod:`.demo`: ``demo``, a private node driven end to end;

@@ -1,10 +1,11 @@
 """
-``namo-recovery bench latency | stream | product``: the benchmarks of a running node.
+``namo-recovery bench latency | stream | product | callers``: the benchmarks of a node.
 
 Each command parses its options and calls its benchmark
 (:mod:`namo_fault_recovery.benchmarks.latency`, :mod:`~namo_fault_recovery.benchmarks.
-stream`, :mod:`~namo_fault_recovery.benchmarks.product_node`), imported only when it
-runs, so the rest of the command line works without ROS.
+stream`, :mod:`~namo_fault_recovery.benchmarks.product_node`,
+:mod:`~namo_fault_recovery.benchmarks.callers`), imported only when it runs, so the
+rest of the command line works without ROS.
 """
 
 import argparse
@@ -71,6 +72,20 @@ def cmd_product(args, out):
                                EXIT_USAGE)
     product_node.run_product(out, args, parts)
     return 0
+
+
+def cmd_callers(args, out):
+    """Run the callers benchmark; exit 1 when a call was left unanswered."""
+    from ..benchmarks import callers
+    for option in ('clients', 'outstanding', 'rounds'):
+        if getattr(args, option) < 1:
+            raise CommandError(f'--{option}: expected an integer >= 1', EXIT_USAGE)
+    report = callers.run_callers(out, args.clients, args.outstanding, args.rounds,
+                                 max(args.single, 0), args.timeout, namespace(args),
+                                 NodeTarget.from_args(args))
+    if args.json:
+        out.write(json.dumps(report, indent=2) + '\n')
+    return EXIT_FAILURE if report['unanswered'] else 0
 
 
 def _add_latency(bench_subparsers):
@@ -177,8 +192,33 @@ def _add_product(bench_subparsers):
     return p
 
 
+def _add_callers(bench_subparsers):
+    """Add ``callers``: crowds of default-QoS service callers (benchmarks.callers)."""
+    p = bench_subparsers.add_parser(
+        'callers', help='crowds of default-QoS /reconfigure_gestures callers: every call '
+                        'answered?')
+    p.add_argument('--clients', type=int, default=50, metavar='N',
+                   help='clients calling once each, at once (default 50)')
+    p.add_argument('--outstanding', type=int, default=20, metavar='N',
+                   help='calls one client sends without waiting (default 20)')
+    p.add_argument('--rounds', type=int, default=3, metavar='N',
+                   help='rounds of both crowds (default 3)')
+    p.add_argument('--single', type=int, default=20, metavar='N',
+                   help="a lone caller's calls in a row, for its round trip (default 20)")
+    p.add_argument('--start-node', action='store_true',
+                   help='start a private recovery_node for the benchmark')
+    p.add_argument('--node-param', dest='node_params', action='append', default=[],
+                   metavar='NAME:=VALUE',
+                   help='a parameter of the private node (--start-node; repeatable)')
+    p.add_argument('--json', action='store_true', help='also print one JSON document')
+    add_connection_arguments(p, timeout=30.0)
+    p.set_defaults(func=wrap(cmd_callers))
+    return p
+
+
 def register(bench_subparsers):
-    """Add ``latency``, ``stream`` and ``product`` to the ``bench`` subcommands."""
+    """Add ``latency``, ``stream``, ``product`` and ``callers`` to ``bench``."""
     _add_latency(bench_subparsers)
     _add_stream(bench_subparsers)
     _add_product(bench_subparsers)
+    _add_callers(bench_subparsers)

@@ -29,7 +29,7 @@ import threading
 import time
 
 from .messages import duration_seconds, stamp_key
-from .spun_node import call_service, SpunClient, SpunNode, wait_on
+from .spun_node import call_service, SpunClient, SpunNode, wait_on, wait_until
 from ..recovery.result import GestureResult, LibraryResult
 from ..runtime import diagnostic_keys as keys
 
@@ -503,3 +503,47 @@ class RecoveryClient(SpunClient):
     def clear_faults(self, timeout: float = 15.0) -> TriggerAnswer:
         """Call clear_faults; return the answer."""
         return self._trigger(CLEAR_SERVICE, timeout)
+
+    def crowd_call(self, clients: int, calls: int = 1, timeout: float = 30.0,
+                   service: str = RECONFIGURE_SERVICE, answered_once: bool = False) -> list:
+        """
+        Call ``service`` from ``clients`` new clients, ``calls`` each, all at once.
+
+        What a crowd of callers does: each client has rclpy's default service QoS (depth
+        10, as ``ros2 service call``), and all of them share this client's executor.
+        ``answered_once``: each client first makes one call and waits for its answer, so
+        that the node has discovered it (a new client's first calls wait in its request
+        writer, of that depth, until the node matched it).  Returns, per call in order,
+        the seconds from the sending of the first call to its answer, or None if none
+        came within ``timeout`` s.  The clients are destroyed.
+        """
+        from std_srvs.srv import Trigger
+        made = [self.node.create_client(Trigger, service) for _ in range(clients)]
+        try:
+            for client in made:
+                if not client.wait_for_service(timeout_sec=timeout):
+                    raise NodeUnreachable(f'service {client.service_name} is not available '
+                                          f'within {timeout:g} s ({self.where()})')
+                if answered_once and call_service(client, Trigger.Request(), timeout) is None:
+                    raise ClientError(f'no answer from {client.service_name} within '
+                                      f'{timeout:g} s')
+            answered = {}
+            lock = threading.Lock()
+
+            def note(index):
+                with lock:
+                    answered[index] = time.monotonic()
+            futures = []
+            start = time.monotonic()
+            for client in made:
+                for _ in range(calls):
+                    futures.append(client.call_async(Trigger.Request()))
+                    futures[-1].add_done_callback(lambda _, i=len(futures) - 1: note(i))
+            wait_until(lambda: len(answered) == len(futures), timeout, period=0.005,
+                       lock=lock)
+            with lock:
+                return [answered[i] - start if i in answered else None
+                        for i in range(len(futures))]
+        finally:
+            for client in made:
+                self.node.destroy_client(client)

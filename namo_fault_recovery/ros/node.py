@@ -268,6 +268,7 @@ class RecoveryNode(Node):
             lambda done: self._after_intake(lambda: self._book.call(done)))
         response.success = bool(outcome.published and outcome.result.success)
         response.message = reconfigure_answer(outcome)
+        self._answers.sent()        # rclpy sends the response as this returns
         return response
 
     async def _on_clear(self, request, response):
@@ -288,6 +289,7 @@ class RecoveryNode(Node):
                             if outcome.published else f'cleared {count} fault(s); '
                                                       f'{outcome.reason}')
         self.get_logger().info(f'cleared {count} fault(s); {done}')
+        self._answers.sent()
         return response
 
     def _after_intake(self, then):
