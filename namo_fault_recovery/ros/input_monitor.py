@@ -25,9 +25,10 @@ MAX_REASON = 300
 class InputMonitor:
     """Latest joint state, measured angles and rejected inputs (thread-safe)."""
 
-    def __init__(self, robot, on_reject):
+    def __init__(self, robot, on_reject, on_sample=lambda: None):
         self._robot = robot
         self._on_reject = on_reject        # on_reject(source, reason): log it
+        self._on_sample = on_sample        # on_sample(): a sample waits to be parsed
         self._lock = threading.Lock()
         self._raw = None
         self._measured = {}
@@ -40,6 +41,7 @@ class InputMonitor:
         """Keep the latest serialized ``/joint_states`` sample (the subscription's callback)."""
         self._raw = raw
         self.states_received += 1
+        self._on_sample()
 
     def pending_state(self):
         """Return True if a joint state arrived since the last :meth:`measured`."""

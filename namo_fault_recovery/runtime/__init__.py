@@ -14,6 +14,7 @@ fast unit tests that need no DDS.
   by a low-priority background process and kept in ``state_dir``;
 - :mod:`.answer_pacer`: service answers released a few at a time;
 - :mod:`.latest_worker`: one delayed thread for the newest item (the RViz markers);
+- :mod:`.demand_tick`: a periodic tick that stops itself while it has no work;
 - :mod:`.persistence`: the state file in the order the run book needs, off the hot paths;
 - :mod:`.restore`: the checks before publishing, and the restore decision;
 - :mod:`.state_store`: the persisted fault set and library (no ROS types);
