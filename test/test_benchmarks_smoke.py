@@ -4,9 +4,12 @@ import csv
 import io
 import json
 import math
+import os
+import subprocess
+import sys
 
 from namo_fault_recovery.benchmarks import common, deadline, load_best_known, optimum, paper
-from namo_fault_recovery.benchmarks import motion, speed
+from namo_fault_recovery.benchmarks import idle, motion, speed
 from namo_fault_recovery.benchmarks.paper_data import TABLE6
 from namo_fault_recovery.cli.main import main
 from namo_fault_recovery.objective.score import gesture_targets, SimilarityScore
@@ -159,6 +162,8 @@ def test_quick_defaults():
     (['bench', 'speed', '--joints', 'left_arm_jointX'], 'unknown joint'),
     (['bench', 'deadline', '--deadlines', '-1'], '--deadlines'),
     (['bench', 'optimum', '--stored', '--write'], 'nothing to write'),
+    (['bench', 'idle', '--window', '0'], '--window'),
+    (['bench', 'idle', '--stops', '-1'], '--stops'),
     (['bench'], 'required'),
 ])
 def test_bad_arguments_exit_2(capsys, argv, message):
@@ -166,6 +171,22 @@ def test_bad_arguments_exit_2(capsys, argv, message):
     assert code == 2
     err = capsys.readouterr().err
     assert message in err and err.count('\n') == 1
+
+
+def test_idle_bench_follows_the_process_tree_and_counts_reaped_children():
+    burn = 'x = 0\nfor i in range(3_000_000):\n    x += i\n'
+    sleeper = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(30)'])
+    try:
+        assert sleeper.pid in idle.process_tree(os.getpid())
+        before = idle.tree_ticks(os.getpid())[os.getpid()][1]
+        subprocess.run([sys.executable, '-c', burn], check=True)      # burns, is reaped
+        after = idle.tree_ticks(os.getpid())[os.getpid()][1]
+        assert after > before                    # its CPU now counts in the root's
+        assert sleeper.pid in idle.tree_ticks(os.getpid())
+        assert any(idle.thread_ticks(os.getpid()))
+    finally:
+        sleeper.kill()
+        sleeper.wait()
 
 
 def test_speed_command(tmp_path):

@@ -10,6 +10,7 @@ from namo_fault_recovery.recovery.result import (GestureResult, LibraryResult,
 from namo_fault_recovery.ros import diagnostics
 from namo_fault_recovery.ros.node import reconfigure_answer
 from namo_fault_recovery.ros.parameters import check_parameter, node_config, parameter_specs
+from namo_fault_recovery.runtime.demand_tick import DemandTick
 from namo_fault_recovery.runtime.fault_intake import Clear, FaultIntake, Report
 from namo_fault_recovery.runtime.inputs import BadInput, MAX_REASON, parse_fault
 from namo_fault_recovery.runtime.restore import check_result, restore_decision
@@ -431,3 +432,56 @@ def test_diagnostics_of_a_refined_library_give_the_refinement_time(robot):
     out = {s.name: s for s in diagnostics.statuses(robot, snap, 'recovery_node: ')}
     assert 'refined_after_sec' not in {kv.key for kv in
                                        out['recovery_node: reconfiguration'].values}
+class _Timer:
+    """A timer's ``cancel()`` and ``reset()``, counted."""
+
+    def __init__(self):
+        self.cancels = self.resets = 0
+
+    def cancel(self):
+        self.cancels += 1
+
+    def reset(self):
+        self.resets += 1
+
+
+def test_demand_tick_stops_without_work_and_restarts_once_per_stop():
+    pending, runs, wakes = [], [], []
+    tick = DemandTick(lambda: runs.append(tick.take_change()), lambda: bool(pending))
+    timer = _Timer()
+    tick.attach(timer, lambda: wakes.append(1))
+    tick.tick()                                   # the first tick takes the initial change
+    assert runs == [True] and tick.idle and timer.cancels == 1
+    tick.wake()
+    tick.wake()                                   # already running: nothing more
+    assert not tick.idle and timer.resets == 1 and len(wakes) == 1
+    pending.append('a sample')
+    tick.tick()
+    assert not tick.idle and timer.cancels == 1   # work left: keeps ticking
+    pending.clear()
+    tick.change()                                 # a change arrives while it runs
+    tick.tick()
+    assert runs[-1] is True and tick.idle and timer.cancels == 2
+    tick.change()                                 # a change while stopped restarts it
+    assert not tick.idle and timer.resets == 2 and len(wakes) == 2
+    tick.tick()
+    assert runs[-1] is True and tick.idle and timer.cancels == 3
+
+
+def test_demand_tick_never_loses_a_change_made_while_it_decides():
+    # change() from another thread while the tick decides to stop: it restarts the tick.
+    timer, changers = _Timer(), []
+
+    def has_work():                    # called with the tick's lock held
+        changers.append(threading.Thread(target=tick.change))
+        changers[-1].start()
+        changers[-1].join(0.05)        # it waits for the lock
+        return False
+
+    tick = DemandTick(lambda: None, has_work)
+    tick.attach(timer, lambda: None)
+    tick.take_change()
+    tick.tick()
+    changers[0].join()
+    assert (timer.cancels, timer.resets) == (1, 1) and not tick.idle
+    assert tick.take_change()

@@ -25,6 +25,8 @@ returns a plain dict (written as JSON) and prints its figures:
   CPU burner runs (``bench stream``);
 - :mod:`.callers`: crowds of default-QoS service callers, every call answered?
   (``bench callers``);
+- :mod:`.idle`: a private node's idle CPU (its process tree, table off and on) and
+  clean SIGTERM stops of ``recovery_node`` and ``namo_sim`` (``bench idle``);
 - :mod:`.common`: models, cases, statistics and output files shared by the above;
 - :mod:`.paper_data`: the paper's published tables, to print beside ours;
 - :mod:`.plotting`: the figures (matplotlib, optional), and the ``plot`` command's run.

@@ -1,20 +1,22 @@
 """
-``namo-recovery bench latency | stream | product | callers``: the benchmarks of a node.
+``namo-recovery bench latency | stream | product | callers | idle``: the benchmarks of a node.
 
 Each command parses its options and calls its benchmark
 (:mod:`namo_fault_recovery.benchmarks.latency`, :mod:`~namo_fault_recovery.benchmarks.
 stream`, :mod:`~namo_fault_recovery.benchmarks.product_node`,
-:mod:`~namo_fault_recovery.benchmarks.callers`), imported only when it runs, so the
+:mod:`~namo_fault_recovery.benchmarks.callers`,
+:mod:`~namo_fault_recovery.benchmarks.idle`), imported only when it runs, so the
 rest of the command line works without ROS.
 """
 
 import argparse
 import json
+import os
 import sys
 
 from .ros_common import (add_connection_arguments, CommandError, EXIT_FAILURE, EXIT_USAGE,
                          namespace, wrap)
-from ..runtime.private_node import NodeTarget
+from ..runtime.private_node import NodeTarget, private_domain
 
 
 def _rates(text):
@@ -86,6 +88,48 @@ def cmd_callers(args, out):
     if args.json:
         out.write(json.dumps(report, indent=2) + '\n')
     return EXIT_FAILURE if report['unanswered'] else 0
+def cmd_idle(args, out):
+    """Measure a private node's idle CPU (and clean stops); exit 1 if a stop was not."""
+    from ..benchmarks import idle
+    for option in ('settle', 'window'):
+        if not getattr(args, option) > 0:
+            raise CommandError(f'--{option}: expected a number of seconds > 0', EXIT_USAGE)
+    if args.stops < 0:
+        raise CommandError('--stops: expected an integer >= 0', EXIT_USAGE)
+    tables = {'off': (False,), 'on': (True,), 'both': (False, True), 'none': ()}[args.table]
+    domain = args.domain_id
+    if domain is None:
+        domain = int(os.environ.get('ROS_DOMAIN_ID') or 0) or private_domain()
+    report = idle.run_idle(out, domain, tables, args.settle, args.window, args.stops,
+                           tuple(args.node_params))
+    if args.json:
+        out.write(json.dumps(report, indent=2) + '\n')
+    return EXIT_FAILURE if any(s['clean'] < s['stops'] for s in report['stops']) else 0
+
+
+def _add_idle(bench_subparsers):
+    """Add ``idle``: a private node's idle CPU and clean stops (benchmarks.idle)."""
+    p = bench_subparsers.add_parser(
+        'idle', help="a private recovery_node's idle CPU (process tree, % of one core), "
+                     'contingency table off and on; --stops: SIGTERM exits')
+    p.add_argument('--table', choices=('off', 'on', 'both', 'none'), default='both',
+                   help='contingency_table of the measured nodes (default both; none: '
+                        'only --stops)')
+    p.add_argument('--settle', type=float, default=20.0, metavar='SEC',
+                   help='wait this long after the node is ready (default 20)')
+    p.add_argument('--window', type=float, default=60.0, metavar='SEC',
+                   help='measure over this long (default 60)')
+    p.add_argument('--stops', type=int, default=0, metavar='N',
+                   help='then SIGTERM recovery_node and namo_sim N times each at a random '
+                        'idle moment; count exits 0 within 5 s (default 0)')
+    p.add_argument('--node-param', dest='node_params', action='append', default=[],
+                   metavar='NAME:=VALUE', help='a parameter of the node (repeatable)')
+    p.add_argument('--domain-id', type=int, default=None, metavar='N',
+                   help='ROS domain id of the nodes (default: $ROS_DOMAIN_ID, else a '
+                        'private one)')
+    p.add_argument('--json', action='store_true', help='also print one JSON document')
+    p.set_defaults(func=wrap(cmd_idle))
+    return p
 
 
 def _add_latency(bench_subparsers):
@@ -222,3 +266,8 @@ def register(bench_subparsers):
     _add_stream(bench_subparsers)
     _add_product(bench_subparsers)
     _add_callers(bench_subparsers)
+    """Add ``latency``, ``stream``, ``product`` and ``idle`` to the ``bench`` subcommands."""
+    _add_latency(bench_subparsers)
+    _add_stream(bench_subparsers)
+    _add_product(bench_subparsers)
+    _add_idle(bench_subparsers)

@@ -28,10 +28,11 @@ MAX_REASON = 300
 class InputMonitor:
     """Latest joint state, measured angles and rejected inputs (thread-safe)."""
 
-    def __init__(self, robot, on_reject, log_period=DEFAULT_PERIOD):
+    def __init__(self, robot, on_reject, on_sample=lambda: None, log_period=DEFAULT_PERIOD):
         self._robot = robot
         # on_reject(line): log ``line``, the rate-limited text (None: held back, counted)
         self._on_reject = on_reject
+        self._on_sample = on_sample        # on_sample(): a sample waits to be parsed
         self._log = LogThrottle(log_period)
         self._lock = threading.Lock()
         self._raw = None
@@ -45,6 +46,7 @@ class InputMonitor:
         """Keep the latest serialized ``/joint_states`` sample (the subscription's callback)."""
         self._raw = raw
         self.states_received += 1
+        self._on_sample()
 
     def pending_state(self):
         """Return True if a joint state arrived since the last :meth:`measured`."""
@@ -80,6 +82,10 @@ class InputMonitor:
             self.rejections.append((time.time(), source, reason))
         self._on_reject(self._log.admit(source, f'rejected {source}: {reason}; previous '
                                                 f'state kept'))
+
+    def log_pending(self):
+        """Return True while rejections are held back, for a later line to report."""
+        return self._log.pending() > 0
 
     def flush_log(self):
         """Report the rejections held back whose period is over (call it periodically)."""

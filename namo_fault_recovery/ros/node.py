@@ -7,6 +7,11 @@ run book (:mod:`.run_book`) says which library is wanted; the dispatcher
 publishes.  Nothing here blocks an executor thread: joint states are kept raw (parsed only
 when needed), services answer from ``async`` callbacks that await the run book, and the
 periodic work runs on a steady clock, independent of ``use_sim_time``.
+
+An idle node wakes only for what is due: ``/diagnostics`` once per
+``diagnostics_period_sec`` (the heartbeat), and a 10 Hz tick only while it has work (a
+joint state to parse, a change to publish); it stops itself when it finds none, and
+whatever brings new work restarts it.
 """
 
 import time
@@ -36,6 +41,7 @@ from ..recovery.result import reference_result, summary
 from ..runtime import diagnostic_keys as dk
 from ..runtime.answer_pacer import AnswerPacer
 from ..runtime.contingency_keeper import ContingencyKeeper
+from ..runtime.demand_tick import DemandTick
 from ..runtime.dispatcher import Dispatcher
 from ..runtime.engine_process import EngineError, EngineProcess
 from ..runtime.fault_intake import After, Clear, FaultIntake, Report
@@ -110,9 +116,10 @@ class RecoveryNode(Node):
         except (ConfigError, FileNotFoundError) as exc:
             raise StartupError(f'invalid configuration: {one_line(exc)}') from None
         self._prefix = diagnostics.status_prefix(self.get_fully_qualified_name())
-        self._inputs = InputMonitor(self._robot, self._log_rejection)
+        self._tick = DemandTick(self._tick_work, lambda: (self._inputs.pending_state()
+                                                          or self._inputs.log_pending()))
+        self._inputs = InputMonitor(self._robot, self._log_rejection, self._tick.wake)
         self._last_stamp_ns = 0
-        self._diag_dirty = True
         self._engine = EngineProcess(values['robot_file'] or None,
                                      values['gesture_file'] or None,
                                      values['engine_start_timeout_sec'])
@@ -181,9 +188,11 @@ class RecoveryNode(Node):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         periodic = MutuallyExclusiveCallbackGroup()
         self._diag_period = self.get_parameter('diagnostics_period_sec').value
-        self._last_diag = 0.0
-        self.create_timer(STATES_PARSE_PERIOD, self._tick, callback_group=periodic,
+        self.create_timer(self._diag_period, self.publish_diagnostics, callback_group=periodic,
                           clock=steady)
+        self._tick.attach(self.create_timer(STATES_PARSE_PERIOD, self._tick.tick,
+                                            callback_group=periodic, clock=steady),
+                          self._wake.trigger)
 
     # --- parameters -----------------------------------------------------------------
 
@@ -220,7 +229,7 @@ class RecoveryNode(Node):
         current = self._book.current
         if names & MARKER_PARAMS and current is not None:
             self._publish_markers(current, self.get_clock().now().to_msg())
-        self._diag_dirty = True
+        self._tick.change()
 
     # --- inputs ---------------------------------------------------------------------
 
@@ -231,7 +240,7 @@ class RecoveryNode(Node):
     def _log_rejection(self, line):
         if line is not None:             # None: held back, counted in a later line
             self.get_logger().warning(line)
-        self._diag_dirty = True
+        self._tick.change()
 
     def _on_fault(self, msg):
         received = time.monotonic()
@@ -245,7 +254,7 @@ class RecoveryNode(Node):
 
     def _on_accepted(self, reports, cleared, faults):
         self._inputs.accepted()
-        self._diag_dirty = True
+        self._tick.change()
         if reports:
             described = describe_reports(reports, self._config.settings.lock_strategy)
             self.get_logger().info(f'fault accepted: {shorten(described, 400)} '
@@ -314,7 +323,7 @@ class RecoveryNode(Node):
         stamp = Time(nanoseconds=stamp_ns).to_msg()
         for msg in conv.library_to_msgs(self._robot.joint_names, result, stamp):
             self._library_pub.publish(msg)
-        self._diag_dirty = True
+        self._tick.change()
         self._markers.submit(result, stamp)        # drawn a moment later, off this path
         return stamp_ns
 
@@ -348,19 +357,16 @@ class RecoveryNode(Node):
 
     # --- periodic work and diagnostics ---------------------------------------------
 
-    def _tick(self):
-        """Steady 10 Hz: refresh the measured angles, publish diagnostics when due."""
+    def _tick_work(self):
+        """Steady 10 Hz while needed: parse the latest joint state, publish a change."""
         if self._inputs.pending_state():
             self._inputs.measured()
         self._inputs.flush_log()         # the rejections held back after a flood
-        now = time.monotonic()
-        if self._diag_dirty or now - self._last_diag >= self._diag_period:
-            self._diag_dirty = False
-            self._last_diag = now
+        if self._tick.take_change():
             self.publish_diagnostics()
 
     def publish_diagnostics(self):
-        """Publish /diagnostics from a snapshot of the state."""
+        """Publish /diagnostics from a snapshot of the state (the heartbeat, and changes)."""
         snap = diagnostics.snapshot(self._book, self._inputs, self._config.settings,
                                     self._state.problem, self._state.store.path,
                                     self._engine.restarts)
