@@ -432,6 +432,8 @@ def test_diagnostics_of_a_refined_library_give_the_refinement_time(robot):
     out = {s.name: s for s in diagnostics.statuses(robot, snap, 'recovery_node: ')}
     assert 'refined_after_sec' not in {kv.key for kv in
                                        out['recovery_node: reconfiguration'].values}
+
+
 class _Timer:
     """A timer's ``cancel()`` and ``reset()``, counted."""
 

@@ -88,6 +88,8 @@ def cmd_callers(args, out):
     if args.json:
         out.write(json.dumps(report, indent=2) + '\n')
     return EXIT_FAILURE if report['unanswered'] else 0
+
+
 def cmd_idle(args, out):
     """Measure a private node's idle CPU (and clean stops); exit 1 if a stop was not."""
     from ..benchmarks import idle
@@ -261,13 +263,9 @@ def _add_callers(bench_subparsers):
 
 
 def register(bench_subparsers):
-    """Add ``latency``, ``stream``, ``product`` and ``callers`` to ``bench``."""
+    """Add ``latency``, ``stream``, ``product``, ``callers`` and ``idle`` to ``bench``."""
     _add_latency(bench_subparsers)
     _add_stream(bench_subparsers)
     _add_product(bench_subparsers)
     _add_callers(bench_subparsers)
-    """Add ``latency``, ``stream``, ``product`` and ``idle`` to the ``bench`` subcommands."""
-    _add_latency(bench_subparsers)
-    _add_stream(bench_subparsers)
-    _add_product(bench_subparsers)
     _add_idle(bench_subparsers)
