@@ -16,6 +16,7 @@ from namo_fault_recovery import load_library, load_robot
 from namo_fault_recovery.resources import config_path, DEMO_MOTION_FILE
 from namo_fault_recovery.ros.client import RecoveryClient
 from namo_fault_recovery.ros.spun_node import wait_until
+from namo_fault_recovery.runtime.diagnostic_keys import format_stamp
 import numpy as np
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -122,9 +123,17 @@ class Recorder:
         return None
 
     def library_settled(self):
-        """Return True once the node neither runs nor refines: the library stays as it is."""
+        """
+        Return True once the node neither runs nor refines: the library stays as it is.
+
+        Only diagnostics that describe the newest library received count: older ones may
+        say ``running`` false from before that library was published.
+        """
         values = self.reconfiguration()
-        return values.get('up_to_date') == 'true' and values.get('running') == 'false'
+        library = self.client.newest_library()
+        return (library is not None and values.get('up_to_date') == 'true'
+                and values.get('running') == 'false'
+                and values.get('library_stamp') == format_stamp(library.stamp))
 
     def wait_locked_library(self, gesture, locked, timeout):
         """

@@ -63,6 +63,22 @@ def test_a_refined_version_only_for_the_current_published_generation():
     book.refined(run.generation)
 
 
+def test_a_run_whose_refinement_follows_stays_running_until_refined():
+    book = RunBook()
+    book.set_faults({'right_arm_joint1': Fault()})
+    run = book.next_run(timeout=1.0)
+    book.refinement_follows(run.generation)
+    book.publish(run.generation, 'first', lambda r: 10)
+    assert book.snapshot()['running']                  # no gap before the refinement
+    assert book.refining(run.generation) == 1
+    book.refined(run.generation)
+    assert not book.snapshot()['running']
+    book.set_faults({'right_arm_joint2': Fault()})     # without a refinement to follow
+    run = book.next_run(timeout=1.0)
+    book.publish(run.generation, 'second', lambda r: 20)
+    assert not book.snapshot()['running']
+
+
 def test_a_new_request_cancels_a_refinement():
     cancelled = []
     book = RunBook(on_request=lambda: cancelled.append(True))

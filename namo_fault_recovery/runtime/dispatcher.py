@@ -98,6 +98,10 @@ class Dispatcher:
         if problem:
             self._fail(run, problem)
             return
+        refine = result.origin == 'deadline' and config.refine_budget_sec > 0 \
+            and self._publish_refined is not None
+        if refine:
+            self._book.refinement_follows(run.generation)
         # Published if still current, then written to the state file off this path.
         ready = self._publish(run.generation, run.faults, result, in_hand)
         if ready is None:
@@ -108,8 +112,7 @@ class Dispatcher:
             self._log(level, summary(result))
         if self._table is not None and config.contingency_table:
             self._table.configure(settings, active=dict(result.locks))
-        if result.origin == 'deadline' and config.refine_budget_sec > 0 \
-                and self._publish_refined is not None:
+        if refine:
             self._refine(run, result, config)
 
     def _lookup(self, faults, settings, measured, config):

@@ -47,6 +47,7 @@ class RunBook:
         self._requested_at = time.monotonic()
         self._taken = 0              # highest generation given to the dispatcher
         self._running = None
+        self._refine_next = None     # generation whose publication a refinement follows
         self._published = 0
         self._failed = None          # (generation, reason) of the last failed run
         self.current = None          # LibraryResult last published
@@ -162,13 +163,27 @@ class RunBook:
         with them outside any lock), or None if the generation went stale.
         """
         with self._cond:
-            self._running = None
+            # Still running when a refinement follows: clients see one span, not a gap.
+            self._running = generation if self._refine_next == generation else None
+            self._refine_next = None
             if generation != self._requested or self.stopping:
+                self._running = None
                 return None
             stamp_ns = publish(result)
             if in_hand is not None:
                 self.publish_path = time.monotonic() - in_hand
             return self._published_locked(generation, result, stamp_ns)
+
+    def refinement_follows(self, generation):
+        """
+        Say that ``generation``'s publication will be followed by its refinement.
+
+        The book then reports the run as still running from the publication until
+        :meth:`refined`, so a client that waits for ``running`` false waits for the
+        library the node settles on, not for the gap before the refinement starts.
+        """
+        with self._cond:
+            self._refine_next = generation
 
     def refining(self, generation):
         """
@@ -181,6 +196,8 @@ class RunBook:
         with self._cond:
             if generation != self._requested or self._published != generation \
                     or self.stopping:
+                if self._running == generation:
+                    self._running = None
                 return 0
             self._running = generation
             return self.version
