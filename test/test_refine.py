@@ -129,6 +129,14 @@ def _state(pid):
         return stat.read().rsplit(')', 1)[1].split()[0]
 
 
+def _stopped(pid, timeout=5.0):
+    """Return whether ``pid`` is stopped, waiting up to ``timeout`` s for it to become so."""
+    end = time.monotonic() + timeout
+    while _state(pid) != 'T' and time.monotonic() < end:
+        time.sleep(0.01)
+    return _state(pid) == 'T'
+
+
 def _report_parent(conn, parent_pid):
     die_with_parent(parent_pid)
     conn.send('alive')
@@ -162,14 +170,16 @@ def test_the_keeper_stops_its_builder_only_once_it_is_armed(robot, product_libra
         while keeper.builder_pid is None and time.monotonic() < end:
             time.sleep(0.001)
         pid = keeper.builder_pid
-        keeper.pause()
+        assert os.getpriority(os.PRIO_PROCESS, pid) == 19     # its start-up too
+        keeper.pause()                              # a live run begins as it starts
         while not keeper.armed and time.monotonic() < end:
             time.sleep(0.05)
         assert keeper.armed, logs                   # it was not stopped while starting
+        assert _stopped(pid)                        # armed, it is stopped for the live run
         keeper.resume()
+        assert _state(pid) != 'T'
         keeper.pause()
-        time.sleep(0.2)
-        assert _state(pid) == 'T'                   # armed, it is stopped for a live run
+        assert _stopped(pid)
         keeper.resume()
         assert _state(pid) != 'T'
     finally:

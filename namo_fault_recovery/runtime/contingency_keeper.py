@@ -9,8 +9,10 @@ restart reuses it and a changed setting starts a new one.  A table built offline
 
 The entries still missing (every single fault; once faults are active, every further
 single fault on top of them) are built by one child process (``spawn``) at the lowest
-CPU priority (``nice`` 19), and stopped (``SIGSTOP``) while a live run computes, so that
-it never competes with one.  Each entry arrives over a pipe, joins the table, and the
+CPU priority (``nice`` 19, set by the node as soon as the child exists, so its start-up
+is at that priority too), and stopped (``SIGSTOP``) while a live run computes, once it has
+armed its death signal (a live run that began before is stopped then), so that it never
+competes with one.  Each entry arrives over a pipe, joins the table, and the
 table file is rewritten atomically.  :meth:`ContingencyKeeper.lookup` is a dictionary
 look-up: a hit is published at once.
 """
@@ -71,6 +73,7 @@ class ContingencyKeeper:
         self._conn = None
         self._reader = None
         self._paused = self._armed = False  # armed: the builder set its death signal
+        self._pause_wanted = False          # a live run computes (stop it once armed)
         self.building = False
 
     # --- lookup ---------------------------------------------------------------------
@@ -182,9 +185,15 @@ class ContingencyKeeper:
                                        self._seeds, os.getpid()))
         proc.start()
         child.close()
+        try:
+            # At once, from here: its start-up (imports) must not compete with a live run
+            # either, and it may not be stopped before it has armed its death signal.
+            os.setpriority(os.PRIO_PROCESS, proc.pid, 19)
+        except OSError:
+            pass
         with self._lock:
             self._proc, self._conn, self.building = proc, parent, True
-            self._paused = self._armed = False
+            self._paused = self._armed = self._pause_wanted = False
         self._reader = threading.Thread(target=self._receive, args=(parent, proc),
                                         name='table-builder', daemon=True)
         self._reader.start()
@@ -201,9 +210,13 @@ class ContingencyKeeper:
             except (EOFError, OSError):
                 return                               # stopped (a new plan, or the node)
             if kind == 'armed':
+                pause = False
                 with self._lock:
                     if self._proc is proc:
                         self._armed = True
+                        pause = self._pause_wanted
+                if pause:
+                    self.pause()                     # a live run began while it started
                 continue
             if kind == 'done':
                 with self._lock:
@@ -252,11 +265,13 @@ class ContingencyKeeper:
     def _signal(self, signum, paused):
         with self._lock:
             proc = self._proc
+            self._pause_wanted = paused
             if proc is None or self._paused == paused or not proc.is_alive():
                 return
             if paused and not self._armed:
                 # Still starting: stopped now, it could never arm its death signal, and
-                # a node killed meanwhile would leave it stopped for ever.
+                # a node killed meanwhile would leave it stopped for ever.  It is stopped
+                # once armed, if the live run still computes.
                 return
             try:
                 os.kill(proc.pid, signum)
