@@ -15,6 +15,7 @@ import logging
 import math
 import os
 from pathlib import Path
+import xml.etree.ElementTree as ET
 
 import numpy as np
 
@@ -94,8 +95,22 @@ class UrdfTree:
                               f'{self.name!r}; expected one of its {len(self.links)} links')
 
 
+def _check_xml(text_or_path, source):
+    """Refuse a document that is not well-formed XML with a <robot> root (yourdfpy recovers)."""
+    try:
+        root = (ET.fromstring(text_or_path) if isinstance(text_or_path, str)
+                else ET.parse(text_or_path).getroot())
+    except ET.ParseError as exc:
+        raise ConfigError(source, None, f'not a URDF that parses ({exc}); expected a '
+                          'well-formed <robot> document') from None
+    if root.tag != 'robot':
+        raise ConfigError(source, None, f'not a URDF: the root element is <{root.tag}>; '
+                          'expected <robot>')
+
+
 def _load_yourdfpy(text_or_path, source):
     import yourdfpy
+    _check_xml(text_or_path, source)
     # yourdfpy logs its own complaints before raising; our one-line error says it all.
     logging.getLogger('yourdfpy').setLevel(logging.CRITICAL)
     handle = (io.BytesIO(text_or_path.encode('utf-8')) if isinstance(text_or_path, str)
