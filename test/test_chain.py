@@ -1,6 +1,7 @@
 """
-Chains compiled from a URDF against the DH kinematics, the spec's golden values and
-Pinocchio, on Namo (its generated URDF), Talos and TIAGo++ (example-robot-data).
+Chains compiled from a URDF against the DH kinematics, the golden values and Pinocchio.
+
+Robots: Namo (its generated URDF), Talos and TIAGo++ (example-robot-data).
 
 Pinocchio reads each URDF itself and computes every link frame of every chain at random
 configurations within the joint limits; ours must agree to 1e-9 m and 1e-9 in rotation
@@ -14,7 +15,7 @@ from pathlib import Path
 from namo_fault_recovery.errors import ConfigError
 from namo_fault_recovery.model.chain import ChainError, compile_chain
 from namo_fault_recovery.model.kinematics import batch_forward, forward_kinematics_jacobian
-from namo_fault_recovery.model.profile import load_profile
+from namo_fault_recovery.model.robot_profile import load_profile
 from namo_fault_recovery.model.urdf import urdf_string
 from namo_fault_recovery.model.urdf_tree import load_urdf_tree
 import numpy as np

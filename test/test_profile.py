@@ -1,6 +1,7 @@
 """
-The recovery profile (its loader's one-line errors), the template command that guesses
-one from a URDF, and ``bench fk``, on Namo, Talos and TIAGo++.
+The recovery profile, the template command that guesses one, and ``bench fk``.
+
+The profile loader's one-line errors; the template on Namo, Talos and TIAGo++.
 """
 
 import io
@@ -8,8 +9,8 @@ from pathlib import Path
 
 from namo_fault_recovery.cli.main import main as cli_main
 from namo_fault_recovery.errors import ConfigError
-from namo_fault_recovery.model.profile import load_profile
 from namo_fault_recovery.model.profile_template import guess_profile
+from namo_fault_recovery.model.robot_profile import load_profile
 from namo_fault_recovery.model.urdf_tree import load_urdf_tree
 from namo_fault_recovery.resources import distribution_file
 import pytest

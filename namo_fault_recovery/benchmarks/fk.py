@@ -1,6 +1,7 @@
 """
-``bench fk``: the batched forward kinematics of the URDF-compiled chains against the DH
-kinematics, side by side on Namo in one run.
+``bench fk``: the URDF-compiled chains' batched FK against the DH FK, on Namo.
+
+The two run side by side in one run.
 
 Both models come from the same robot file: the DH one as the engine loads it, the URDF
 one compiled from the URDF generated from that file (``config/namo_profile.yaml`` over
@@ -17,8 +18,8 @@ import numpy as np
 
 from . import common
 from ..model.kinematics import batch_forward, batch_forward_jacobian
-from ..model.profile import load_profile
 from ..model.robot import ARMS
+from ..model.robot_profile import load_profile
 from ..model.urdf import urdf_string
 from ..resources import config_path, NAMO_PROFILE_FILE
 

@@ -1,6 +1,8 @@
 """
-The ``profile`` command of ``namo-recovery`` (a template recovery profile from a URDF),
-and ``bench fk`` (the URDF-compiled kinematics against the DH kinematics on Namo).
+The ``profile`` command and ``bench fk`` of ``namo-recovery``.
+
+``profile`` writes a template recovery profile from a URDF; ``bench fk`` times the
+URDF-compiled kinematics against the DH kinematics on Namo.
 
 ``namo-recovery profile --urdf FILE [--out FILE]`` guesses a profile from the URDF's
 kinematic tree and link names (:mod:`..model.profile_template`), writes it (or prints
@@ -17,8 +19,8 @@ from ..errors import ConfigError
 
 def cmd_profile(args, out):
     """Write the template to ``--out`` (or stdout) and report the guesses; return 0."""
-    from ..model.profile import load_profile
     from ..model.profile_template import guess_profile
+    from ..model.robot_profile import load_profile
     from ..model.urdf_tree import load_urdf_tree
     tree = load_urdf_tree(args.urdf)
     urdf = Path(args.urdf).resolve()

@@ -287,7 +287,7 @@ class KinematicChain:
 
     @property
     def n_joints(self) -> int:
-        """The number of revolute/continuous joints from base to tip."""
+        """Return the number of revolute/continuous joints from base to tip."""
         return len(self.joint_names)
 
     def _states(self, q):

@@ -42,7 +42,7 @@ class UrdfJoint:
 
     @property
     def movable(self) -> bool:
-        """True for a revolute or continuous joint that mimics no other joint."""
+        """Return True for a revolute or continuous joint that mimics no other joint."""
         return self.kind in MOVABLE and self.mimic is None
 
 

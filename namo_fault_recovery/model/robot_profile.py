@@ -158,7 +158,7 @@ def _compile_arm(tree, cfg, path, side):
 
 
 def _check_shared(arms, shared, path):
-    """A joint on two arms' chains must be declared shared, and a shared one must be."""
+    """Check that a joint on two arms' chains is declared shared, and a shared one is."""
     owners = {}
     for side, arm in arms.items():
         for name in arm.chain.joint_names:
