@@ -25,6 +25,7 @@ not find) it says, and writes a value that a person must check.
 from dataclasses import dataclass, field
 import json
 import re
+import textwrap
 
 import numpy as np
 
@@ -234,8 +235,17 @@ def _name(text):
     return text if re.fullmatch(r'[A-Za-z0-9_./-]+', text) else json.dumps(text)
 
 
-def _names(names):
-    return '[' + ', '.join(_name(n) for n in names) + ']'
+def _names(names, indent=0):
+    """Return a YAML flow list, wrapped under 90 columns after ``indent`` characters."""
+    text = '[' + ', '.join(_name(n) for n in names) + ']'
+    if indent + len(text) <= 90:
+        return text
+    return textwrap.fill(text, 90, initial_indent=' ' * indent,
+                         subsequent_indent=' ' * (indent + 1))[indent:]
+
+
+def _comment(line):
+    return textwrap.wrap(line, 90, initial_indent='#   - ', subsequent_indent='#       ')
 
 
 def _arm_entry(t, branch, run, report):
@@ -279,9 +289,9 @@ def _arms(t, report):
 
 def _lines(tree, urdf_ref, arms, shared, velocity, report):
     out = [f'# Recovery profile of {tree.name!r}, a template guessed by '
-           f'`namo-recovery profile` from {tree.source}.', '# Guessed:']
-    out += [f'#   - {g}' for g in report.guessed] + ['# Could not (check these):']
-    out += [f'#   - {m}' for m in report.missing] or ['#   (nothing)']
+           '`namo-recovery profile`', f'# from {tree.source}.', '# Guessed:']
+    out += [c for g in report.guessed for c in _comment(g)] + ['# Could not (check these):']
+    out += [c for m in report.missing for c in _comment(m)] or ['#   (nothing)']
     out += [f'name: {_name(tree.name)}', f'urdf: {_name(urdf_ref)}',
             f'shared: {_names(shared)}']
     if velocity:
@@ -295,8 +305,9 @@ def _lines(tree, urdf_ref, arms, shared, velocity, report):
                 '    landmarks:', f'      elbow: {_name(arm["elbow"])}',
                 f'      wrist: {_name(arm["wrist"])}',
                 f'      fingertip: {{link: {_name(arm["tip"])}, offset: [0.0, 0.0, 0.0]}}',
-                f'      palm: {_name(arm["palm"])}', f'    joints: {_names(arm["joints"])}',
-                f'    expansion: {_names(arm["expansion"])}']
+                f'      palm: {_name(arm["palm"])}',
+                f'    joints: {_names(arm["joints"], len("    joints: "))}',
+                f'    expansion: {_names(arm["expansion"], len("    expansion: "))}']
     return out
 
 
