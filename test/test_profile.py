@@ -178,3 +178,20 @@ def test_bench_fk_prints_the_ratio_and_agrees(tmp_path):
     assert 'FK ratio' in text and 'URDF / DH' in text
     doc = yaml.safe_load((tmp_path / 'fk.json').read_text())
     assert doc['max_difference_mm'] < 1e-5 and doc['fk']['ratio'] > 0
+
+
+def test_the_template_says_when_it_finds_no_arm_and_that_profile_is_refused(tmp_path):
+    links = ''.join(f'<link name="l{i}"/>' for i in range(4))
+    joints = ''.join(f'<joint name="j{i}" type="revolute"><parent link="l{i}"/>'
+                     f'<child link="l{i + 1}"/><axis xyz="0 0 1"/>'
+                     '<limit lower="-1" upper="1" effort="1" velocity="1"/></joint>'
+                     for i in range(3))
+    urdf = tmp_path / 'three.urdf'
+    urdf.write_text(f'<robot name="three">{links}{joints}</robot>')
+    template = guess_profile(load_urdf_tree(urdf), 'three.urdf')
+    assert template.guessed == []
+    assert template.missing[0].startswith('arms: no serial run of 5 or more revolute joints')
+    path = tmp_path / 'three.yaml'
+    path.write_text(template.text)
+    with pytest.raises(ConfigError, match="key 'arms': expected one or two of right, left"):
+        load_profile(path)
