@@ -4,9 +4,10 @@ A template recovery profile guessed from a URDF's kinematic tree and link names.
 Why guess: a robot team should start from a profile that loads, then correct it, not
 from a blank page.  The guesses, each reported with its reason:
 
-- **arms**: serial runs of 5 to 8 revolute joints that leave a branching link (a torso,
-  a base), not named like a leg, wheel or head, and stopped by the first joint named
-  like a hand's (gripper, finger, thumb ...) or by the next branching;
+- **arms**: serial runs of 5 or more revolute joints (more than 8, which the model does
+  not take, are reported) that leave a branching link (a torso, a base), not named like
+  a leg, wheel or head, and stopped by the first joint named like a hand's (gripper,
+  finger, thumb ...) or by the next branching;
 - **side**: ``left`` / ``right`` in the names, else the sign of y of the first joint;
 - **base and shared joints**: from the link the arms leave, up through the revolute
   joints above it that both arms share (a torso or waist); those are the shared and the
