@@ -17,6 +17,7 @@ setup(
         (share, ['package.xml']),
         (os.path.join(share, 'config'),
          sorted(glob('config/*.yaml') + glob('config/*.urdf') + glob('config/*.rviz'))),
+        (os.path.join(share, 'config', 'robots'), sorted(glob('config/robots/*.yaml'))),
         (os.path.join(share, 'launch'), sorted(glob('config/launch/*.launch.py'))),
         (os.path.join(share, 'config', 'trajectories'), sorted(glob('config/trajectories/*'))),
         (os.path.join(share, 'msg_docs'), sorted(f for f in glob('msg_docs/*')
@@ -24,7 +25,8 @@ setup(
         (os.path.join(share, 'msg_docs', 'figures'), sorted(glob('msg_docs/figures/*.png'))),
     ],
     python_requires='>=3.10',
-    install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML'],
+    # yourdfpy parses URDFs (the recovery profiles' robots; model/urdf_tree.py).
+    install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML', 'yourdfpy'],
     extras_require={
         'wheels': ['ros-jazzy-rclpy', 'ros-jazzy-common-interfaces',
                    'ros-jazzy-rmw-fastrtps-cpp', 'ros-jazzy-ament-index-python'],
@@ -39,6 +41,9 @@ setup(
                  'matplotlib',
                  # The simulator's tests, and the URDF checked by an independent library.
                  'mujoco', 'yourdfpy'],
+        # Real humanoids for the tests and benchmarks: example-robot-data ships the URDFs
+        # of Talos and TIAGo++ inside its wheel; Pinocchio cross-checks our kinematics.
+        'robots': ['example-robot-data', 'pin'],
         'plot': ['matplotlib'],
         'sim': ['mujoco'],   # namo_sim, the simulated Namo
     },

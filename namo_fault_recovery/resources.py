@@ -52,9 +52,32 @@ def config_path(name):
 
 
 DEFAULT_ROBOT_FILE = 'namo_robot.yaml'
+NAMO_PROFILE_FILE = 'namo_profile.yaml'   # Namo as any robot: its URDF plus a profile
 DEFAULT_GESTURE_FILE = 'gestures.yaml'      # Namo's four gestures (Table 2, as motions)
 PAPER_GESTURE_FILE = 'paper_gestures.yaml'   # the paper's Table 2 poses
 # The demo library of motions: the four gestures plus the dense 100-point "draw a circle"
 # (``bench motion`` and the dense-motion demos; kept out of the default library so that
 # its lock averages stay Table 2's row).
 DEMO_MOTION_FILE = 'demo_motions.yaml'
+
+
+def distribution_file(distribution, name):
+    """
+    Return the path of a data file shipped inside an installed Python distribution.
+
+    ``name`` is matched against the end of the distribution's recorded file paths (e.g.
+    ``talos_data/robots/talos_reduced.urdf`` in ``example-robot-data``, whose URDFs live
+    under ``cmeel.prefix/share/...``).  Raises FileNotFoundError naming what is missing.
+    """
+    from importlib import metadata
+    try:
+        dist = metadata.distribution(distribution)
+    except metadata.PackageNotFoundError:
+        raise FileNotFoundError(
+            f'Python distribution {distribution!r} is not installed; expected it for '
+            f'{name} (pip install {distribution})') from None
+    wanted = '/' + name.strip('/')
+    for entry in dist.files or ():
+        if ('/' + str(entry).replace(os.sep, '/')).endswith(wanted):
+            return Path(dist.locate_file(entry))
+    raise FileNotFoundError(f'{distribution} {dist.version} has no file {name!r}')

@@ -268,6 +268,9 @@ def build_parser():
     precompute.register(sub)                 # precompute (the contingency table)
     from . import settings_command
     settings_command.register(sub)           # settings (the files that list them)
+    from . import profile_command
+    profile_command.register(sub)            # profile (a template from a URDF)
+    profile_command.register_bench(bench_sub)    # bench fk
     return parser
 
 

@@ -4,6 +4,10 @@ The robot and its gestures, free of ROS: what Namo is and what it should do.
 - :mod:`.robot`: the arm model (DH table, joint names, limits, capsules, a tool) loaded
   from ``config/namo_robot.yaml``;
 - :mod:`.kinematics`: forward kinematics and its Jacobian, batched over N configurations;
+- :mod:`.urdf_tree`: any robot's kinematic tree read from its URDF (yourdfpy), checked;
+- :mod:`.chain`: a base-to-tip chain compiled from that tree: batched FK and Jacobians;
+- :mod:`.robot_profile`: the recovery profile (arms, landmarks, roles of joints) over a URDF;
+- :mod:`.profile_template`: a template profile guessed from a URDF's tree and names;
 - :mod:`.capsules`: the capsule geometry of the arms and torso;
 - :mod:`.gestures`: the reference gesture library (keyframes, weights, expansion stages);
 - :mod:`.weights`: ``ScoreWeights``, the similarity components a gesture's score weighs;

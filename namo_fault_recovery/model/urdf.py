@@ -11,7 +11,8 @@ it, scaled to metres), so no static transform is needed between them.  Each arm 
 links ``<side>_arm_link1..7``; link i is DH frame i, so the elbow landmark is the origin
 of ``<side>_arm_link<elbow frame>`` (link3), the wrist the origin of
 ``<side>_arm_link<wrist frame>`` (link5), and a fixed ``<side>_arm_fingertip`` link is the
-fingertip (end-effector frame).  Joints carry the robot file's names and limits.
+fingertip (end-effector frame).  Joints carry the robot file's names, limits and
+velocity limits (so that a URDF-built model, ``config/namo_profile.yaml``, reads them).
 
 Modified DH as URDF.  ``T(i-1, i) = RotX(alpha) TransX(a) RotZ(offset + q) TransZ(d)``
 equals ``[RotX(alpha) TransX(a) RotZ(offset) TransZ(d)] RotZ(q)``, because the
@@ -46,7 +47,6 @@ _FLIP = np.diag([1.0, -1.0, 1.0])
 _SEGMENT_MASS = {'upper_arm': 1.5, 'forearm': 1.0, 'hand': 0.4}
 _SMALL_MASS = 0.2
 _EFFORT = 40.0      # N m, placeholder actuator limit
-_VELOCITY = 3.0     # rad/s, placeholder
 _COLORS = {'right': '1.0 0.55 0.1 1.0', 'left': '0.1 0.6 1.0 1.0',
            'torso': '0.75 0.75 0.75 1.0'}
 
@@ -260,7 +260,8 @@ def urdf_tree(robot):
             ET.SubElement(joint, 'axis', {'xyz': _fmt(joint_axis(robot, side))})
             ET.SubElement(joint, 'limit', {
                 'lower': f'{arm.lower[i]:.9g}', 'upper': f'{arm.upper[i]:.9g}',
-                'effort': f'{_EFFORT:g}', 'velocity': f'{_VELOCITY:g}'})
+                'effort': f'{_EFFORT:g}',
+                'velocity': f'{robot.velocity_limits[i]:.9g}'})
             link = ET.SubElement(root, 'link', {'name': name})
             cap = caps.get(name)
             if cap is None:
