@@ -302,19 +302,20 @@ def test_background_writer_never_writes_an_older_snapshot_over_a_newer_one(tmp_p
 def test_a_fault_set_being_written_starts_the_run_but_is_published_only_once_on_disk(
         tmp_path, robot, library):
     from namo_fault_recovery.runtime.persistence import Persistence
-    from namo_fault_recovery.runtime.state_store import decode_state
+    from namo_fault_recovery.runtime.state_store import StateStore
     book = RunBook()
     state = Persistence(tmp_path, robot, library, book, on_error=lambda text: None)
     saving, release, order = threading.Event(), threading.Event(), []
-    real_save = state.store.save
+    journal = state.store.journal
+    real_append = journal.append
 
-    def slow_save(*args, **kwargs):
+    def slow_append(*args, **kwargs):
         saving.set()
         assert release.wait(5.0)
+        real_append(*args, **kwargs)
         order.append('synced')
-        return real_save(*args, **kwargs)
 
-    state.store.save = slow_save
+    journal.append = slow_append
     faults = {'right_arm_joint1': Fault(0.1)}
     committer = threading.Thread(target=state.commit_faults, args=(faults, 0.0))
     committer.start()
@@ -335,7 +336,61 @@ def test_a_fault_set_being_written_starts_the_run_but_is_published_only_once_on_
     snap = book.snapshot()
     assert snap['faults'] == faults and snap['fault_sync'] >= 0.0
     assert snap['fault_to_request'] >= 0.0 and snap['publish_path'] >= 0.0
+    # On disk before the publication, as a restart reads it (no state file written yet:
+    # its writer was never started).
+    assert not state.store.path.exists()
+    assert StateStore(tmp_path).load()[0].faults == faults
+
+
+def test_fault_to_publish_spans_a_report_to_the_first_library_after_it(library):
+    import time
+    book = RunBook()
+    received = time.monotonic()
+    book.set_faults({'right_arm_joint1': Fault(0.1)}, received_at=received)
+    book.request()                                   # a newer request joins the report
+    run = book.next_run(timeout=1.0)
+    before = time.monotonic()
+    assert book.publish(run.generation, reference_result(library), lambda r: 1) is not None
+    first = book.snapshot()['fault_to_publish']
+    assert before - received <= first <= time.monotonic() - received
+    book.request()                                   # e.g. /reconfigure_gestures: no report
+    run = book.next_run(timeout=1.0)
+    book.publish(run.generation, reference_result(library), lambda r: 2)
+    assert book.snapshot()['fault_to_publish'] == first
+
+
+def test_the_state_file_follows_the_journal_and_empties_it(tmp_path, robot, library):
+    from namo_fault_recovery.runtime.persistence import Persistence
+    from namo_fault_recovery.runtime.state_store import decode_state, StateStore
+    book = RunBook()
+    state = Persistence(tmp_path, robot, library, book, on_error=lambda text: None)
+    state.start()
+    faults = {'left_arm_joint3': Fault(-0.2, 0.1)}
+    state.commit_faults(faults)
+    state.stop()                                      # writes what is queued
     assert decode_state(state.store.path.read_text()).faults == faults
+    assert state.store.journal.path.read_bytes() == b''
+    # A restarted node numbers its changes above those on disk.
+    again = Persistence(tmp_path, robot, library, RunBook(), on_error=lambda text: None)
+    again.commit_faults({})
+    stored = StateStore(tmp_path).load()[0]
+    assert stored.faults == {} and stored.seq > decode_state(
+        state.store.path.read_text()).seq
+    again.stop()
+
+
+def test_an_unwritable_journal_falls_back_to_the_state_file(tmp_path, robot, library):
+    from namo_fault_recovery.runtime.persistence import Persistence
+    from namo_fault_recovery.runtime.state_store import decode_state
+    errors = []
+    state = Persistence(tmp_path, robot, library, RunBook(), on_error=errors.append)
+    state.store.journal.path.mkdir()                  # cannot be opened as a file
+    faults = {'right_arm_joint7': Fault(0.3)}
+    state.commit_faults(faults)
+    state.commit_faults(faults)
+    assert decode_state(state.store.path.read_text()).faults == faults
+    assert len(errors) == 1 and 'fault journal' in errors[0]
+    state.stop()
 
 
 def test_diagnostics_show_the_publish_path_figures(robot, library):

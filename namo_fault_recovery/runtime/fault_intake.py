@@ -61,6 +61,7 @@ class FaultIntake:
         self._stopping = False
         self._on_error = on_error          # on_error(exc): the batch failed (a bug)
         self.dropped = 0
+        self._applying = False
         self._thread = threading.Thread(target=self._loop, name='fault-intake', daemon=True)
 
     def start(self):
@@ -86,6 +87,7 @@ class FaultIntake:
                     return
                 batch = list(self._queue)
                 self._queue.clear()
+                self._applying = True
             try:
                 self._apply(batch)
             except Exception as exc:  # noqa: B902 - the intake must outlive any bug
@@ -96,6 +98,9 @@ class FaultIntake:
                         item.then()
                     elif isinstance(item, Clear):
                         item.done(0)
+            finally:
+                with self._cond:
+                    self._applying = False
 
     def _apply(self, batch):
         if all(isinstance(i, After) for i in batch):
@@ -131,6 +136,18 @@ class FaultIntake:
             item.done(count)
         for item in afters:
             item.then()
+
+    def busy(self):
+        """
+        Return True from a report's arrival until its library is out (or its run failed).
+
+        What the node's followers of a publication (markers, the table's next plan) wait
+        for: while it holds, a table hit is milliseconds from its publication.
+        """
+        with self._cond:
+            if self._queue or self._applying:
+                return True
+        return self._book.pending()
 
     def stop(self):
         """Stop the thread (queued items are dropped: they were never acknowledged)."""
