@@ -359,7 +359,7 @@ def test_fault_to_publish_spans_a_report_to_the_first_library_after_it(library):
     assert book.snapshot()['fault_to_publish'] == first
 
 
-def test_the_state_file_follows_the_journal_and_empties_it(tmp_path, robot, library):
+def test_the_state_file_follows_the_publication_and_empties_the_journal(tmp_path, robot, library):
     from namo_fault_recovery.runtime.persistence import Persistence
     from namo_fault_recovery.runtime.state_store import decode_state, StateStore
     book = RunBook()
@@ -367,6 +367,10 @@ def test_the_state_file_follows_the_journal_and_empties_it(tmp_path, robot, libr
     state.start()
     faults = {'left_arm_joint3': Fault(-0.2, 0.1)}
     state.commit_faults(faults)
+    assert not state.store.path.exists()              # nothing published yet
+    run = book.next_run(timeout=1.0)
+    assert state.publish_and_queue(run.generation, faults, reference_result(library),
+                                   lambda result: 1) is not None
     state.stop()                                      # writes what is queued
     assert decode_state(state.store.path.read_text()).faults == faults
     assert state.store.journal.path.read_bytes() == b''

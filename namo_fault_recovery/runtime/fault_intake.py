@@ -9,6 +9,14 @@ once it is in the state file (atomically, synced; the engine may start meanwhile
 nothing is published before the write ends); then ``on_accepted`` runs (it logs
 ``fault accepted``).  A crash at any moment therefore loses only reports that were never
 acknowledged, and a burst of N reports costs one file write per batch, not N.
+
+A batch of reports alone (no clear, no caller waiting) is acknowledged once its library
+is out, or after ``SETTLE_SEC``: a table hit is published by the dispatcher within a
+millisecond or two of the write, and the acknowledgement (a log line, a wake-up of the
+executor) made at the same moment held the interpreter lock that the publication needed
+(measured: the lock handed to the dispatcher 2.8 ms after the write, p50, on a busy
+machine).  A live search keeps computing; its faults are acknowledged ``SETTLE_SEC``
+after they are on disk.
 """
 
 from collections import deque
@@ -16,6 +24,8 @@ from dataclasses import dataclass
 import threading
 
 from .state_store import Fault
+
+SETTLE_SEC = 0.01      # s: a batch of reports waits at most this long for its library
 
 
 @dataclass(frozen=True)
@@ -131,6 +141,8 @@ class FaultIntake:
             self._commit(faults, received_at=min(received))
         else:
             self._commit(faults)
+        if reports and not clears and not afters:
+            self._book.wait_published(SETTLE_SEC)   # a table hit goes out first
         self._on_accepted(reports, bool(clears), faults)
         for item, count in clears:
             item.done(count)

@@ -4,8 +4,8 @@ The node's persistence: the state file, in the order the run book needs, off the
 Free of ROS.  A new fault set is made durable before anything acknowledges it, under one
 lock with a sequence number: appended to the fault journal and synced (one line and one
 ``fdatasync``, see :mod:`.state_store`; the whole state file is rewritten only if the
-journal cannot be written).  The state file (faults and library) is then queued for a
-background writer under the same lock, as is every published library, so the numbers
+journal cannot be written).  The state file (faults and library) follows each
+publication: queued for a background writer under the same lock, so the numbers
 say which of a library and a newer fault set came last and a slow write never
 overwrites a newer state.  The run book gets the new fault set just before the write
 (a table hit or the engine starts while the disk syncs), but every publication and
@@ -59,7 +59,6 @@ class Persistence:
             began = time.monotonic()
             self._journal(faults, library, seq)
             self._book.faults_durable(time.monotonic() - began)
-            self._writer.submit(faults, library, seq)      # the state file, off this path
 
     def publish_and_queue(self, generation, faults, result, publish, in_hand=None):
         """

@@ -152,8 +152,22 @@ class RunBook:
     def pending(self):
         """Return True while a requested library is neither published nor failed yet."""
         with self._cond:
-            failed_gen = self._failed[0] if self._failed else 0
-            return self._requested > max(self._published, failed_gen)
+            return self._pending_locked()
+
+    def wait_published(self, timeout):
+        """Wait up to ``timeout`` s until nothing is pending; return True if nothing is."""
+        end = time.monotonic() + timeout
+        with self._cond:
+            while self._pending_locked() and not self.stopping:
+                remaining = end - time.monotonic()
+                if remaining <= 0:
+                    return False
+                self._cond.wait(remaining)
+            return True
+
+    def _pending_locked(self):
+        failed_gen = self._failed[0] if self._failed else 0
+        return self._requested > max(self._published, failed_gen)
 
     def is_current(self, generation):
         """Return True while ``generation`` is the newest request (not yet superseded)."""
