@@ -122,6 +122,32 @@ def test_intake_persists_before_it_acknowledges_and_keeps_order():
     assert book.faults == {'left_arm_joint3': Fault(0.1, None)}
 
 
+def test_reports_alone_are_acknowledged_once_their_library_is_out(monkeypatch, library):
+    from namo_fault_recovery.runtime import fault_intake
+    monkeypatch.setattr(fault_intake, 'SETTLE_SEC', 30.0)   # only the publication ends it
+    book = RunBook()
+    pending_when_accepted, cleared = [], threading.Event()
+    intake = FaultIntake(book, book.set_faults,
+                         lambda reports, *_: pending_when_accepted.append(book.pending()))
+
+    def dispatcher():
+        run = book.next_run(timeout=5.0)
+        book.publish(run.generation, reference_result(library), lambda result: 1)
+
+    publisher = threading.Thread(target=dispatcher)
+    publisher.start()
+    intake.start()
+    try:
+        intake.submit(Report({'right_arm_joint1': 0.1}))
+        publisher.join(5.0)
+        # A clear is answered at once: its caller registers for the library it asked for.
+        intake.submit(Clear(lambda count: cleared.set()))
+        assert cleared.wait(5.0)
+    finally:
+        intake.stop()
+    assert pending_when_accepted == [False, True]
+
+
 def test_intake_keeps_the_first_measured_angle_of_a_joint_reported_again():
     book = RunBook()
     measured = {'right_arm_joint1': 0.25}
