@@ -50,7 +50,8 @@ def test_sigkill_then_restart_restores_and_republishes(tmp_path, client):
         # faults were written before they were acknowledged): kill once it is on disk.
         end = time.monotonic() + 10.0
         while time.monotonic() < end:
-            saved = decode_state((state / 'state.json').read_text()).library
+            stored = StateStore(state).load()[0]       # the faults first, in the journal
+            saved = stored.library if stored is not None else None
             if saved is not None and set(saved.locks) == {'right_arm_joint3',
                                                           'left_arm_joint1'}:
                 break
