@@ -14,7 +14,7 @@ import signal
 import time
 
 from namo_fault_recovery import load_library, load_robot
-from namo_fault_recovery.runtime.state_store import decode_state
+from namo_fault_recovery.runtime.state_store import decode_state, StateStore
 from node_harness import NodeProcess, RosClient, session_domain, statuses_values
 import pytest
 
@@ -50,7 +50,8 @@ def test_sigkill_then_restart_restores_and_republishes(tmp_path, client):
         # faults were written before they were acknowledged): kill once it is on disk.
         end = time.monotonic() + 10.0
         while time.monotonic() < end:
-            saved = decode_state((state / 'state.json').read_text()).library
+            stored = StateStore(state).load()[0]       # the faults first, in the journal
+            saved = stored.library if stored is not None else None
             if saved is not None and set(saved.locks) == {'right_arm_joint3',
                                                           'left_arm_joint1'}:
                 break
@@ -87,7 +88,7 @@ def test_sigkill_then_restart_restores_and_republishes(tmp_path, client):
         assert all(a == average for a in restored.column('right_arm_joint3'))
         # The restored state is live: clearing it works and is persisted too.
         assert client.trigger('/clear_faults').success
-        assert decode_state((state / 'state.json').read_text()).faults == {}
+        assert StateStore(state).load()[0].faults == {}     # as a restart reads it
     finally:
         assert node.stop() == 0
     no_traceback(node)
@@ -153,8 +154,7 @@ def test_corrupted_state_file_is_set_aside(tmp_path, client, content, reason):
         before = client.latest().stamp
         client.publish_fault(['right_arm_joint2'])
         client.wait_library(after=before, what='a library after the fault')
-        assert list(decode_state((state / 'state.json').read_text()).faults) == [
-            'right_arm_joint2']
+        assert list(StateStore(state).load()[0].faults) == ['right_arm_joint2']
         assert node.alive()
     finally:
         assert node.stop() == 0

@@ -122,6 +122,32 @@ def test_intake_persists_before_it_acknowledges_and_keeps_order():
     assert book.faults == {'left_arm_joint3': Fault(0.1, None)}
 
 
+def test_reports_alone_are_acknowledged_once_their_library_is_out(monkeypatch, library):
+    from namo_fault_recovery.runtime import fault_intake
+    monkeypatch.setattr(fault_intake, 'SETTLE_SEC', 30.0)   # only the publication ends it
+    book = RunBook()
+    pending_when_accepted, cleared = [], threading.Event()
+    intake = FaultIntake(book, book.set_faults,
+                         lambda reports, *_: pending_when_accepted.append(book.pending()))
+
+    def dispatcher():
+        run = book.next_run(timeout=5.0)
+        book.publish(run.generation, reference_result(library), lambda result: 1)
+
+    publisher = threading.Thread(target=dispatcher)
+    publisher.start()
+    intake.start()
+    try:
+        intake.submit(Report({'right_arm_joint1': 0.1}))
+        publisher.join(5.0)
+        # A clear is answered at once: its caller registers for the library it asked for.
+        intake.submit(Clear(lambda count: cleared.set()))
+        assert cleared.wait(5.0)
+    finally:
+        intake.stop()
+    assert pending_when_accepted == [False, True]
+
+
 def test_intake_keeps_the_first_measured_angle_of_a_joint_reported_again():
     book = RunBook()
     measured = {'right_arm_joint1': 0.25}
@@ -302,19 +328,20 @@ def test_background_writer_never_writes_an_older_snapshot_over_a_newer_one(tmp_p
 def test_a_fault_set_being_written_starts_the_run_but_is_published_only_once_on_disk(
         tmp_path, robot, library):
     from namo_fault_recovery.runtime.persistence import Persistence
-    from namo_fault_recovery.runtime.state_store import decode_state
+    from namo_fault_recovery.runtime.state_store import StateStore
     book = RunBook()
     state = Persistence(tmp_path, robot, library, book, on_error=lambda text: None)
     saving, release, order = threading.Event(), threading.Event(), []
-    real_save = state.store.save
+    journal = state.store.journal
+    real_append = journal.append
 
-    def slow_save(*args, **kwargs):
+    def slow_append(*args, **kwargs):
         saving.set()
         assert release.wait(5.0)
+        real_append(*args, **kwargs)
         order.append('synced')
-        return real_save(*args, **kwargs)
 
-    state.store.save = slow_save
+    journal.append = slow_append
     faults = {'right_arm_joint1': Fault(0.1)}
     committer = threading.Thread(target=state.commit_faults, args=(faults, 0.0))
     committer.start()
@@ -335,7 +362,65 @@ def test_a_fault_set_being_written_starts_the_run_but_is_published_only_once_on_
     snap = book.snapshot()
     assert snap['faults'] == faults and snap['fault_sync'] >= 0.0
     assert snap['fault_to_request'] >= 0.0 and snap['publish_path'] >= 0.0
+    # On disk before the publication, as a restart reads it (no state file written yet:
+    # its writer was never started).
+    assert not state.store.path.exists()
+    assert StateStore(tmp_path).load()[0].faults == faults
+
+
+def test_fault_to_publish_spans_a_report_to_the_first_library_after_it(library):
+    import time
+    book = RunBook()
+    received = time.monotonic()
+    book.set_faults({'right_arm_joint1': Fault(0.1)}, received_at=received)
+    book.request()                                   # a newer request joins the report
+    run = book.next_run(timeout=1.0)
+    before = time.monotonic()
+    assert book.publish(run.generation, reference_result(library), lambda r: 1) is not None
+    first = book.snapshot()['fault_to_publish']
+    assert before - received <= first <= time.monotonic() - received
+    book.request()                                   # e.g. /reconfigure_gestures: no report
+    run = book.next_run(timeout=1.0)
+    book.publish(run.generation, reference_result(library), lambda r: 2)
+    assert book.snapshot()['fault_to_publish'] == first
+
+
+def test_the_state_file_follows_the_publication_and_empties_the_journal(tmp_path, robot, library):
+    from namo_fault_recovery.runtime.persistence import Persistence
+    from namo_fault_recovery.runtime.state_store import decode_state, StateStore
+    book = RunBook()
+    state = Persistence(tmp_path, robot, library, book, on_error=lambda text: None)
+    state.start()
+    faults = {'left_arm_joint3': Fault(-0.2, 0.1)}
+    state.commit_faults(faults)
+    assert not state.store.path.exists()              # nothing published yet
+    run = book.next_run(timeout=1.0)
+    assert state.publish_and_queue(run.generation, faults, reference_result(library),
+                                   lambda result: 1) is not None
+    state.stop()                                      # writes what is queued
     assert decode_state(state.store.path.read_text()).faults == faults
+    assert state.store.journal.path.read_bytes() == b''
+    # A restarted node numbers its changes above those on disk.
+    again = Persistence(tmp_path, robot, library, RunBook(), on_error=lambda text: None)
+    again.commit_faults({})
+    stored = StateStore(tmp_path).load()[0]
+    assert stored.faults == {} and stored.seq > decode_state(
+        state.store.path.read_text()).seq
+    again.stop()
+
+
+def test_an_unwritable_journal_falls_back_to_the_state_file(tmp_path, robot, library):
+    from namo_fault_recovery.runtime.persistence import Persistence
+    from namo_fault_recovery.runtime.state_store import decode_state
+    errors = []
+    state = Persistence(tmp_path, robot, library, RunBook(), on_error=errors.append)
+    state.store.journal.path.mkdir()                  # cannot be opened as a file
+    faults = {'right_arm_joint7': Fault(0.3)}
+    state.commit_faults(faults)
+    state.commit_faults(faults)
+    assert decode_state(state.store.path.read_text()).faults == faults
+    assert len(errors) == 1 and 'fault journal' in errors[0]
+    state.stop()
 
 
 def test_diagnostics_show_the_publish_path_figures(robot, library):

@@ -137,3 +137,53 @@ def test_unwritable_directory_raises_oserror(tmp_path):
     blocker.write_text('')
     with pytest.raises(OSError):
         StateStore(blocker / 'state').save({}, None)
+
+
+# --- the fault journal: the durable step of a fault, before the state file follows ---------
+
+def test_a_journal_record_newer_than_the_state_file_wins(tmp_path):
+    store = StateStore(tmp_path)
+    assert store.save(FAULTS, library(), 'fp', seq=3)
+    store.journal.append(2, {})                       # older than the file: ignored
+    assert store.load()[0].faults == FAULTS
+    newer = {'left_arm_joint1': Fault(0.5, None)}
+    store.journal.append(4, newer)
+    state, problem = store.load()
+    assert problem is None and state.faults == newer and state.seq == 4
+    assert state.library == library() and state.fingerprint == 'fp'   # kept: recomputed
+    assert store.newest_seq() == 4
+    store.journal.close()
+
+
+def test_a_torn_last_record_is_ignored(tmp_path):
+    store = StateStore(tmp_path)
+    store.journal.append(1, FAULTS)
+    store.journal.close()
+    line = state_store.encode_record(2, {'right_arm_joint5': Fault(0.1)})
+    with open(store.journal.path, 'ab') as f:
+        f.write(line[:len(line) // 2])                # the process died mid-append
+    state, problem = store.load()
+    assert problem is None and state.faults == FAULTS and state.library is None
+    flipped = bytearray(line)
+    flipped[-5] ^= 1                                  # a changed byte fails the checksum
+    assert state_store.decode_record(bytes(flipped).rstrip(b'\n')) is None
+
+
+def test_saving_a_newer_state_empties_the_journal_but_never_a_newer_record(tmp_path):
+    store = StateStore(tmp_path)
+    store.journal.append(5, FAULTS)
+    assert store.save({}, None, seq=4)                # older than the record: kept
+    assert store.load()[0].faults == FAULTS
+    assert store.save(FAULTS, None, seq=6)
+    assert store.journal.path.read_bytes() == b''
+    assert store.load()[0].faults == FAULTS and store.load()[0].seq == 6
+    store.journal.close()
+
+
+def test_a_corrupted_state_file_is_set_aside_and_the_journal_still_counts(tmp_path):
+    store = StateStore(tmp_path)
+    store.path.write_text('{')
+    store.journal.append(1, FAULTS)
+    state, problem = store.load()
+    assert 'set aside' in problem and state.faults == FAULTS and state.library is None
+    store.journal.close()

@@ -6,8 +6,11 @@ publish the fault, time the arrival of the complete new library, then time a
 reconfigure_gestures round trip.  Prints p50/p95/max, and splits the latency into the
 engine's wall time (from ``/diagnostics``; none for a contingency-table hit) and what the
 node and DDS add, with the node's own figures of each library: ``publish_path_sec``
-(result in hand -> last gesture published), ``fault_to_request_sec`` and
-``fault_sync_sec``.  ``--joint-states-hz`` streams ``/joint_states`` from another process
+(result in hand -> last gesture published), ``fault_to_request_sec``,
+``fault_sync_sec`` and ``fault_to_publish_sec`` (fault received -> last gesture
+published: the node's whole share; the rest is DDS and the client), and the libraries'
+origins (``table`` for a contingency-table hit).  ``--settle`` waits between a clear and
+the next fault.  ``--joint-states-hz`` streams ``/joint_states`` from another process
 meanwhile; ``--node-param`` sets a parameter of the private node (e.g.
 ``contingency_table:=false`` to time the engine path only).  Everything goes through
 :class:`~namo_fault_recovery.ros.client.RecoveryClient`; ROS is imported only when the
@@ -38,11 +41,13 @@ class _Samples:
         self.latencies, self.round_trips, self.engine, self.overhead = [], [], [], []
         self.figures = {key: [] for key, _ in NODE_FIGURES}
         self.failures = []
+        self.origins = {}                  # library_origin -> count ('' if not described)
 
     def add_library(self, client, library, t0):
         """Add the latency of a fault's ``library`` (published at ``t0``) and its split."""
         self.latencies.append(library.received - t0)
         origin = _node_figures(client, library, self)
+        self.origins[origin] = self.origins.get(origin, 0) + 1
         if library.described:
             engine = 0.0 if origin in NO_ENGINE else library.result.wall_time
             self.engine.append(engine)
@@ -54,7 +59,7 @@ class _Samples:
             raise BenchError('no measurement succeeded: ' + '; '.join(self.failures[:3]))
         report = {'faults': count, 'fault_to_library': percentiles(self.latencies),
                   'reconfigure_service': percentiles(self.round_trips),
-                  'failures': self.failures}
+                  'origins': dict(self.origins), 'failures': self.failures}
         if self.engine:
             report['engine_wall_time'] = percentiles(self.engine)
             report['node_and_dds_overhead'] = percentiles(self.overhead)
@@ -67,7 +72,8 @@ class _Samples:
 # The node's own figures of each library (from /diagnostics), as the report names them.
 NODE_FIGURES = ((keys.FAULT_TO_REQUEST_SEC, '  node: fault received -> run requested'),
                 (keys.FAULT_SYNC_SEC, '  node: fault set synced (overlaps engine)'),
-                (keys.PUBLISH_PATH_SEC, '  node: result in hand -> published'))
+                (keys.PUBLISH_PATH_SEC, '  node: result in hand -> published'),
+                (keys.FAULT_TO_PUBLISH_SEC, '  node: fault received -> last published'))
 NO_ENGINE = ('reference', 'table')       # origins published without an engine run
 
 
@@ -123,7 +129,7 @@ def fault_library(client, joints, angles, timeout, diagnostics_timeout=3.0):
         stamp = library.stamp
 
 
-def _measure(client, samples, count, joints, timeout, out, verbose=False):
+def _measure(client, samples, count, joints, timeout, out, verbose=False, settle=0.0):
     """Run ``count`` clear -> fault -> reconfigure rounds; add them to ``samples``."""
     current = client.current_library(timeout, diagnostics_timeout=0.0)
     joints = _checked_joints(joints, current.joint_names)
@@ -131,6 +137,7 @@ def _measure(client, samples, count, joints, timeout, out, verbose=False):
     for i in range(count):
         joint = joints[i % len(joints)]
         stamp = clear_faults(client, timeout, stamp)
+        time.sleep(settle)          # the node at rest (its work after the clear done)
         library, t0 = fault_library(client, [joint], None, timeout)
         if library is None:
             samples.failures.append(f'{joint}: no library within {timeout:g} s')
@@ -162,9 +169,12 @@ def _checked_joints(joints, known):
 
 
 def run_latency(out, count=50, joints=None, timeout=30.0, namespace='/',
-                target=NodeTarget(), joint_states_hz=0.0, verbose=False):
+                target=NodeTarget(), joint_states_hz=0.0, verbose=False, settle=0.0):
     """
     Measure fault-publish -> full-library-received latency against a node.
+
+    ``settle`` s pass between the library of each clear and the next fault (0: at once,
+    while the node still draws the clear's markers and restarts its table builder).
 
     ``target`` (:class:`~..runtime.private_node.NodeTarget`) is the node: with
     ``start_node`` a private one is started (its ``robot_file``, ``gesture_file`` and
@@ -181,7 +191,7 @@ def run_latency(out, count=50, joints=None, timeout=30.0, namespace='/',
             from ..ros.joint_state_stream import StreamProcess
             stream = StreamProcess(joint_states_hz, domain_id)
         with RecoveryClient(namespace, domain_id) as client:
-            _measure(client, samples, count, joints, timeout, out, verbose)
+            _measure(client, samples, count, joints, timeout, out, verbose, settle)
     finally:
         if stream is not None:
             stream.close()
@@ -201,5 +211,9 @@ def write_latency(out, report, failures):
             s = report[key]
             out.write(f"{label:<42} n={s['n']:<3} p50 {s['p50_ms']:7.1f} ms  "
                       f"p95 {s['p95_ms']:7.1f} ms  max {s['max_ms']:7.1f} ms\n")
+    origins = report.get('origins') or {}
+    if origins:
+        out.write('libraries by origin: ' + ', '.join(
+            f'{name or "not described"} {n}' for name, n in sorted(origins.items())) + '\n')
     for failure in failures:
         out.write(f'failure: {failure}\n')

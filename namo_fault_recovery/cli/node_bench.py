@@ -32,9 +32,12 @@ def _rates(text):
 def cmd_latency(args, out):
     """Measure fault-publish -> full-library-received latency against a node."""
     from ..benchmarks import latency
+    if not args.settle >= 0:
+        raise CommandError('--settle: expected a number of seconds >= 0', EXIT_USAGE)
     report, failures = latency.run_latency(
         out, args.count, args.joints, args.timeout, namespace(args),
-        NodeTarget.from_args(args), joint_states_hz=args.joint_states_hz, verbose=args.verbose)
+        NodeTarget.from_args(args), joint_states_hz=args.joint_states_hz, verbose=args.verbose,
+        settle=args.settle)
     if args.json:
         out.write(json.dumps(report, indent=2) + '\n')
     else:
@@ -146,6 +149,9 @@ def _add_latency(bench_subparsers):
                    help='start a private recovery_node for the benchmark')
     p.add_argument('--joint-states-hz', type=float, default=0.0, metavar='HZ',
                    help='stream /joint_states at HZ from another process meanwhile')
+    p.add_argument('--settle', type=float, default=0.0, metavar='SEC',
+                   help='wait this long after each clear before the next fault (default 0: '
+                        'at once)')
     p.add_argument('--node-param', dest='node_params', action='append', default=[],
                    metavar='NAME:=VALUE',
                    help='a parameter of the private node (--start-node; repeatable)')

@@ -242,9 +242,13 @@ class Inbox:
         """Take one gesture_library message (a gesture of the version its stamp names)."""
         key = stamp_key(msg.header.stamp)
         with self._cond:
-            self._versions.setdefault(key, {})[msg.header.frame_id] = msg
+            version = self._versions.setdefault(key, {})
+            version[msg.header.frame_id] = msg
             self._last_arrival = self._arrivals[key] = time.monotonic()
-            self._cond.notify_all()
+            # Waiters want complete versions (a settled one is polled): wake them once,
+            # not once per gesture, while the executor thread still takes the others.
+            if len(version) >= (self._gesture_count or 1):
+                self._cond.notify_all()
         if self._on_library is not None:
             self._on_library(key, msg)
 

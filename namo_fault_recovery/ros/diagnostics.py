@@ -55,6 +55,7 @@ class Snapshot:
     publish_path: float = None
     fault_to_request: float = None
     fault_sync: float = None
+    fault_to_publish: float = None
 
 
 def snapshot(book, inputs, settings, state_problem, state_file, engine_restarts):
@@ -70,7 +71,8 @@ def snapshot(book, inputs, settings, state_problem, state_file, engine_restarts)
         state_problem=state_problem, state_file=str(state_file),
         engine_restarts=engine_restarts, waiting_callers=b['waiting_callers'],
         request_to_publish=b['request_to_publish'], publish_path=b['publish_path'],
-        fault_to_request=b['fault_to_request'], fault_sync=b['fault_sync'])
+        fault_to_request=b['fault_to_request'], fault_sync=b['fault_sync'],
+        fault_to_publish=b['fault_to_publish'])
 
 
 def statuses(robot, snap, prefix=DEFAULT_PREFIX):
@@ -158,6 +160,7 @@ def reconfiguration_status(snap, up_to_date, hw, prefix):
               (dk.PUBLISH_PATH_SEC, _seconds(snap.publish_path, 6)),
               (dk.FAULT_TO_REQUEST_SEC, _seconds(snap.fault_to_request, 6)),
               (dk.FAULT_SYNC_SEC, _seconds(snap.fault_sync, 6)),
+              (dk.FAULT_TO_PUBLISH_SEC, _seconds(snap.fault_to_publish, 6)),
               (dk.DEADLINE_MET, dk.flag(current.deadline_met)),
               (dk.SUCCESS, dk.flag(current.success)),
               (dk.FROZEN_ARMS, ' '.join(current.frozen_arms)),

@@ -120,8 +120,7 @@ class RecoveryNode(Node):
                                                           or self._inputs.log_pending()))
         self._inputs = InputMonitor(self._robot, self._log_rejection, self._tick.wake)
         self._last_stamp_ns = 0
-        self._engine = EngineProcess(values['robot_file'] or None,
-                                     values['gesture_file'] or None,
+        self._engine = EngineProcess(values['robot_file'] or None, values['gesture_file'] or None,
                                      values['engine_start_timeout_sec'])
         self._engine.start()
         # The engine process imports, loads and warms up (about a second): the node is
@@ -137,13 +136,14 @@ class RecoveryNode(Node):
                                   self._library, self._book, self.get_logger().error)
         self._intake = FaultIntake(self._book, self._state.commit_faults, self._on_accepted,
                                    self._inputs.measured, on_error=self._intake_error)
-        self._table = ContingencyKeeper(self._robot, self._library,
-                                        self._state.store.directory, self._log,
-                                        values['contingency_file'] or None)
+        self._table = ContingencyKeeper(self._robot, self._library, self._state.store.directory,
+                                        self._log, values['contingency_file'] or None,
+                                        hold=self._intake.busy)
         self._dispatcher = Dispatcher(self._book, self._engine, self._robot, self._library,
                                       lambda: self._config, self._publish_and_persist,
                                       self._log, self._publish_refined, self._table)
-        self._markers = LatestWorker(self._publish_markers, MARKER_DELAY, name='markers')
+        self._markers = LatestWorker(self._publish_markers, MARKER_DELAY, name='markers',
+                                     hold=self._intake.busy)
         try:
             self._create_interfaces()
             self._restore()

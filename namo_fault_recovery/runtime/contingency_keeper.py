@@ -14,7 +14,10 @@ is at that priority too), and stopped (``SIGSTOP``) while a live run computes, o
 armed its death signal (a live run that began before is stopped then), so that it never
 competes with one.  Each entry arrives over a pipe, joins the table, and the
 table file is rewritten atomically.  :meth:`ContingencyKeeper.lookup` is a dictionary
-look-up: a hit is published at once.
+look-up: a hit is published at once.  A new plan (after each publication) waits
+``HOLD_POLL`` s, and longer while ``hold()`` says a fault is being handled: planning and
+starting a builder process hold the interpreter lock for milliseconds, which a fault's
+intake and publication need more.
 """
 
 from dataclasses import replace
@@ -31,6 +34,7 @@ from ..recovery.motion import typical_points
 
 TABLE_FILE = 'contingency_table.json'
 BUILD_SEEDS = (0, 1, 2, 3)
+HOLD_POLL = 0.05          # s: a new plan waits this long, then while hold() is true
 
 
 def _build(conn, robot, library, settings, plan, seeds, parent_pid=None):
@@ -53,7 +57,9 @@ def _build(conn, robot, library, settings, plan, seeds, parent_pid=None):
 class ContingencyKeeper:
     """The table of one node: lookup, background build, persistence."""
 
-    def __init__(self, robot, library, state_dir, log, offline_file=None, seeds=BUILD_SEEDS):
+    def __init__(self, robot, library, state_dir, log, offline_file=None, seeds=BUILD_SEEDS,
+                 hold=lambda: False):
+        self._hold = hold                     # hold() true: plan later (a fault is handled)
         self._robot = robot
         self._library = library
         self._path = os.path.join(os.path.expanduser(str(state_dir)), TABLE_FILE)
@@ -122,6 +128,12 @@ class ContingencyKeeper:
             with self._wanted_cond:
                 while self._wanted is None and not self._stopping:
                     self._wanted_cond.wait()
+                if self._stopping:
+                    return
+            time.sleep(HOLD_POLL)                     # the publication's followers first
+            while self._hold() and not self._stopping:
+                time.sleep(HOLD_POLL)
+            with self._wanted_cond:
                 if self._stopping:
                     return
                 settings, active = self._wanted

@@ -62,6 +62,9 @@ PUBLISH_PATH_SEC = 'publish_path_sec'
 FAULT_TO_REQUEST_SEC = 'fault_to_request_sec'
 # Last fault batch: the synced write of the fault set (overlaps the engine run).
 FAULT_SYNC_SEC = 'fault_sync_sec'
+# Last fault batch: first report received -> last gesture of its library published (the
+# node's whole share of a table hit; an outside client adds the transport both ways).
+FAULT_TO_PUBLISH_SEC = 'fault_to_publish_sec'
 DEADLINE_MET = 'deadline_met'
 # A refined library: s from the refinement's start (its deadline result) to this version.
 REFINED_AFTER_SEC = 'refined_after_sec'

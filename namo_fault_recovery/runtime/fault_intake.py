@@ -9,6 +9,14 @@ once it is in the state file (atomically, synced; the engine may start meanwhile
 nothing is published before the write ends); then ``on_accepted`` runs (it logs
 ``fault accepted``).  A crash at any moment therefore loses only reports that were never
 acknowledged, and a burst of N reports costs one file write per batch, not N.
+
+A batch of reports alone (no clear, no caller waiting) is acknowledged once its library
+is out, or after ``SETTLE_SEC``: a table hit is published by the dispatcher within a
+millisecond or two of the write, and the acknowledgement (a log line, a wake-up of the
+executor) made at the same moment held the interpreter lock that the publication needed
+(measured: the lock handed to the dispatcher 2.8 ms after the write, p50, on a busy
+machine).  A live search keeps computing; its faults are acknowledged ``SETTLE_SEC``
+after they are on disk.
 """
 
 from collections import deque
@@ -16,6 +24,8 @@ from dataclasses import dataclass
 import threading
 
 from .state_store import Fault
+
+SETTLE_SEC = 0.01      # s: a batch of reports waits at most this long for its library
 
 
 @dataclass(frozen=True)
@@ -61,6 +71,7 @@ class FaultIntake:
         self._stopping = False
         self._on_error = on_error          # on_error(exc): the batch failed (a bug)
         self.dropped = 0
+        self._applying = False
         self._thread = threading.Thread(target=self._loop, name='fault-intake', daemon=True)
 
     def start(self):
@@ -86,6 +97,7 @@ class FaultIntake:
                     return
                 batch = list(self._queue)
                 self._queue.clear()
+                self._applying = True
             try:
                 self._apply(batch)
             except Exception as exc:  # noqa: B902 - the intake must outlive any bug
@@ -96,6 +108,9 @@ class FaultIntake:
                         item.then()
                     elif isinstance(item, Clear):
                         item.done(0)
+            finally:
+                with self._cond:
+                    self._applying = False
 
     def _apply(self, batch):
         if all(isinstance(i, After) for i in batch):
@@ -126,11 +141,25 @@ class FaultIntake:
             self._commit(faults, received_at=min(received))
         else:
             self._commit(faults)
+        if reports and not clears and not afters:
+            self._book.wait_published(SETTLE_SEC)   # a table hit goes out first
         self._on_accepted(reports, bool(clears), faults)
         for item, count in clears:
             item.done(count)
         for item in afters:
             item.then()
+
+    def busy(self):
+        """
+        Return True from a report's arrival until its library is out (or its run failed).
+
+        What the node's followers of a publication (markers, the table's next plan) wait
+        for: while it holds, a table hit is milliseconds from its publication.
+        """
+        with self._cond:
+            if self._queue or self._applying:
+                return True
+        return self._book.pending()
 
     def stop(self):
         """Stop the thread (queued items are dropped: they were never acknowledged)."""

@@ -8,6 +8,9 @@ thread's own start held the interpreter lock just when the service answers, the
 diagnostics and the next run needed it.  :class:`LatestWorker` is one long-lived thread:
 :meth:`~LatestWorker.submit` only stores the item (O(1)), and the job runs ``delay``
 seconds later on the newest item; items submitted meanwhile collapse into the newest.
+While ``hold()`` is true (the node handles a fault: a table hit is published within
+milliseconds) the job waits, a ``delay`` at a time: drawn in the middle of a fault's
+path, it held the interpreter lock that the intake and the publication needed.
 """
 
 import threading
@@ -17,9 +20,10 @@ import time
 class LatestWorker:
     """One thread that calls ``job(*item)`` on the newest submitted item, after ``delay``."""
 
-    def __init__(self, job, delay=0.05, name='latest-worker'):
+    def __init__(self, job, delay=0.05, name='latest-worker', hold=lambda: False):
         self._job = job
         self._delay = delay
+        self._hold = hold                  # hold() true: not now (checked every delay)
         self._cond = threading.Condition()
         self._item = None
         self._stopping = False
@@ -43,6 +47,8 @@ class LatestWorker:
                 if self._stopping:
                     return
             time.sleep(self._delay)            # let the publication's followers run first
+            while self._hold() and not self._stopping:
+                time.sleep(self._delay)
             with self._cond:
                 item, self._item = self._item, None
             if item is not None:

@@ -1,12 +1,14 @@
 """
 The node's persistence: the state file, in the order the run book needs, off the hot paths.
 
-Free of ROS.  A new fault set is written (synced) before anything acknowledges it, under
-one lock with a sequence number; a published library is queued for a background writer
-under the same lock, so the numbers say which of a library and a newer fault set came
-last and a slow write never overwrites a newer state.  The run book gets the new fault
-set just before the write (the engine starts while the disk syncs, which takes 3-15 ms,
-more than the rest of the node's share of the latency), but every publication and
+Free of ROS.  A new fault set is made durable before anything acknowledges it, under one
+lock with a sequence number: appended to the fault journal and synced (one line and one
+``fdatasync``, see :mod:`.state_store`; the whole state file is rewritten only if the
+journal cannot be written).  The state file (faults and library) follows each
+publication: queued for a background writer under the same lock, so the numbers
+say which of a library and a newer fault set came last and a slow write never
+overwrites a newer state.  The run book gets the new fault set just before the write
+(a table hit or the engine starts while the disk syncs), but every publication and
 every answer waits for it: publishing takes the same lock, and the fault intake tells
 its callers only after :meth:`Persistence.commit_faults` returns.  A write failure is
 reported once and kept for ``/diagnostics``, never fatal.
@@ -32,9 +34,11 @@ class Persistence:
         self._book = book
         self._on_error = on_error          # on_error(text): log it
         self._lock = threading.Lock()
-        self._seq = itertools.count(1)
+        # Above every change number on disk: a record of this run is never taken as older.
+        self._seq = itertools.count(self.store.newest_seq() + 1)
         self._writer = BackgroundWriter(self._save)
         self.problem = None                # the last write problem, or a set-aside file
+        self._journal_failed = False
 
     def start(self):
         """Start the background writer."""
@@ -51,8 +55,9 @@ class Persistence:
         with self._lock:
             library = self._book.current
             self._book.set_faults(faults, durable=False, received_at=received_at)
+            seq = next(self._seq)
             began = time.monotonic()
-            self._save(faults, library, next(self._seq))
+            self._journal(faults, library, seq)
             self._book.faults_durable(time.monotonic() - began)
 
     def publish_and_queue(self, generation, faults, result, publish, in_hand=None):
@@ -84,6 +89,19 @@ class Persistence:
             self.problem = shorten(plan.problem, 500)
         return plan
 
+    def _journal(self, faults, library, seq):
+        """Append the fault set to the journal, synced; else rewrite the state file."""
+        try:
+            self.store.journal.append(seq, faults)
+            self._journal_failed = False
+        except (OSError, ValueError) as exc:
+            if not self._journal_failed:           # reported once, like a write failure
+                self._on_error(f'cannot append to the fault journal '
+                               f'{self.store.journal.path}: {exc}; rewriting the state file '
+                               f'instead')
+            self._journal_failed = True
+            self._save(faults, library, seq)
+
     def _save(self, faults, library, seq=None):
         try:
             self.store.save(faults, library, self.fingerprint, seq)
@@ -95,5 +113,6 @@ class Persistence:
             self.problem = shorten(f'cannot write {self.store.path}: {exc}')
 
     def stop(self):
-        """Write what is queued, then stop the writer."""
+        """Write what is queued, then stop the writer and close the journal."""
         self._writer.stop()
+        self.store.journal.close()

@@ -57,6 +57,8 @@ class RunBook:
         self.publish_path = None     # s from the result in hand to its last message published
         self.fault_to_request = None     # s from the first report of a batch to its request
         self.fault_sync = None       # s the last fault set took to reach the disk (synced)
+        self.fault_to_publish = None     # s from a batch's first report to its library sent
+        self._report = None          # (generation, received_at) of the newest batch unsent
         self._durable = ({}, 0)      # (faults, fault_version) on disk: what others are shown
         self._waiters = []           # (generation, callback)
         self.stopping = False
@@ -84,6 +86,8 @@ class RunBook:
                 self._durable = (self.faults, self.fault_version)
             if request:
                 self._request_locked()
+                if received_at is not None:
+                    self._report = (self._requested, received_at)
 
     def faults_durable(self, sync_sec=None):
         """Record that the current fault set is on disk (``sync_sec``: the write's span)."""
@@ -145,6 +149,26 @@ class RunBook:
             self._taken = self._running = self._requested
             return Run(self._requested, dict(self.faults), self._requested_at)
 
+    def pending(self):
+        """Return True while a requested library is neither published nor failed yet."""
+        with self._cond:
+            return self._pending_locked()
+
+    def wait_published(self, timeout):
+        """Wait up to ``timeout`` s until nothing is pending; return True if nothing is."""
+        end = time.monotonic() + timeout
+        with self._cond:
+            while self._pending_locked() and not self.stopping:
+                remaining = end - time.monotonic()
+                if remaining <= 0:
+                    return False
+                self._cond.wait(remaining)
+            return True
+
+    def _pending_locked(self):
+        failed_gen = self._failed[0] if self._failed else 0
+        return self._requested > max(self._published, failed_gen)
+
     def is_current(self, generation):
         """Return True while ``generation`` is the newest request (not yet superseded)."""
         return not self.stopping and generation == self._requested
@@ -170,8 +194,12 @@ class RunBook:
                 self._running = None
                 return None
             stamp_ns = publish(result)
+            now = time.monotonic()
             if in_hand is not None:
-                self.publish_path = time.monotonic() - in_hand
+                self.publish_path = now - in_hand
+            if self._report is not None and generation >= self._report[0]:
+                self.fault_to_publish = now - self._report[1]
+                self._report = None
             return self._published_locked(generation, result, stamp_ns)
 
     def refinement_follows(self, generation):
@@ -283,4 +311,5 @@ class RunBook:
                 'request_to_publish': self.request_to_publish,
                 'publish_path': self.publish_path,
                 'fault_to_request': self.fault_to_request, 'fault_sync': self.fault_sync,
+                'fault_to_publish': self.fault_to_publish,
             }
