@@ -29,6 +29,7 @@ import numpy as np
 
 from .budget import ENGINE_RESERVE, STAGE1_SHARE
 from .figures import largest_jump
+from . import pacing
 from .locks import clamp_lock, resolve_locks
 from .result import GestureResult, LibraryResult
 from ..model.kinematics import ArmLandmarks, batch_forward, batch_forward_jacobian, take_landmarks
@@ -48,6 +49,8 @@ DEFAULT_EXPANSION_THRESHOLD = 5.0   # mm of fingertip error
 SHARE_NEIGHBOURS = 5       # a keyframe is restarted from this many keyframes of its motion
 SHARE_SWEEPS = 3           # restart sweeps at most (each spreads a branch a little further)
 SHARE_POLISHED = 1         # of those restarts, the best-scoring ones are polished
+PACED_NOTE = ('its keyframes were searched into branches too far apart for the joints '
+              'to travel in time; repaired within the velocity limits')
 
 
 @dataclass(frozen=True)
@@ -108,11 +111,14 @@ class PoseProblem(Problem):
     def subset(self, rows):
         """Return the same problem for some of its rows only (``rows``: indices)."""
         rows = np.asarray(rows, dtype=int)
-        return PoseProblem(self.robot, self.scorer, self.target_ids[rows],
-                           (self.base['right'][rows], self.base['left'][rows]), self.free,
-                           self.collision, self.smooth, self.x0[rows],
-                           None if self.anchor is None else self.anchor[rows],
-                           self.continuity / _DEG2 if self.anchor is not None else 0.0)
+        sub = PoseProblem(self.robot, self.scorer, self.target_ids[rows],
+                          (self.base['right'][rows], self.base['left'][rows]), self.free,
+                          self.collision, self.smooth, self.x0[rows],
+                          None if self.anchor is None else self.anchor[rows],
+                          self.continuity / _DEG2 if self.anchor is not None else 0.0)
+        if self.row_bounds is not None:
+            sub.restrict(self.row_bounds[0][rows], self.row_bounds[1][rows])
+        return sub
 
     def assemble(self, x):
         """Return full (right, left) angles of shape (..., 7) for variables x (B, ..., D)."""
@@ -553,6 +559,7 @@ class _Rows:
         self.right = self.left = self.after = self.status = None
         self.stage = np.ones(len(self.ids), dtype=int)
         self.expansion = np.zeros(len(self.ids), dtype=int)
+        self.paced = np.zeros(len(self.ids), dtype=bool)   # repaired by _pace
 
 
 def _run(setup, lock_sets, rng, clock, stats):
@@ -579,6 +586,7 @@ def _run(setup, lock_sets, rng, clock, stats):
     stage1 = rows.after.copy()
     if rows.two_stage:
         _stage2(setup, rows, clock, rng)
+    _pace(setup, rows, clock)
     best_r, best_l, after = rows.right, rows.left, rows.after
     # The optimisers search within the limits; clipping again guards that promise.
     clipped_r, clipped_l = robot.arms['right'].clip(best_r), robot.arms['left'].clip(best_l)
@@ -587,7 +595,102 @@ def _run(setup, lock_sets, rng, clock, stats):
         after = scorer.evaluate(best_r, best_l, rows.ids)
     return {'right': best_r, 'left': best_l, 'after': after, 'stage1': stage1,
             'stage': rows.stage, 'expansion': rows.expansion, 'status': rows.status,
-            'layouts': rows.layouts, 'base_right': rows.base_r, 'base_left': rows.base_l}
+            'layouts': rows.layouts, 'base_right': rows.base_r, 'base_left': rows.base_l,
+            'paced': rows.paced}
+
+
+def pose_values(robot, scorer, checker, q, ids):
+    """
+    Return the search's value of poses ``q`` (..., 14) for targets ``ids`` (...,).
+
+    The similarity score, plus the capsule penalty with a collision ``checker``: what
+    the keyframe search minimises, without its ``stay_close`` pull.
+    """
+    shape = q.shape[:-1]
+    q = q.reshape(-1, 2 * N_JOINTS)
+    ids = np.broadcast_to(ids, shape).reshape(-1)
+    lm_r = batch_forward(robot, q[:, :N_JOINTS], 'right')
+    lm_l = batch_forward(robot, q[:, N_JOINTS:], 'left')
+    f = scorer.evaluate(lm_r, lm_l, ids)
+    if checker is not None:
+        f = f + checker.penalty(lm_r, lm_l, ids)[0]
+    return f.reshape(shape)
+
+
+def joint_bounds(robot):
+    """Return the (lower, upper) joint limits of both arms, (14,) each, right arm first."""
+    return (np.concatenate([robot.arms[s].lower for s in ARMS]),
+            np.concatenate([robot.arms[s].upper for s in ARMS]))
+
+
+def _pace(setup, rows, clock):
+    """
+    Keep every motion of ``rows`` within the joints' velocity limits (in place).
+
+    The rows of a motion (a gesture of several keyframes) are searched one keyframe
+    each, so two of them may end in branches of the arm's redundancy too far apart for
+    the joints to travel in the time between them.  A motion whose steps break the
+    limits of :func:`.pacing.step_limits` is replaced by the best of
+    :func:`.pacing.repair`'s feasible candidates (its own keyframes clipped into reach,
+    the locked design, the design carried through each solved keyframe), then
+    polished within :func:`.pacing.tube` boxes, in which every point stays feasible.
+    The repair needs no time (it runs at the deadline too); the polish runs while
+    ``clock`` allows.  ``rows.paced`` marks the rows repaired.
+    """
+    robot, scorer, checker = setup.robot, setup.scorer, setup.checker
+    lower, upper = joint_bounds(robot)
+    repaired = []
+    owners = np.asarray(rows.owners)
+    for owner in np.unique(owners):
+        ks = np.nonzero(owners == owner)[0]
+        if len(ks) < 2:
+            continue
+        times = [kf.time_from_start for kf in rows.selected[owner].keyframes]
+        ids = rows.ids[ks]
+        design = np.concatenate((setup.ref_r[ids], setup.ref_l[ids]), axis=1)
+        limits = pacing.step_limits(robot.velocity_limits, times, design)
+        q = np.concatenate((rows.right[ks], rows.left[ks]), axis=1)
+        if pacing.feasible(q, limits):
+            continue
+        base = np.concatenate((rows.base_r[ks], rows.base_l[ks]), axis=1)
+        best, _ = pacing.repair(q, base, limits, lower, upper,
+                                lambda c: pose_values(robot, scorer, checker, c, ids))
+        rows.right[ks], rows.left[ks] = best[:, :N_JOINTS], best[:, N_JOINTS:]
+        rows.paced[ks] = True
+        repaired.append((owner, ks, pacing.tube(best, limits, lower, upper)))
+    if repaired and not clock.expired():
+        _polish_in_tubes(setup, rows, repaired, clock)
+    if repaired:
+        rows.after = scorer.evaluate(rows.right, rows.left, rows.ids)
+
+
+def _polish_in_tubes(setup, rows, repaired, clock):
+    """Polish repaired motions, each keyframe within its box (one batch per layout)."""
+    robot, algo = setup.robot, setup.algo
+    groups = {}
+    for owner, ks, (low, high) in repaired:
+        free = rows.layouts[ks[0]]
+        if np.any(rows.stage[ks] == 2):
+            free = free_layout(robot, rows.selected[owner].arms, setup.locked, set(ARMS))
+        if free:
+            groups.setdefault(free, []).append((ks, low, high))
+    for free, members in groups.items():
+        ks = np.concatenate([m[0] for m in members])
+        col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in free])
+        ids = rows.ids[ks]
+        anchor = None
+        if setup.stay_close:
+            anchor = np.concatenate((setup.ref_r[ids], setup.ref_l[ids]), axis=1)[:, col]
+        problem = PoseProblem(robot, setup.scorer, ids, (rows.right[ks], rows.left[ks]), free,
+                              collision=setup.checker, anchor=anchor,
+                              continuity=setup.stay_close)
+        problem.restrict(np.concatenate([m[1] for m in members])[:, col],
+                         np.concatenate([m[2] for m in members])[:, col])
+        x, _ = polish(problem, problem.x0[:, None, :], clock,
+                      maxiter=getattr(algo, 'polish_maxiter', 100),
+                      ftol=getattr(algo, 'polish_ftol', 1e-7))
+        qr, ql = problem.assemble(x[:, 0][:, None])
+        rows.right[ks], rows.left[ks] = qr[:, 0], ql[:, 0]
 
 
 def _stage2(setup, rows, clock, rng):
@@ -623,11 +726,12 @@ def _take(out, c, n_t):
 
 def _path_figures(setup, out, ks):
     """
-    Return the fingertip and joint-step figures of one gesture's rows ``ks``.
+    Return the fingertip, joint-step and speed figures of one gesture's rows ``ks``.
 
     The same figures as a whole motion's (:func:`.figures.describe_motion`), over the
     keyframes this search solved: fingertip distance to the designed keyframe (mm, the
-    worse hand) and the largest joint step between successive keyframes (deg).
+    worse hand), the largest joint step between successive keyframes (deg) and the
+    playability figure :func:`.pacing.speed_ratio`.
     """
     scorer, rows = setup.scorer, np.asarray(ks)
     design = np.concatenate((setup.ref_r[rows], setup.ref_l[rows]), axis=1)
@@ -635,7 +739,9 @@ def _path_figures(setup, out, ks):
     best = np.concatenate((out['right'][rows], out['left'][rows]), axis=1)
     err_before = scorer.tip_error(out['base_right'][rows], out['base_left'][rows], rows)
     err_after = scorer.tip_error(out['right'][rows], out['left'][rows], rows)
-    return {'tip_error_before_mm': float(err_before.mean()),
+    times = [kf.time_from_start for kf in setup.selected[setup.owners[rows[0]]].keyframes]
+    return {'speed_ratio': pacing.speed_ratio(setup.robot.velocity_limits, times, best),
+            'tip_error_before_mm': float(err_before.mean()),
             'tip_error_mm': float(err_after.mean()), 'tip_error_max_mm': float(err_after.max()),
             'max_jump_designed_deg': largest_jump(design),
             'max_jump_before_deg': largest_jump(base), 'max_jump_deg': largest_jump(best)}
@@ -684,6 +790,8 @@ def _library_result(setup, locks, out, notes, wall, nfev):
             typical_points=len(ks), typical_indices=tuple(range(len(ks))),
             nfev=int(round(nfev * len(ks) / max(1, len(targets)))),
             **_path_figures(setup, out, ks)))
+    notes = list(notes) + [f'{setup.selected[g].name}: {PACED_NOTE}'
+                           for g in sorted({owners[k] for k in ids if out['paced'][k]})]
     deadline_met = not any(g.status in ('deadline', 'cancelled') for g in results)
     return LibraryResult(
         gestures=tuple(results), faults=setup.faults,
