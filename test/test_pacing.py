@@ -1,19 +1,18 @@
 """The joints' velocity limits between keyframes: the constraint, its constructions, the engine."""
 
-import numpy as np
-import pytest
-
 from namo_fault_recovery.optimize.base import Clock, Problem
 from namo_fault_recovery.playback.timing import plan_motion
 from namo_fault_recovery.recovery import pacing
 from namo_fault_recovery.recovery.engine import recover, RecoverySettings
 from namo_fault_recovery.recovery.keyframes import joint_bounds, PACED_NOTE
+import numpy as np
+import pytest
 
 LIMITS = np.radians([90.0, 90.0, 120.0, 120.0, 150.0, 150.0, 150.0])
 
 
 def _stretch(times, q, limits=LIMITS):
-    """The player's stretch of keyframes ``q`` (K, 7) at ``times``, from the first keyframe."""
+    """Return the player's stretch of keyframes ``q`` (K, 7) at ``times``, from the first."""
     names = [f'j{i}' for i in range(q.shape[1])]
     return plan_motion(names, q[0], times, q, np.resize(limits, q.shape[1])).stretch
 
@@ -115,8 +114,8 @@ def _played(robot, result):
     {'max_cycles': 1, 'polish_maxiter': 5},             # the colony's first evaluations
     {'max_cycles': 1, 'polish': 0, 'use_x0': False},    # random sources, no known start
 ])
-def test_a_tiny_budget_never_returns_a_step_beyond_the_velocity_limits(robot, product_library,
-                                                                      overrides):
+def test_a_tiny_budget_never_returns_a_step_beyond_the_velocity_limits(
+        robot, product_library, overrides):
     for seed in range(4):
         for joint in ('right_arm_joint1', 'right_arm_joint3', 'right_arm_joint6'):
             res = recover(robot, product_library, {joint: None}, RecoverySettings(),

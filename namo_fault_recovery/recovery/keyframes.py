@@ -27,9 +27,9 @@ from typing import Optional, Union
 
 import numpy as np
 
+from . import pacing
 from .budget import ENGINE_RESERVE, STAGE1_SHARE
 from .figures import largest_jump
-from . import pacing
 from .locks import clamp_lock, resolve_locks
 from .result import GestureResult, LibraryResult
 from ..model.kinematics import ArmLandmarks, batch_forward, batch_forward_jacobian, take_landmarks

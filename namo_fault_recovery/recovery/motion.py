@@ -376,7 +376,9 @@ def _pace_motion(ctx, m, picks, clock, notes):
                             lambda c: pose_values(model, ctx.scorer, ctx.checker, c, m.ids),
                             picks)
     m.q_r, m.q_l = best[:, :N_JOINTS], best[:, N_JOINTS:]
-    notes.append(f'{m.gesture.name}: {PACED_NOTE}')
+    note = f'{m.gesture.name}: {PACED_NOTE}'
+    if note not in notes:      # the typical points' search may have said it already
+        notes.append(note)
     layout = free_layout(robot, m.gesture.arms, ctx.locked, ctx.faulted,
                          joint_set(robot, m.free))
     if not layout or clock.expired():

@@ -351,8 +351,8 @@ def reference_result(library, deadline: Optional[float] = 0.0, settings: Optiona
     def ratio(g):
         if velocity_limits is None:
             return 0.0
-        return pacing.speed_ratio(velocity_limits, [kf.time_from_start for kf in g.keyframes],
-                           g.joint_matrix())
+        times = [kf.time_from_start for kf in g.keyframes]
+        return pacing.speed_ratio(velocity_limits, times, g.joint_matrix())
 
     gestures = tuple(
         GestureResult(name=g.name,
