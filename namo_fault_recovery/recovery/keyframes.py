@@ -49,6 +49,7 @@ DEFAULT_EXPANSION_THRESHOLD = 5.0   # mm of fingertip error
 SHARE_NEIGHBOURS = 5       # a keyframe is restarted from this many keyframes of its motion
 SHARE_SWEEPS = 3           # restart sweeps at most (each spreads a branch a little further)
 SHARE_POLISHED = 1         # of those restarts, the best-scoring ones are polished
+RESTART_MAXITER = 20       # polish iterations of a repair's branch restarts
 PACED_NOTE = ('its keyframes were searched into branches too far apart for the joints '
               'to travel in time; repaired within the velocity limits')
 
@@ -586,7 +587,7 @@ def _run(setup, lock_sets, rng, clock, stats):
     stage1 = rows.after.copy()
     if rows.two_stage:
         _stage2(setup, rows, clock, rng)
-    _pace(setup, rows, clock)
+    _pace(setup, rows, clock, rng)
     best_r, best_l, after = rows.right, rows.left, rows.after
     # The optimisers search within the limits; clipping again guards that promise.
     clipped_r, clipped_l = robot.arms['right'].clip(best_r), robot.arms['left'].clip(best_l)
@@ -623,7 +624,7 @@ def joint_bounds(robot):
             np.concatenate([robot.arms[s].upper for s in ARMS]))
 
 
-def _pace(setup, rows, clock):
+def _pace(setup, rows, clock, rng):
     """
     Keep every motion of ``rows`` within the joints' velocity limits (in place).
 
@@ -653,8 +654,14 @@ def _pace(setup, rows, clock):
         if pacing.feasible(q, limits):
             continue
         base = np.concatenate((rows.base_r[ks], rows.base_l[ks]), axis=1)
+        extra = _within_reach(setup, rows, owner, ks, (q, limits, lower, upper), clock, rng)
+        if not clock.expired():
+            extra += list(_branch_restarts(setup, rows, owner, ks,
+                                           pacing.candidates(q, base, limits, lower, upper),
+                                           clock))
         best, _ = pacing.repair(q, base, limits, lower, upper,
-                                lambda c: pose_values(robot, scorer, checker, c, ids))
+                                lambda c: pose_values(robot, scorer, checker, c, ids),
+                                extra=extra)
         rows.right[ks], rows.left[ks] = best[:, :N_JOINTS], best[:, N_JOINTS:]
         rows.paced[ks] = True
         repaired.append((owner, ks, pacing.tube(best, limits, lower, upper)))
@@ -664,26 +671,98 @@ def _pace(setup, rows, clock):
         rows.after = scorer.evaluate(rows.right, rows.left, rows.ids)
 
 
+def _motion_layout(setup, rows, owner, ks):
+    """Return the free joints of one motion's rows (its stage-2 layout if it used one)."""
+    if np.any(rows.stage[ks] == 2):
+        return free_layout(setup.robot, rows.selected[owner].arms, setup.locked, set(ARMS))
+    return rows.layouts[ks[0]]
+
+
+def _motion_problem(setup, rows, ks, free):
+    """Return the keyframe problem of rows ``ks`` with layout ``free``, as the search's."""
+    ids = rows.ids[ks]
+    anchor = None
+    if setup.stay_close:
+        col = [j + (0 if s == 'right' else N_JOINTS) for s, j in free]
+        anchor = np.concatenate((setup.ref_r[ids], setup.ref_l[ids]), axis=1)[:, col]
+    return PoseProblem(setup.robot, setup.scorer, ids, (rows.right[ks], rows.left[ks]), free,
+                       collision=setup.checker, anchor=anchor, continuity=setup.stay_close)
+
+
+def _within_reach(setup, rows, owner, ks, motion, clock, rng):
+    """
+    Search every other keyframe again within its neighbours' reach; return the motions.
+
+    ``motion`` is (q (K, 14), step limits, lower, upper).  For each parity, the
+    keyframes of that parity are searched again by the run's algorithm, each within the
+    box its two kept neighbours allow (:func:`.pacing.reach_boxes`, the problem's
+    bounds): a keyframe flipped into another branch finds the best pose its neighbours
+    can reach in time, and every point searched is feasible.
+    """
+    q, limits, lower, upper = motion
+    free = _motion_layout(setup, rows, owner, ks)
+    col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in free])
+    out = []
+    for parity in (0, 1):
+        boxes = pacing.reach_boxes(q, limits, lower, upper, parity)
+        if not free or boxes is None or clock.expired():
+            continue
+        picked, low, high = boxes
+        problem = _motion_problem(setup, rows, ks[picked], free)
+        problem.restrict(low[:, col], high[:, col])
+        res = minimize(problem, setup.algo, clock=clock, seed=int(rng.integers(2 ** 63)))
+        x, f = np.atleast_2d(res.x), np.atleast_1d(res.fun)
+        # The kept neighbours' own poses are starts in the branches they reach.
+        design = np.concatenate((setup.ref_r[rows.ids[ks]], setup.ref_l[rows.ids[ks]]), axis=1)
+        near = [np.clip(picked + d, 0, len(q) - 1) for d in (-1, 1)]
+        starts = np.stack([(q[n] + design[picked] - design[n])[:, col] for n in near], axis=1)
+        px, pf = polish(problem, problem.clip(starts), clock,
+                        maxiter=getattr(setup.algo, 'polish_maxiter', 100),
+                        ftol=getattr(setup.algo, 'polish_ftol', 1e-7))
+        pick = np.argmin(pf, axis=1)
+        better = pf[np.arange(len(pf)), pick] < f
+        x[better] = px[np.arange(len(px)), pick][better]
+        found = q.copy()
+        found[np.ix_(picked, col)] = x
+        out.append(found)
+    return out
+
+
+def _branch_restarts(setup, rows, owner, ks, starts, clock):
+    """
+    Polish a motion's keyframes from each feasible start; return the motions (N, K, 14).
+
+    Every start (N, K, 14) puts the whole motion in one branch (e.g. the design carried
+    through one solved keyframe); polishing each of its keyframes freely keeps them in
+    that branch, so the polished motion is usually feasible, and a much better one than
+    the start (the caller clips it into reach).  All starts of all keyframes are one
+    batched polish.
+    """
+    free = _motion_layout(setup, rows, owner, ks)
+    if not free:
+        return ()
+    col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in free])
+    problem = _motion_problem(setup, rows, ks, free)
+    x, _ = polish(problem, problem.clip(np.swapaxes(starts[:, :, col], 0, 1)), clock,
+                  maxiter=RESTART_MAXITER, ftol=getattr(setup.algo, 'polish_ftol', 1e-7))
+    out = np.repeat(np.concatenate((rows.right[ks], rows.left[ks]), axis=1)[None],
+                    len(starts), axis=0)
+    out[:, :, col] = np.swapaxes(x, 0, 1)
+    return out
+
+
 def _polish_in_tubes(setup, rows, repaired, clock):
     """Polish repaired motions, each keyframe within its box (one batch per layout)."""
-    robot, algo = setup.robot, setup.algo
+    algo = setup.algo
     groups = {}
     for owner, ks, (low, high) in repaired:
-        free = rows.layouts[ks[0]]
-        if np.any(rows.stage[ks] == 2):
-            free = free_layout(robot, rows.selected[owner].arms, setup.locked, set(ARMS))
+        free = _motion_layout(setup, rows, owner, ks)
         if free:
             groups.setdefault(free, []).append((ks, low, high))
     for free, members in groups.items():
         ks = np.concatenate([m[0] for m in members])
         col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in free])
-        ids = rows.ids[ks]
-        anchor = None
-        if setup.stay_close:
-            anchor = np.concatenate((setup.ref_r[ids], setup.ref_l[ids]), axis=1)[:, col]
-        problem = PoseProblem(robot, setup.scorer, ids, (rows.right[ks], rows.left[ks]), free,
-                              collision=setup.checker, anchor=anchor,
-                              continuity=setup.stay_close)
+        problem = _motion_problem(setup, rows, ks, free)
         problem.restrict(np.concatenate([m[1] for m in members])[:, col],
                          np.concatenate([m[2] for m in members])[:, col])
         x, _ = polish(problem, problem.x0[:, None, :], clock,

@@ -131,15 +131,13 @@ def tube(q, limits, lower, upper):
     return np.clip(q - half, lower, upper), np.clip(q + half, lower, upper)
 
 
-def repair(q, base, limits, lower, upper, value, picks=None):
+def candidates(q, base, limits, lower, upper, picks=None):
     """
-    Return the best feasible motion near ``q`` (K, J) and its keyframe values (K,).
+    Return feasible motions near ``q`` (K, J), (N, K, J): the starts of a repair.
 
-    The candidates are :func:`chain_clip` of ``q`` forwards and backwards, the feasible
-    ``base`` (K, J) itself, and ``base`` :func:`shifted` through each keyframe of ``q``
-    in ``picks`` (None: all): every one feasible by construction.  ``value`` maps
-    candidates (N, K, J) to keyframe values (N, K) in one call; the candidate with the
-    lowest worst keyframe wins (then the lowest sum; the earlier on ties).
+    :func:`chain_clip` of ``q`` forwards and backwards, the feasible ``base`` (K, J)
+    itself, and ``base`` :func:`shifted` through each keyframe of ``q`` in ``picks``
+    (None: all): every one feasible by construction.
     """
     q = np.asarray(q, dtype=float)
     base = np.asarray(base, dtype=float)
@@ -147,8 +145,49 @@ def repair(q, base, limits, lower, upper, value, picks=None):
     cands = [chain_clip(q, limits, lower, upper),
              chain_clip(q[::-1], limits[::-1], lower, upper)[::-1], base]
     cands += [shifted(base, q, m, lower, upper) for m in picks]
+    return np.stack(cands)
+
+
+def repair(q, base, limits, lower, upper, value, picks=None, extra=()):
+    """
+    Return the best feasible motion near ``q`` (K, J) and its keyframe values (K,).
+
+    The candidates are those of :func:`candidates`, and ``extra`` motions (e.g. the
+    candidates polished keyframe by keyframe) clipped into reach by :func:`chain_clip`:
+    every one feasible.  ``value`` maps candidates (N, K, J) to keyframe values (N, K)
+    in one call; the candidate with the lowest worst keyframe wins (then the lowest
+    sum; the earlier on ties).
+    """
+    cands = list(candidates(q, base, limits, lower, upper, picks))
+    cands += [chain_clip(c, limits, lower, upper) for c in extra]
     cands = np.stack(cands)
     values = np.asarray(value(cands), dtype=float)
     values = np.where(np.isnan(values), np.inf, values)
     best = int(np.lexsort((np.arange(len(cands)), values.sum(axis=1), values.max(axis=1)))[0])
     return cands[best], values[best]
+
+
+def reach_boxes(q, limits, lower, upper, parity):
+    """
+    Return boxes for every other keyframe of ``q`` (K, J) within its neighbours' reach.
+
+    The keyframes ``parity``, ``parity + 2``, ... may each move anywhere within
+    ``lower``/``upper`` and ``limits`` of both its (kept) neighbours: any choice in
+    these boxes, with the other keyframes kept, is a feasible motion.  Returns (rows,
+    low, high) with boxes (len(rows), J), or None where the kept neighbours of a
+    keyframe are too far apart for any box.
+    """
+    q = np.asarray(q, dtype=float)
+    rows = np.arange(parity, len(q), 2)
+    low = np.broadcast_to(lower, (len(rows), q.shape[1])).copy()
+    high = np.broadcast_to(upper, (len(rows), q.shape[1])).copy()
+    for i, k in enumerate(rows):
+        if k > 0:
+            low[i] = np.maximum(low[i], q[k - 1] - limits[k - 1])
+            high[i] = np.minimum(high[i], q[k - 1] + limits[k - 1])
+        if k + 1 < len(q):
+            low[i] = np.maximum(low[i], q[k + 1] - limits[k])
+            high[i] = np.minimum(high[i], q[k + 1] + limits[k])
+    if len(rows) == 0 or np.any(low > high):
+        return None
+    return rows, low, high
