@@ -28,6 +28,9 @@ returns a plain dict (written as JSON) and prints its figures:
 - :mod:`.idle`: a private node's idle CPU (its process tree, table off and on) and
   clean SIGTERM stops of ``recovery_node`` and ``namo_sim`` (``bench idle``);
 - :mod:`.fk`: the URDF-compiled chains' FK against the DH FK on Namo (``bench fk``);
+- :mod:`.playability`: the libraries the player would have to stretch (joint velocity
+  limits), every single fault, at a fixed small budget and at the deadline
+  (``bench playability``);
 - :mod:`.common`: models, cases, statistics and output files shared by the above;
 - :mod:`.paper_data`: the paper's published tables, to print beside ours;
 - :mod:`.plotting`: the figures (matplotlib, optional), and the ``plot`` command's run.

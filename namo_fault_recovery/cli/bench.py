@@ -136,6 +136,28 @@ def cmd_bench_deadline(args, out):
     return 0
 
 
+def cmd_bench_playability(args, out):
+    """Count the libraries the player would have to stretch (benchmarks.playability)."""
+    from ..benchmarks import common, playability
+    from ..benchmarks.product import load_models
+    _positive_int('--seeds', args.seeds, 0)
+    _positive_int('--deadline-seeds', args.deadline_seeds, 0)
+    _positive_int('--jobs', args.jobs)
+    robot = load_models(args.library)[0]
+    unknown = [j for j in args.joints or () if j not in robot.joint_names]
+    if unknown:
+        raise _usage(f'--joints: unknown joint {unknown[0]!r}; expected names such as '
+                     f'{robot.joint_names[0]}')
+    summary = playability.run_playability(
+        out, args.library, seeds=args.seeds, deadline_seeds=args.deadline_seeds,
+        joints=args.joints, jobs=args.jobs, seed_base=args.seed_base,
+        progress=not args.quiet)
+    path = out_dir_of(args, 'playability') / 'summary.json'
+    common.write_json(path, summary)
+    out.write(f'written: {path}\n')
+    return 0
+
+
 def cmd_plot(args, out):
     """
     Draw one gesture before and after adaptation (matplotlib optional).
@@ -258,6 +280,28 @@ def _add_deadline(bench_sub):
     p.set_defaults(func=cmd_bench_deadline)
 
 
+def _add_playability(bench_sub):
+    """Add ``bench playability``: libraries the player would stretch."""
+    p = bench_sub.add_parser('playability',
+                             help='published libraries the player would have to stretch '
+                                  '(joint velocity limits), every single fault')
+    p.add_argument('--library', default='product', choices=['product', 'demo'],
+                   help='the packaged library or the demo one (default product)')
+    p.add_argument('--seeds', type=int, default=2000,
+                   help='seeds per single fault at the fixed small budget (default 2000; '
+                        '0: skip)')
+    p.add_argument('--deadline-seeds', type=int, default=0,
+                   help="seeds per single fault at the node's 1 s deadline (default 0: "
+                        'skip; run alone on the machine)')
+    p.add_argument('--joints', nargs='+', default=None, metavar='JOINT',
+                   help='single faults to run (default: all 14 joints)')
+    p.add_argument('--jobs', type=int, default=2,
+                   help='worker processes of the fixed-budget part (default 2)')
+    p.add_argument('--seed-base', type=int, default=0, help='seed of repetition 0')
+    _add_common(p)
+    p.set_defaults(func=cmd_bench_playability)
+
+
 def _add_plot(subparsers):
     """Add ``plot``: one gesture before and after adaptation."""
     p = subparsers.add_parser('plot', help='draw a gesture before and after adaptation (PNG)')
@@ -292,7 +336,7 @@ def register(subparsers):
     bench_sub = bench.add_subparsers(dest='bench_command', metavar='BENCHMARK',
                                      parser_class=Parser)
     bench_sub.required = True
-    for add in (_add_paper, _add_optimum, _add_speed, _add_deadline):
+    for add in (_add_paper, _add_optimum, _add_speed, _add_deadline, _add_playability):
         add(bench_sub)
     _add_plot(subparsers)
     return bench_sub

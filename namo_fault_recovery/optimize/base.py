@@ -58,6 +58,7 @@ class Problem:
         self.nfev = 0
         # Optional analytic gradient: X (batch, N, D) -> (f (batch, N), g (batch, N, D)).
         self._value_and_grad = value_and_grad
+        self.row_bounds = None   # (lower, upper) per sub-problem, (batch, D): see restrict
         # Optional known-good starting points, (batch, D); algorithms may use them.
         self.x0 = None if x0 is None else self.clip(
             np.asarray(x0, dtype=float).reshape(self.batch, self.dim))
@@ -100,11 +101,36 @@ class Problem:
 
     def random(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """Draw ``n`` uniform points per sub-problem, shape (batch, n, D)."""
+        if self.row_bounds is not None:
+            low, high = self.row_bounds
+            return rng.uniform(low[:, None], high[:, None], size=(self.batch, n, self.dim))
         return rng.uniform(self.lower, self.upper, size=(self.batch, n, self.dim))
 
     def clip(self, x: np.ndarray) -> np.ndarray:
-        """Clip into the bounds."""
-        return np.clip(x, self.lower, self.upper)
+        """Clip into the bounds (each sub-problem's own, after :meth:`restrict`)."""
+        if self.row_bounds is None:
+            return np.clip(x, self.lower, self.upper)
+        x = np.asarray(x, dtype=float)
+        shape = (self.batch,) + (1,) * (x.ndim - 2) + (self.dim,)
+        low, high = self.row_bounds
+        return np.clip(x, low.reshape(shape), high.reshape(shape))
+
+    def restrict(self, lower, upper):
+        """
+        Narrow each sub-problem's box to its own ``lower``/``upper`` (batch, D).
+
+        A problem's constraints that are boxes per sub-problem (e.g. a motion's
+        keyframes, each kept near its neighbours) are met by every point the
+        algorithms draw or clip; ``lower``/``upper`` stay the boxes' union.  The
+        boxes must lie within the bounds; ``x0`` is clipped into them.
+        """
+        low = np.broadcast_to(np.asarray(lower, dtype=float), (self.batch, self.dim))
+        high = np.broadcast_to(np.asarray(upper, dtype=float), (self.batch, self.dim))
+        if np.any(low > high) or np.any(low < self.lower) or np.any(high > self.upper):
+            raise ValueError('Problem.restrict: expected lower <= upper within the bounds')
+        self.row_bounds = (low.copy(), high.copy())
+        if self.x0 is not None:
+            self.x0 = self.clip(self.x0)
 
 
 @dataclass

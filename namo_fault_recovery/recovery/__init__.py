@@ -20,6 +20,8 @@ From a fault set to an adapted gesture library, free of ROS.
   error, joint jumps, collisions) and the locked-design fallback of a cut-short run;
 - :mod:`.trajectory_opt`: whole-trajectory optimisation of a dense motion (every point
   at once, batched analytic gradients, a smoothness term; ``auto``'s pass after Kriging);
+- :mod:`.pacing`: the joints' velocity limits between keyframes as constraints of the
+  search (step limits from the player's spline, feasible repairs, per-keyframe boxes);
 - :mod:`.vq`: vector quantisation that picks a motion's typical points;
 - :mod:`.kriging`: the variogram fit and ordinary Kriging;
 - :mod:`.budget`: how the caller's one deadline clock is shared out (reserves, shares).

@@ -66,7 +66,8 @@ def recover(robot: 'RobotModel', library: 'GestureLibrary', faults: Optional[dic
     seed = int(seed)
     if not structure_changed(faults, settings):
         budget = None if clock.end is None else float(clock.end - clock.start)
-        return reference_result(library, budget, settings.public(), seed)
+        return reference_result(library, budget, settings.public(), seed,
+                                velocity_limits=robot.velocity_limits)
     began = time.monotonic()
     if quantisations is None:
         quantisations = typical_points(robot, library, settings.vq_distortion_mm, clock=clock)

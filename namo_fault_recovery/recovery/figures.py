@@ -12,6 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from . import pacing
 from .result import GestureResult
 from ..model.kinematics import batch_forward
 from ..model.robot import ARMS, N_JOINTS
@@ -99,7 +100,15 @@ def describe_motion(ctx, motion, picks) -> GestureResult:
         tip_error_before_mm=float(err_before.mean()),
         tip_error_max_mm=float(err_after.max()),
         max_jump_designed_deg=largest_jump(m.design),
-        max_jump_before_deg=largest_jump(np.concatenate((m.base_r, m.base_l), axis=1)))
+        max_jump_before_deg=largest_jump(np.concatenate((m.base_r, m.base_l), axis=1)),
+        speed_ratio=motion_speed_ratio(ctx.robot, gesture,
+                                       np.concatenate((m.q_r, m.q_l), axis=1)))
+
+
+def motion_speed_ratio(robot, gesture, q):
+    """Return :func:`.pacing.speed_ratio` of angles ``q`` (K, 14) at ``gesture``'s times."""
+    return pacing.speed_ratio(robot.velocity_limits,
+                              [kf.time_from_start for kf in gesture.keyframes], q)
 
 
 def no_worse_than_locked(robot, gesture, result, locks, settings) -> GestureResult:
@@ -134,5 +143,6 @@ def no_worse_than_locked(robot, gesture, result, locks, settings) -> GestureResu
                    score_mean=result.score_before_mean,
                    tip_error_mm=result.tip_error_before_mm,
                    max_jump_deg=result.max_jump_before_deg, collides=collides,
+                   speed_ratio=motion_speed_ratio(robot, gesture, np.array(positions)),
                    colliding_pairs=pairs, breakdown={},
                    message=f'{result.message}; {note}' if result.message else note)

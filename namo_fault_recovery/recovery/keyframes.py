@@ -27,6 +27,7 @@ from typing import Optional, Union
 
 import numpy as np
 
+from . import pacing
 from .budget import ENGINE_RESERVE, STAGE1_SHARE
 from .figures import largest_jump
 from .locks import clamp_lock, resolve_locks
@@ -48,6 +49,9 @@ DEFAULT_EXPANSION_THRESHOLD = 5.0   # mm of fingertip error
 SHARE_NEIGHBOURS = 5       # a keyframe is restarted from this many keyframes of its motion
 SHARE_SWEEPS = 3           # restart sweeps at most (each spreads a branch a little further)
 SHARE_POLISHED = 1         # of those restarts, the best-scoring ones are polished
+RESTART_MAXITER = 20       # polish iterations of a repair's branch restarts
+PACED_NOTE = ('its keyframes were searched into branches too far apart for the joints '
+              'to travel in time; repaired within the velocity limits')
 
 
 @dataclass(frozen=True)
@@ -108,11 +112,14 @@ class PoseProblem(Problem):
     def subset(self, rows):
         """Return the same problem for some of its rows only (``rows``: indices)."""
         rows = np.asarray(rows, dtype=int)
-        return PoseProblem(self.robot, self.scorer, self.target_ids[rows],
-                           (self.base['right'][rows], self.base['left'][rows]), self.free,
-                           self.collision, self.smooth, self.x0[rows],
-                           None if self.anchor is None else self.anchor[rows],
-                           self.continuity / _DEG2 if self.anchor is not None else 0.0)
+        sub = PoseProblem(self.robot, self.scorer, self.target_ids[rows],
+                          (self.base['right'][rows], self.base['left'][rows]), self.free,
+                          self.collision, self.smooth, self.x0[rows],
+                          None if self.anchor is None else self.anchor[rows],
+                          self.continuity / _DEG2 if self.anchor is not None else 0.0)
+        if self.row_bounds is not None:
+            sub.restrict(self.row_bounds[0][rows], self.row_bounds[1][rows])
+        return sub
 
     def assemble(self, x):
         """Return full (right, left) angles of shape (..., 7) for variables x (B, ..., D)."""
@@ -553,6 +560,7 @@ class _Rows:
         self.right = self.left = self.after = self.status = None
         self.stage = np.ones(len(self.ids), dtype=int)
         self.expansion = np.zeros(len(self.ids), dtype=int)
+        self.paced = np.zeros(len(self.ids), dtype=bool)   # repaired by _pace
 
 
 def _run(setup, lock_sets, rng, clock, stats):
@@ -579,6 +587,7 @@ def _run(setup, lock_sets, rng, clock, stats):
     stage1 = rows.after.copy()
     if rows.two_stage:
         _stage2(setup, rows, clock, rng)
+    _pace(setup, rows, clock, rng)
     best_r, best_l, after = rows.right, rows.left, rows.after
     # The optimisers search within the limits; clipping again guards that promise.
     clipped_r, clipped_l = robot.arms['right'].clip(best_r), robot.arms['left'].clip(best_l)
@@ -587,7 +596,180 @@ def _run(setup, lock_sets, rng, clock, stats):
         after = scorer.evaluate(best_r, best_l, rows.ids)
     return {'right': best_r, 'left': best_l, 'after': after, 'stage1': stage1,
             'stage': rows.stage, 'expansion': rows.expansion, 'status': rows.status,
-            'layouts': rows.layouts, 'base_right': rows.base_r, 'base_left': rows.base_l}
+            'layouts': rows.layouts, 'base_right': rows.base_r, 'base_left': rows.base_l,
+            'paced': rows.paced}
+
+
+def pose_values(robot, scorer, checker, q, ids):
+    """
+    Return the search's value of poses ``q`` (..., 14) for targets ``ids`` (...,).
+
+    The similarity score, plus the capsule penalty with a collision ``checker``: what
+    the keyframe search minimises, without its ``stay_close`` pull.
+    """
+    shape = q.shape[:-1]
+    q = q.reshape(-1, 2 * N_JOINTS)
+    ids = np.broadcast_to(ids, shape).reshape(-1)
+    lm_r = batch_forward(robot, q[:, :N_JOINTS], 'right')
+    lm_l = batch_forward(robot, q[:, N_JOINTS:], 'left')
+    f = scorer.evaluate(lm_r, lm_l, ids)
+    if checker is not None:
+        f = f + checker.penalty(lm_r, lm_l, ids)[0]
+    return f.reshape(shape)
+
+
+def joint_bounds(robot):
+    """Return the (lower, upper) joint limits of both arms, (14,) each, right arm first."""
+    return (np.concatenate([robot.arms[s].lower for s in ARMS]),
+            np.concatenate([robot.arms[s].upper for s in ARMS]))
+
+
+def _pace(setup, rows, clock, rng):
+    """
+    Keep every motion of ``rows`` within the joints' velocity limits (in place).
+
+    The rows of a motion (a gesture of several keyframes) are searched one keyframe
+    each, so two of them may end in branches of the arm's redundancy too far apart for
+    the joints to travel in the time between them.  A motion whose steps break the
+    limits of :func:`.pacing.step_limits` is replaced by the best of
+    :func:`.pacing.repair`'s feasible candidates (its own keyframes clipped into reach,
+    the locked design, the design carried through each solved keyframe), then
+    polished within :func:`.pacing.tube` boxes, in which every point stays feasible.
+    The repair needs no time (it runs at the deadline too); the polish runs while
+    ``clock`` allows.  ``rows.paced`` marks the rows repaired.
+    """
+    robot, scorer, checker = setup.robot, setup.scorer, setup.checker
+    lower, upper = joint_bounds(robot)
+    repaired = []
+    owners = np.asarray(rows.owners)
+    for owner in np.unique(owners):
+        ks = np.nonzero(owners == owner)[0]
+        if len(ks) < 2:
+            continue
+        times = [kf.time_from_start for kf in rows.selected[owner].keyframes]
+        ids = rows.ids[ks]
+        design = np.concatenate((setup.ref_r[ids], setup.ref_l[ids]), axis=1)
+        limits = pacing.step_limits(robot.velocity_limits, times, design)
+        q = np.concatenate((rows.right[ks], rows.left[ks]), axis=1)
+        if pacing.feasible(q, limits):
+            continue
+        base = np.concatenate((rows.base_r[ks], rows.base_l[ks]), axis=1)
+        extra = _within_reach(setup, rows, owner, ks, (q, limits, lower, upper), clock, rng)
+        if not clock.expired():
+            extra += list(_branch_restarts(setup, rows, owner, ks,
+                                           pacing.candidates(q, base, limits, lower, upper),
+                                           clock))
+        best, _ = pacing.repair(q, base, limits, lower, upper,
+                                lambda c: pose_values(robot, scorer, checker, c, ids),
+                                extra=extra)
+        rows.right[ks], rows.left[ks] = best[:, :N_JOINTS], best[:, N_JOINTS:]
+        rows.paced[ks] = True
+        repaired.append((owner, ks, pacing.tube(best, limits, lower, upper)))
+    if repaired and not clock.expired():
+        _polish_in_tubes(setup, rows, repaired, clock)
+    if repaired:
+        rows.after = scorer.evaluate(rows.right, rows.left, rows.ids)
+
+
+def _motion_layout(setup, rows, owner, ks):
+    """Return the free joints of one motion's rows (its stage-2 layout if it used one)."""
+    if np.any(rows.stage[ks] == 2):
+        return free_layout(setup.robot, rows.selected[owner].arms, setup.locked, set(ARMS))
+    return rows.layouts[ks[0]]
+
+
+def _motion_problem(setup, rows, ks, free):
+    """Return the keyframe problem of rows ``ks`` with layout ``free``, as the search's."""
+    ids = rows.ids[ks]
+    anchor = None
+    if setup.stay_close:
+        col = [j + (0 if s == 'right' else N_JOINTS) for s, j in free]
+        anchor = np.concatenate((setup.ref_r[ids], setup.ref_l[ids]), axis=1)[:, col]
+    return PoseProblem(setup.robot, setup.scorer, ids, (rows.right[ks], rows.left[ks]), free,
+                       collision=setup.checker, anchor=anchor, continuity=setup.stay_close)
+
+
+def _within_reach(setup, rows, owner, ks, motion, clock, rng):
+    """
+    Search every other keyframe again within its neighbours' reach; return the motions.
+
+    ``motion`` is (q (K, 14), step limits, lower, upper).  For each parity, the
+    keyframes of that parity are searched again by the run's algorithm, each within the
+    box its two kept neighbours allow (:func:`.pacing.reach_boxes`, the problem's
+    bounds): a keyframe flipped into another branch finds the best pose its neighbours
+    can reach in time, and every point searched is feasible.
+    """
+    q, limits, lower, upper = motion
+    free = _motion_layout(setup, rows, owner, ks)
+    col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in free])
+    out = []
+    for parity in (0, 1):
+        boxes = pacing.reach_boxes(q, limits, lower, upper, parity)
+        if not free or boxes is None or clock.expired():
+            continue
+        picked, low, high = boxes
+        problem = _motion_problem(setup, rows, ks[picked], free)
+        problem.restrict(low[:, col], high[:, col])
+        res = minimize(problem, setup.algo, clock=clock, seed=int(rng.integers(2 ** 63)))
+        x, f = np.atleast_2d(res.x), np.atleast_1d(res.fun)
+        # The kept neighbours' own poses are starts in the branches they reach.
+        design = np.concatenate((setup.ref_r[rows.ids[ks]], setup.ref_l[rows.ids[ks]]), axis=1)
+        near = [np.clip(picked + d, 0, len(q) - 1) for d in (-1, 1)]
+        starts = np.stack([(q[n] + design[picked] - design[n])[:, col] for n in near], axis=1)
+        px, pf = polish(problem, problem.clip(starts), clock,
+                        maxiter=getattr(setup.algo, 'polish_maxiter', 100),
+                        ftol=getattr(setup.algo, 'polish_ftol', 1e-7))
+        pick = np.argmin(pf, axis=1)
+        better = pf[np.arange(len(pf)), pick] < f
+        x[better] = px[np.arange(len(px)), pick][better]
+        found = q.copy()
+        found[np.ix_(picked, col)] = x
+        out.append(found)
+    return out
+
+
+def _branch_restarts(setup, rows, owner, ks, starts, clock):
+    """
+    Polish a motion's keyframes from each feasible start; return the motions (N, K, 14).
+
+    Every start (N, K, 14) puts the whole motion in one branch (e.g. the design carried
+    through one solved keyframe); polishing each of its keyframes freely keeps them in
+    that branch, so the polished motion is usually feasible, and a much better one than
+    the start (the caller clips it into reach).  All starts of all keyframes are one
+    batched polish.
+    """
+    free = _motion_layout(setup, rows, owner, ks)
+    if not free:
+        return ()
+    col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in free])
+    problem = _motion_problem(setup, rows, ks, free)
+    x, _ = polish(problem, problem.clip(np.swapaxes(starts[:, :, col], 0, 1)), clock,
+                  maxiter=RESTART_MAXITER, ftol=getattr(setup.algo, 'polish_ftol', 1e-7))
+    out = np.repeat(np.concatenate((rows.right[ks], rows.left[ks]), axis=1)[None],
+                    len(starts), axis=0)
+    out[:, :, col] = np.swapaxes(x, 0, 1)
+    return out
+
+
+def _polish_in_tubes(setup, rows, repaired, clock):
+    """Polish repaired motions, each keyframe within its box (one batch per layout)."""
+    algo = setup.algo
+    groups = {}
+    for owner, ks, (low, high) in repaired:
+        free = _motion_layout(setup, rows, owner, ks)
+        if free:
+            groups.setdefault(free, []).append((ks, low, high))
+    for free, members in groups.items():
+        ks = np.concatenate([m[0] for m in members])
+        col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in free])
+        problem = _motion_problem(setup, rows, ks, free)
+        problem.restrict(np.concatenate([m[1] for m in members])[:, col],
+                         np.concatenate([m[2] for m in members])[:, col])
+        x, _ = polish(problem, problem.x0[:, None, :], clock,
+                      maxiter=getattr(algo, 'polish_maxiter', 100),
+                      ftol=getattr(algo, 'polish_ftol', 1e-7))
+        qr, ql = problem.assemble(x[:, 0][:, None])
+        rows.right[ks], rows.left[ks] = qr[:, 0], ql[:, 0]
 
 
 def _stage2(setup, rows, clock, rng):
@@ -623,11 +805,12 @@ def _take(out, c, n_t):
 
 def _path_figures(setup, out, ks):
     """
-    Return the fingertip and joint-step figures of one gesture's rows ``ks``.
+    Return the fingertip, joint-step and speed figures of one gesture's rows ``ks``.
 
     The same figures as a whole motion's (:func:`.figures.describe_motion`), over the
     keyframes this search solved: fingertip distance to the designed keyframe (mm, the
-    worse hand) and the largest joint step between successive keyframes (deg).
+    worse hand), the largest joint step between successive keyframes (deg) and the
+    playability figure :func:`.pacing.speed_ratio`.
     """
     scorer, rows = setup.scorer, np.asarray(ks)
     design = np.concatenate((setup.ref_r[rows], setup.ref_l[rows]), axis=1)
@@ -635,7 +818,9 @@ def _path_figures(setup, out, ks):
     best = np.concatenate((out['right'][rows], out['left'][rows]), axis=1)
     err_before = scorer.tip_error(out['base_right'][rows], out['base_left'][rows], rows)
     err_after = scorer.tip_error(out['right'][rows], out['left'][rows], rows)
-    return {'tip_error_before_mm': float(err_before.mean()),
+    times = [kf.time_from_start for kf in setup.selected[setup.owners[rows[0]]].keyframes]
+    return {'speed_ratio': pacing.speed_ratio(setup.robot.velocity_limits, times, best),
+            'tip_error_before_mm': float(err_before.mean()),
             'tip_error_mm': float(err_after.mean()), 'tip_error_max_mm': float(err_after.max()),
             'max_jump_designed_deg': largest_jump(design),
             'max_jump_before_deg': largest_jump(base), 'max_jump_deg': largest_jump(best)}
@@ -684,6 +869,8 @@ def _library_result(setup, locks, out, notes, wall, nfev):
             typical_points=len(ks), typical_indices=tuple(range(len(ks))),
             nfev=int(round(nfev * len(ks) / max(1, len(targets)))),
             **_path_figures(setup, out, ks)))
+    notes = list(notes) + [f'{setup.selected[g].name}: {PACED_NOTE}'
+                           for g in sorted({owners[k] for k in ids if out['paced'][k]})]
     deadline_met = not any(g.status in ('deadline', 'cancelled') for g in results)
     return LibraryResult(
         gestures=tuple(results), faults=setup.faults,

@@ -33,14 +33,17 @@ from typing import Optional
 import numpy as np
 
 from . import keyframes as keyframe_search
+from . import pacing
 from .budget import FINISH_RESERVE, PUBLISH_RESERVE, TYPICAL_SHARE, VQ_SHARE
 from .figures import columns, describe_motion, no_worse_than_locked
-from .keyframes import (apply_locks, free_layout, joint_set, locked_sets, PoseProblem,
-                        reconfigure_library, SearchOptions)
+from .keyframes import (apply_locks, free_layout, joint_bounds, joint_set, locked_sets,
+                        PACED_NOTE, pose_values, PoseProblem, reconfigure_library,
+                        SearchOptions)
 from .kriging import OrdinaryKriging
 from .locks import frozen_arms, resolve_locks
 from .result import LibraryResult
-from .trajectory_opt import optimise_motion
+from .trajectory_opt import (designed_step_deg, optimise_motion, optimise_trajectory,
+                             TrajectoryProblem)
 from .vq import quantise
 from ..model.gestures import GestureLibrary
 from ..model.kinematics import batch_forward
@@ -314,6 +317,8 @@ def _adapt(job, locks, seed, search):
             _whole_trajectory(ctx, m, search.child(share=1.0 / (n_left + 1)), notes)
         if m.affected and method == 'per_point':
             _per_point(job, ctx, m, search, rng, notes)
+        if m.affected:
+            _pace_motion(ctx, m, job.picks[gesture.name], search, notes)
         # Every angle published lies within its limits, bit for bit (the locks are
         # clamped into theirs, so clipping leaves them as they are).
         m.q_r, m.q_l = ctx.model.arms['right'].clip(m.q_r), ctx.model.arms['left'].clip(m.q_l)
@@ -346,6 +351,48 @@ def _from_typical(job, ctx, m, typical, search):
                                    job.settings.continuity_weight, search)
         m.nfev += used
     m.q_r, m.q_l, m.sigma = _spread(robot, gesture, mine, solved, ctx.locks)
+
+
+def _pace_motion(ctx, m, picks, clock, notes):
+    """
+    Keep one adapted motion within the joints' velocity limits (as the keyframe search).
+
+    Kriging, the whole-trajectory pass and the per-point chain each place every point of
+    a motion; one whose steps break :func:`.pacing.step_limits` is replaced by the best
+    of :func:`.pacing.repair`'s feasible candidates (the design carried through each
+    typical point ``picks`` among them), which needs no time, and then, while ``clock``
+    allows, optimised again as a whole with every point held in its
+    :func:`.pacing.tube` box, where every choice stays feasible.
+    """
+    robot, model = ctx.robot, ctx.model
+    limits = pacing.step_limits(robot.velocity_limits,
+                                [kf.time_from_start for kf in m.gesture.keyframes], m.design)
+    lower, upper = joint_bounds(model)
+    q = np.clip(np.concatenate((m.q_r, m.q_l), axis=1), lower, upper)
+    if pacing.feasible(q, limits):
+        return
+    base = np.concatenate((m.base_r, m.base_l), axis=1)
+    best, _ = pacing.repair(q, base, limits, lower, upper,
+                            lambda c: pose_values(model, ctx.scorer, ctx.checker, c, m.ids),
+                            picks)
+    m.q_r, m.q_l = best[:, :N_JOINTS], best[:, N_JOINTS:]
+    note = f'{m.gesture.name}: {PACED_NOTE}'
+    if note not in notes:      # the typical points' search may have said it already
+        notes.append(note)
+    layout = free_layout(robot, m.gesture.arms, ctx.locked, ctx.faulted,
+                         joint_set(robot, m.free))
+    if not layout or clock.expired():
+        return
+    problem = TrajectoryProblem(model, ctx.scorer, m.ids, (m.q_r, m.q_l), layout,
+                                step_cap_deg=designed_step_deg(m.design),
+                                collision=ctx.checker)
+    col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in layout])
+    low, high = pacing.tube(best, limits, lower, upper)
+    problem.restrict(low[:, col], high[:, col])
+    out = optimise_trajectory(problem, clock)
+    m.nfev += out.nfev
+    if out.value < out.value_start:
+        m.q_r, m.q_l = out.q_right, out.q_left
 
 
 def _whole_trajectory(ctx, m, budget, notes):

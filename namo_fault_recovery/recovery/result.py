@@ -32,6 +32,7 @@ from typing import Optional
 
 import numpy as np
 
+from . import pacing
 from ..model.robot import N_JOINTS
 
 
@@ -98,7 +99,10 @@ class GestureResult:
       ``tip_error_mm`` mean and ``tip_error_max_mm`` largest as published;
     - largest joint step between successive keyframes (deg): ``max_jump_designed_deg``
       as designed, ``max_jump_before_deg`` with the locks applied, ``max_jump_deg`` as
-      published.
+      published;
+    - ``speed_ratio``: playability, the bound on the player's peak joint speed over the
+      joint's velocity limit (:func:`.pacing.speed_ratio`; at most 1: played as timed,
+      not stretched; 0 for a single keyframe).
     """
 
     name: str
@@ -129,6 +133,7 @@ class GestureResult:
     tip_error_max_mm: float = 0.0
     max_jump_designed_deg: float = 0.0
     max_jump_before_deg: float = 0.0
+    speed_ratio: float = 0.0
 
     @property
     def keyframes(self) -> tuple:
@@ -157,6 +162,7 @@ class GestureResult:
             'tip_error_max_mm': self.tip_error_max_mm,
             'max_jump_designed_deg': self.max_jump_designed_deg,
             'max_jump_before_deg': self.max_jump_before_deg,
+            'speed_ratio': self.speed_ratio,
         }
 
     @classmethod
@@ -195,6 +201,7 @@ class GestureResult:
                 tip_error_max_mm=number(doc.get('tip_error_max_mm', 0.0)),
                 max_jump_designed_deg=number(doc.get('max_jump_designed_deg', 0.0)),
                 max_jump_before_deg=number(doc.get('max_jump_before_deg', 0.0)),
+                speed_ratio=number(doc.get('speed_ratio', 0.0)),
             )
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             if isinstance(exc, MalformedResult):
@@ -257,6 +264,11 @@ class LibraryResult:
     def names(self) -> tuple:
         """Gesture names in library order."""
         return tuple(g.name for g in self.gestures)
+
+    @property
+    def speed_ratio(self) -> float:
+        """Return the library's playability: the largest gesture ``speed_ratio``."""
+        return float(max((g.speed_ratio for g in self.gestures), default=0.0))
 
     @property
     def total_score(self) -> float:
@@ -329,14 +341,26 @@ class LibraryResult:
 
 
 def reference_result(library, deadline: Optional[float] = 0.0, settings: Optional[dict] = None,
-                     seed: Optional[int] = None) -> LibraryResult:
-    """Return the reference library as a LibraryResult (no faults, every score 0)."""
+                     seed: Optional[int] = None, velocity_limits=None) -> LibraryResult:
+    """
+    Return the reference library as a LibraryResult (no faults, every score 0).
+
+    With the robot's ``velocity_limits`` each gesture's ``speed_ratio`` is the
+    design's own (0 without them).
+    """
+    def ratio(g):
+        if velocity_limits is None:
+            return 0.0
+        times = [kf.time_from_start for kf in g.keyframes]
+        return pacing.speed_ratio(velocity_limits, times, g.joint_matrix())
+
     gestures = tuple(
         GestureResult(name=g.name,
                       times=tuple(float(kf.time_from_start) for kf in g.keyframes),
                       positions=tuple(tuple(float(a) for a in kf.positions())
                                       for kf in g.keyframes),
-                      status='unchanged', message='reference gesture')
+                      status='unchanged', message='reference gesture',
+                      speed_ratio=ratio(g))
         for g in library)
     return LibraryResult(gestures=gestures, deadline=deadline, settings=dict(settings or {}),
                          seed=seed, origin='reference')

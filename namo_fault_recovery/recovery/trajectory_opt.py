@@ -97,6 +97,20 @@ class TrajectoryProblem:
                           self.lower, self.upper)
         self.nfev = 0
 
+    def restrict(self, lower, upper):
+        """
+        Narrow the bounds to ``lower``/``upper`` (T x D, stacked like the variables).
+
+        For constraints that are a box per point (each point of a motion kept near its
+        neighbours, :func:`..recovery.pacing.tube`): the projected solver never leaves
+        them.  The warm start is clipped into them.
+        """
+        self.lower = np.maximum(self.lower, np.asarray(lower, dtype=float).ravel())
+        self.upper = np.minimum(self.upper, np.asarray(upper, dtype=float).ravel())
+        if np.any(self.lower > self.upper):
+            raise ValueError('TrajectoryProblem.restrict: the boxes miss the joint limits')
+        self.x0 = np.clip(self.x0, self.lower, self.upper)
+
     def gather(self, q_right, q_left):
         """Return the free joints (T, D) of full angles (T, 7) per arm."""
         x = np.empty((len(q_right), self.dim))

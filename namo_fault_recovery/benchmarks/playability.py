@@ -1,0 +1,168 @@
+"""
+Every published library can be played: the player's verdict on the engine's output.
+
+``namo-recovery bench playability``.  A gesture is *unplayable* when the player would
+stretch it (:func:`~namo_fault_recovery.playback.timing.plan_motion`, the very plan the
+gesture player sends: its ``stretch`` above 1 means a segment needed more than a
+joint's ``velocity_limits`` and was slowed down).  Every library is planned from the
+rest pose, as the player's first play after a fault; the approach is the player's own
+(at ``approach_velocity``).  Two parts, both through the engine's entry point
+``recover()`` with the node's settings, every single fault:
+
+- ``budget``: ``seeds`` seeds at a fixed small evaluation budget
+  (:data:`BUDGET_OVERRIDES`: one colony cycle, a short polish, no deadline), where
+  unfinished searches leave keyframes in different branches most often.  It counts
+  evaluations, not seconds, so it reads the same on a loaded machine;
+- ``deadline``: ``deadline_seeds`` seeds at the node's 1 s deadline (run it alone on the
+  machine: how far a search gets depends on the load).
+
+Per part: gestures planned, unplayable ones, the largest stretch, the largest peak
+speed over the limit of the player's unstretched plan, and the largest ``speed_ratio``
+the engine reported (its bound on that peak), with the runs the engine had to repair.
+"""
+
+import multiprocessing
+import time
+
+import numpy as np
+
+from . import common
+from .product import load_models, node_settings
+from ..optimize.base import Clock
+from ..playback.timing import plan_motion, PlayTiming
+from ..recovery.engine import recover
+from ..recovery.keyframes import PACED_NOTE
+from ..recovery.motion import typical_points
+
+# One employed/onlooker cycle and a 5-step polish: a search cut after a handful of
+# evaluations, far below what 1 s allows.
+BUDGET_OVERRIDES = {'max_cycles': 1, 'polish_maxiter': 5}
+_GRID = 400            # samples of a plan when looking for its peak speed
+_NO_LIMIT = 1e6        # speed limits that never stretch: the plan as timed
+STRETCHED = 1.0 + 1e-9
+
+_WORKER = {}
+
+
+def play_figures(robot, gesture, locks, timing=PlayTiming()):
+    """
+    Return (stretch, peak speed over the limit) of the player's plan of a GestureResult.
+
+    The plan starts at the rest pose (all zeros), holds ``locks`` (joint -> rad) and
+    clips into the joint limits, as the player does.  The peak is read off the plan
+    timed as designed (limits so high that nothing is stretched), on a fine grid.
+    """
+    names = robot.joint_names
+    limits = np.tile(np.asarray(robot.velocity_limits, dtype=float), 2)
+    lower = np.concatenate([robot.arms[s].lower for s in ('right', 'left')])
+    upper = np.concatenate([robot.arms[s].upper for s in ('right', 'left')])
+    args = (names, np.zeros(len(names)), gesture.times, np.asarray(gesture.positions))
+    played = plan_motion(*args, limits, locks=locks, lower=lower, upper=upper, timing=timing)
+    timed = plan_motion(*args, limits * _NO_LIMIT, locks=locks, lower=lower, upper=upper,
+                        timing=timing)
+    t = np.linspace(0.0, timed.duration, _GRID)
+    peak = float(np.max(np.abs(timed.velocity_at(t)) / limits))
+    return float(played.stretch), peak
+
+
+def _init_worker(which):
+    robot, lib = load_models(which)
+    settings = node_settings()
+    _WORKER.update(robot=robot, lib=lib, settings=settings,
+                   quant=typical_points(robot, lib, settings.vq_distortion_mm))
+
+
+def _run_one(task):
+    joint, seed, deadline = task
+    robot, lib, settings = _WORKER['robot'], _WORKER['lib'], _WORKER['settings']
+    clock = Clock(deadline)
+    overrides = None if deadline is not None else BUDGET_OVERRIDES
+    res = recover(robot, lib, {joint: None}, settings, seed=seed, clock=clock,
+                  quantisations=_WORKER['quant'], optimizer_overrides=overrides)
+    gestures = []
+    for g in res.gestures:
+        stretch, peak = play_figures(robot, g, res.locks)
+        gestures.append({'gesture': g.name, 'stretch': stretch, 'peak_ratio': peak,
+                         'speed_ratio': g.speed_ratio})
+    return {'fault': joint, 'seed': seed, 'gestures': gestures,
+            'repaired': sum(PACED_NOTE in n for n in res.notes),
+            'deadline_met': res.deadline_met}
+
+
+def _summary(runs):
+    rows = [g for r in runs for g in r['gestures']]
+    bad = [dict(g, fault=r['fault'], seed=r['seed']) for r in runs for g in r['gestures']
+           if g['stretch'] > STRETCHED]
+    return {'runs': len(runs), 'gestures': len(rows), 'unplayable': len(bad),
+            'unplayable_runs': sum(any(g['stretch'] > STRETCHED for g in r['gestures'])
+                                   for r in runs),
+            'max_stretch': max(g['stretch'] for g in rows),
+            'max_peak_ratio': max(g['peak_ratio'] for g in rows),
+            'max_speed_ratio': max(g['speed_ratio'] for g in rows),
+            'repaired_runs': sum(r['repaired'] > 0 for r in runs),
+            'deadline_met_share': float(np.mean([r['deadline_met'] for r in runs])),
+            'worst': sorted(bad, key=lambda g: -g['stretch'])[:5]}
+
+
+def _part(out, which, tasks, jobs, label, progress):
+    prog = common.Progress(len(tasks), label) if progress else None
+    runs = []
+    began = time.monotonic()
+    ctx = multiprocessing.get_context('spawn')
+    with ctx.Pool(max(1, int(jobs)), initializer=_init_worker, initargs=(which,)) as pool:
+        for run in pool.imap_unordered(_run_one, tasks, chunksize=8):
+            runs.append(run)
+            if prog:
+                prog.step()
+    summary = _summary(runs)
+    summary['wall_sec'] = time.monotonic() - began
+    return summary
+
+
+def run_playability(out, which='product', seeds=2000, deadline_seeds=0, joints=None,
+                    jobs=2, seed_base=0, progress=True):
+    """
+    Run the parts (see the module docstring); print the figures, return the summary.
+
+    ``seeds`` runs per single fault at the fixed budget (0: skip), ``deadline_seeds``
+    at the node's deadline (0: skip; run it with ``jobs=1`` on a quiet machine).
+    """
+    robot, _ = load_models(which)
+    joints = list(joints or robot.joint_names)
+    deadline = node_settings().deadline_sec
+    summary = {'library': which, 'joints': joints, 'budget_overrides': BUDGET_OVERRIDES,
+               'machine': common.machine_info(), 'parts': {}}
+    plan = [('budget', seeds, None, jobs), ('deadline', deadline_seeds, deadline, 1)]
+    for name, n, limit, n_jobs in plan:
+        if n <= 0:
+            continue
+        tasks = [(j, seed_base + s, limit) for j in joints for s in range(n)]
+        summary['parts'][name] = _part(out, which, tasks, n_jobs, f'playability {name}',
+                                       progress)
+    print_playability(out, summary, deadline)
+    return summary
+
+
+def print_playability(out, s, deadline):
+    """Print the table of :func:`run_playability`'s summary."""
+    out.write(f"\n== playability [{s['library']}] (every single fault; the player's plan "
+              f'from the rest pose) ==\n')
+    labels = {'budget': f"fixed budget {s['budget_overrides']}",
+              'deadline': f'deadline {deadline:g} s'}
+    rows = [[labels[k], p['runs'], p['gestures'], p['unplayable'], p['unplayable_runs'],
+             common.fmt(p['max_stretch'], 3), common.fmt(p['max_peak_ratio'], 3),
+             common.fmt(p['max_speed_ratio'], 3), p['repaired_runs'],
+             f"{100 * p['deadline_met_share']:.0f}%", f"{p['wall_sec']:.0f}"]
+            for k, p in s['parts'].items()]
+    out.write(common.text_table(
+        ['part', 'runs', 'gestures', 'unplayable', 'runs with one', 'max stretch',
+         'max peak/limit', 'max speed_ratio', 'repaired runs', 'deadline met', 'wall s'],
+        rows))
+    for k, p in s['parts'].items():
+        for g in p['worst']:
+            out.write(f"  {k}: {g['gesture']} (fault {g['fault']}, seed {g['seed']}): "
+                      f"stretch {g['stretch']:.3f}, peak {g['peak_ratio']:.3f} x the "
+                      f'limit\n')
+        verdict = 'met' if p['unplayable'] == 0 else 'MISSED'
+        out.write(f"{k}: {p['unplayable']} unplayable of {p['gestures']} gestures "
+                  f'(target 0): {verdict}\n')
