@@ -5,6 +5,8 @@ The robot and its gestures, free of ROS: what Namo is and what it should do.
   from ``config/namo_robot.yaml``;
 - :mod:`.kinematics`: forward kinematics and its Jacobian, batched over N configurations;
 - :mod:`.capsules`: the capsule geometry of the arms and torso;
+- :mod:`.self_contact`: capsule distances, the checked pairs, designed contact, and the
+  load-time check that no reference pose goes into the robot's own body;
 - :mod:`.gestures`: the reference gesture library (keyframes, weights, expansion stages);
 - :mod:`.weights`: ``ScoreWeights``, the similarity components a gesture's score weighs;
 - :mod:`.trajectory_csv`: dense recorded motions stored as CSV files;
