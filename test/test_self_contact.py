@@ -1,11 +1,11 @@
 """
-One self-contact geometry: the optimiser's capsules against the simulator's, and the
-load-time check of a library's reference poses.
+One self-contact geometry: the optimiser's capsules against the simulator's.
 
 The optimiser's capsule model (:mod:`namo_fault_recovery.objective.collision`) and the
 MuJoCo model the simulator builds from the URDF (:mod:`namo_fault_recovery.sim.physics`)
 must agree on every sampled pose, pair by pair: a library the optimiser passes as clear
-must count no contact in the simulator for the same poses.
+must count no contact in the simulator for the same poses.  Also the load-time check of
+a library's reference poses.
 """
 
 import math
@@ -71,7 +71,7 @@ def test_capsule_distances_are_the_simulators_on_sampled_poses(robot, sim):
 
 
 def test_the_simulators_contacts_are_the_objectives_penetrations(robot, sim):
-    """MuJoCo's contact pipeline reports exactly the pairs the objective finds deeper than 1 mm."""
+    """The simulator's contact pipeline reports exactly the pairs deeper than 1 mm, as deep."""
     names = [sim.model.geom(i).name for i in range(sim.model.ngeom)]
     index = {frozenset(p): k for k, p in enumerate(GEOM_PAIRS)}
     for q in _sampled_poses(200, seed=11):
@@ -123,7 +123,7 @@ def _abduction(deg):
 
 
 def _abduction_for_depth(robot, depth_mm):
-    """Return the right shoulder abduction (deg) that swings the arm ``depth_mm`` into the torso."""
+    """Return the right shoulder abduction (deg) that swings the arm ``depth_mm`` into the body."""
     lo, hi = 0.0, 60.0
     for _ in range(60):
         mid = (lo + hi) / 2

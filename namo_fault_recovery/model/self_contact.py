@@ -54,7 +54,7 @@ PAIR_NAMES = tuple(pair_name(p) for p in PAIRS)
 
 
 def designed_pairs(two_handed):
-    """Return a bool per pair of :data:`PAIRS`: may a reference bring it into contact?"""
+    """Return a bool per pair of :data:`PAIRS`: True where a reference may touch it."""
     return np.array([two_handed and b != 'torso' for _, _, b, _ in PAIRS])
 
 
@@ -149,8 +149,8 @@ class ReferenceContact(NamedTuple):
         verdict = (f'refused: deeper than {REFUSE_MM:g} mm' if self.refused else
                    f'loaded: a graze of at most {REFUSE_MM:g} mm')
         return (f'gesture {self.gesture!r} keyframe {self.keyframe} (t = {self.time:g} s): '
-                f'{self.pair} interpenetrate by {self.depth_mm:.1f} mm{more}; the robot\'s '
-                f'own body blocks this reference ({verdict})')
+                f'{self.pair} interpenetrate by {self.depth_mm:.1f} mm{more}; the '
+                f"robot's own body blocks this reference ({verdict})")
 
 
 def reference_contact(robot, gesture):
