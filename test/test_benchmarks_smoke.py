@@ -9,7 +9,7 @@ import subprocess
 import sys
 
 from namo_fault_recovery.benchmarks import common, deadline, load_best_known, optimum, paper
-from namo_fault_recovery.benchmarks import idle, motion, speed
+from namo_fault_recovery.benchmarks import idle, motion, product, speed
 from namo_fault_recovery.benchmarks.paper_data import TABLE6
 from namo_fault_recovery.cli.main import main
 from namo_fault_recovery.objective.score import gesture_targets, SimilarityScore
@@ -264,6 +264,19 @@ def test_product_bench_offline_parts(tmp_path):
     assert 'circle' in summary['demo']['runs'][0]['scores']
     # The seeds of the stored optimum, rerun, are at the optimum (gap 0).
     assert all(math.isfinite(g) for g in summary['quality']['runs'][0]['gaps'].values())
+
+
+def test_optima_of_one_library_keep_the_others():
+    """``--optima-libraries demo`` rewrites the demo entry only; each says when it was made."""
+    new = {'made': {'date': 'new'}, 'libraries': {'demo': {'seeds': 8}}}
+    old = {'made': {'date': 'old'},
+           'libraries': {'product': {'seeds': 256}, 'demo': {'seeds': 32}}}
+    doc = product.merge_optima(new, old)
+    assert list(doc['libraries']) == ['product', 'demo']
+    assert doc['libraries']['demo'] == {'seeds': 8, 'made': {'date': 'new'}}
+    assert doc['libraries']['product'] == {'seeds': 256, 'made': {'date': 'old'}}
+    with pytest.raises(KeyError, match="unknown library 'circle'"):
+        product.generate_optima(io.StringIO(), libraries=('circle',))
 
 
 def test_product_bench_node_parts(tmp_path):

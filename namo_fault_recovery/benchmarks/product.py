@@ -179,10 +179,11 @@ def _optimum_task(task):
                               for g in built.result.gestures}
 
 
-def optima_plan(settings, seeds=OPTIMA_SEEDS, demo_seeds=DEMO_OPTIMA_SEEDS, joints=None):
+def optima_plan(settings, seeds=OPTIMA_SEEDS, demo_seeds=DEMO_OPTIMA_SEEDS, joints=None,
+                libraries=tuple(LIBRARIES)):
     """Return ``{library: {key: faults}}``: the fault sets the optima are computed for."""
     plan = {}
-    for which in LIBRARIES:
+    for which in libraries:
         robot, lib = load_models(which)
         sets = fault_sets(robot, lib, settings, joints=joints)
         if which == 'product':
@@ -213,15 +214,20 @@ def _best_of_runs(runs, names):
 
 
 def generate_optima(out, seeds=OPTIMA_SEEDS, demo_seeds=DEMO_OPTIMA_SEEDS, jobs=2,
-                    joints=None, settings=None, progress=True):
+                    joints=None, settings=None, progress=True, libraries=tuple(LIBRARIES)):
     """
     Compute the best-known optima (min over seeds per gesture); return the YAML doc.
 
     Each (fault set, seed) is one :func:`measure_entry` run without a deadline;
-    ``jobs`` spawned workers share them.
+    ``jobs`` spawned workers share them.  ``libraries`` (keys of :data:`LIBRARIES`)
+    are computed; :func:`merge_optima` keeps the others of a stored document.
     """
     settings = settings or node_settings()
-    plan = optima_plan(settings, seeds, demo_seeds, joints)
+    unknown = [w for w in libraries if w not in LIBRARIES]
+    if unknown:
+        raise KeyError(f'unknown library {unknown[0]!r}; expected one of '
+                       f'{", ".join(LIBRARIES)}')
+    plan = optima_plan(settings, seeds, demo_seeds, joints, libraries)
     tasks = [(which, key, faults, s) for which, sets in plan.items()
              for key, faults in sets.items()
              for s in range(seeds if which == 'product' else demo_seeds)]
@@ -243,7 +249,9 @@ def generate_optima(out, seeds=OPTIMA_SEEDS, demo_seeds=DEMO_OPTIMA_SEEDS, jobs=
                         'settings, average), plus the refinement fault sets of bench '
                         'product.'),
         'generated_by': f'namo-recovery bench product --update-optima --optima-seeds {seeds} '
-                        f'--demo-optima-seeds {demo_seeds} --jobs {jobs}',
+                        f'--demo-optima-seeds {demo_seeds} --jobs {jobs}'
+                        + ('' if set(libraries) == set(LIBRARIES) else
+                           f' --optima-libraries {",".join(libraries)}'),
         'method': 'per fault set, recover() without a deadline (measure_entry, one seed '
                   'each, seeds 0..N-1, the node settings and preset); per gesture the '
                   'lowest score_after over the seeds whose keyframes respect the joint '
@@ -265,6 +273,25 @@ def generate_optima(out, seeds=OPTIMA_SEEDS, demo_seeds=DEMO_OPTIMA_SEEDS, jobs=
         doc['libraries'][which] = entry
     out.write(f'optima: {len(tasks)} runs in {wall:.0f} s ({jobs} jobs)\n')
     return doc
+
+
+def merge_optima(new, old):
+    """
+    Return ``new`` with the libraries it did not compute taken from ``old`` (or None).
+
+    Each library entry keeps its own ``made`` (date, commit, seeds), so a document
+    regenerated for one library still says when and how the others were made.
+    """
+    for which, entry in new['libraries'].items():
+        entry.setdefault('made', new['made'])
+    if old is None:
+        return new
+    for which, entry in old.get('libraries', {}).items():
+        if which not in new['libraries']:
+            entry.setdefault('made', old.get('made', {}))
+            new['libraries'][which] = entry
+    new['libraries'] = {w: new['libraries'][w] for w in LIBRARIES if w in new['libraries']}
+    return new
 
 
 def git_commit():

@@ -299,9 +299,19 @@ def _best_known(out, args, joints):
     """Return the best-known optima document (regenerated first with --update-optima)."""
     optima_file = Path(args.optima_file) if args.optima_file else product.best_known_path()
     if args.update_optima:
-        doc = product.generate_optima(out, args.optima_seeds, args.demo_optima_seeds,
-                                      args.jobs, joints=joints, progress=not args.quiet)
-        product.write_product_optima(optima_file, doc)
+        libraries = tuple(args.optima_libraries.split(',')) if args.optima_libraries \
+            else tuple(product.LIBRARIES)
+        try:
+            doc = product.generate_optima(out, args.optima_seeds, args.demo_optima_seeds,
+                                          args.jobs, joints=joints, progress=not args.quiet,
+                                          libraries=libraries)
+        except KeyError as exc:
+            raise BenchError(f'--optima-libraries: {exc.args[0]}', EXIT_USAGE) from None
+        try:
+            old = product.load_product_best_known(optima_file)
+        except FileNotFoundError:
+            old = None
+        product.write_product_optima(optima_file, product.merge_optima(doc, old))
         out.write(f'written: {optima_file}\n')
     try:
         best_doc = product.load_product_best_known(optima_file)

@@ -226,6 +226,9 @@ def _add_product(bench_subparsers):
     p.add_argument('--demo-optima-seeds', type=int, default=DEMO_OPTIMA_SEEDS,
                    help=f'seeds per fault set of the demo library (default '
                         f'{DEMO_OPTIMA_SEEDS})')
+    p.add_argument('--optima-libraries', default=None, metavar='LIST',
+                   help='with --update-optima: regenerate only these libraries '
+                        '(comma-separated: product, demo; the others are kept)')
     p.add_argument('--optima-file', default=None, metavar='FILE',
                    help='optima to read (and write) (default: the package config '
                         'product_best_known.yaml)')

@@ -9,6 +9,8 @@ The robot and its gestures, free of ROS: what Namo is and what it should do.
 - :mod:`.robot_profile`: the recovery profile (arms, landmarks, roles of joints) over a URDF;
 - :mod:`.profile_template`: a template profile guessed from a URDF's tree and names;
 - :mod:`.capsules`: the capsule geometry of the arms and torso;
+- :mod:`.self_contact`: capsule distances, the checked pairs, designed contact, and the
+  load-time check that no reference pose goes into the robot's own body;
 - :mod:`.gestures`: the reference gesture library (keyframes, weights, expansion stages);
 - :mod:`.weights`: ``ScoreWeights``, the similarity components a gesture's score weighs;
 - :mod:`.trajectory_csv`: dense recorded motions stored as CSV files;

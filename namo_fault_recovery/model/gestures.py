@@ -6,8 +6,9 @@ A gesture is a motion: a few keyframes written in the file, or a dense recorded
 trajectory read from a CSV file (:mod:`.trajectory_csv`).
 """
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
+import logging
 import math
 import os
 from pathlib import Path
@@ -17,6 +18,7 @@ import numpy as np
 
 from . import yaml_checks as chk
 from .robot import ARMS, N_JOINTS, RobotModel
+from .self_contact import reference_contact
 from .trajectory_csv import load_trajectory_csv
 from .weights import ScoreWeights
 from ..errors import ConfigError
@@ -82,10 +84,16 @@ class Gesture:
 
 @dataclass(frozen=True)
 class GestureLibrary:
-    """An ordered collection of gestures, addressable by name."""
+    """
+    An ordered collection of gestures, addressable by name.
+
+    ``warnings`` are the one-line warnings of loading it (reference grazes, see
+    :func:`load_library`).
+    """
 
     gestures: tuple
     source: str = '<memory>'
+    warnings: tuple = ()
 
     @property
     def names(self) -> tuple:
@@ -153,8 +161,18 @@ def _arm_angles(value, side, robot, scale, file, key, right_angles):
 
 
 def load_library(robot: RobotModel,
-                 path: str | os.PathLike | None = None) -> GestureLibrary:
-    """Load and validate a gesture file against ``robot``; the packaged library if None."""
+                 path: str | os.PathLike | None = None,
+                 on_warning: Callable[[str], None] | None = None) -> GestureLibrary:
+    """
+    Load and validate a gesture file against ``robot``; the packaged library if None.
+
+    A reference keyframe that the robot's own body blocks (an undesigned capsule
+    contact, :mod:`.self_contact`) is a library error: deeper than
+    ``self_contact.REFUSE_MM`` it raises ConfigError naming the file, gesture, keyframe,
+    pair and depth; a graze above the 1 mm tolerance is a one-line warning, passed to
+    ``on_warning`` (default: this module's ``logging`` logger, which prints it on
+    stderr) and kept in the library's ``warnings``.
+    """
     path = Path(path) if path is not None else config_path(DEFAULT_GESTURE_FILE)
     data = chk.load_yaml(path)
     scale = chk.as_angle_scale(chk.require(data, 'units', path), path, 'units')
@@ -163,10 +181,23 @@ def load_library(robot: RobotModel,
         raise ConfigError(path, 'gestures', f'the library is empty; expected a list of '
                           f'gestures, got {entries!r}')
     gestures = []
+    found = []
     seen = set()
     for gi, entry in enumerate(entries):
-        gestures.append(_parse_gesture(entry, robot, scale, path, f'gestures[{gi}]', seen))
-    return GestureLibrary(tuple(gestures), str(path))
+        gesture = _parse_gesture(entry, robot, scale, path, f'gestures[{gi}]', seen)
+        gestures.append(gesture)
+        contact = reference_contact(robot, gesture)
+        if contact is None:
+            continue
+        key = (f'gestures[{gi}].keyframes[{contact.keyframe}]' if 'keyframes' in entry
+               else f'gestures[{gi}].trajectory')
+        if contact.refused:
+            raise ConfigError(path, key, contact.problem())
+        found.append(f'warning: {ConfigError(path, key, contact.problem())}')
+    report = on_warning or logging.getLogger(__name__).warning
+    for line in found:
+        report(line)
+    return GestureLibrary(tuple(gestures), str(path), tuple(found))
 
 
 def _parse_gesture(entry, robot, scale, path, where, seen):

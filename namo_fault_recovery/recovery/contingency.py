@@ -85,14 +85,15 @@ def canonical(value):
     """
     Return ``value`` as plain JSON data that is the same whenever the model is.
 
-    Dataclasses become their fields (``source``, a file name, left out: the content
-    counts, not where it was read from), arrays and tuples lists, floats text with
+    Dataclasses become their fields (``source``, a file name, and a library's load
+    ``warnings`` left out: the content counts, not where it was read from or what was
+    said about it), arrays and tuples lists, floats text with
     ``FLOAT_DIGITS`` significant digits (so that a round trip through a file or a
     harmless last-bit difference does not change a fingerprint).
     """
     if is_dataclass(value) and not isinstance(value, type):
         return {f.name: canonical(getattr(value, f.name)) for f in fields(value)
-                if f.name != 'source'}
+                if f.name not in ('source', 'warnings')}
     if isinstance(value, dict):
         return {str(k): canonical(v) for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))}
     if isinstance(value, np.ndarray):

@@ -112,7 +112,8 @@ class RecoveryNode(Node):
         self._config = node_config(values)
         try:
             self._robot = load_robot(values['robot_file'] or None)
-            self._library = load_library(self._robot, values['gesture_file'] or None)
+            self._library = load_library(self._robot, values['gesture_file'] or None,
+                                         on_warning=self.get_logger().warning)
         except (ConfigError, FileNotFoundError) as exc:
             raise StartupError(f'invalid configuration: {one_line(exc)}') from None
         self._prefix = diagnostics.status_prefix(self.get_fully_qualified_name())

@@ -100,7 +100,8 @@ class SimNode(Node):
         super().__init__(NODE_NAME)
         self.p = self._declare_parameters()
         self.robot = load_robot(self.p['robot_file'] or None)
-        library = load_library(self.robot, self.p['gesture_file'] or None)
+        library = load_library(self.robot, self.p['gesture_file'] or None,
+                               on_warning=self.get_logger().warning)
         for name in ('timestep', 'kp', 'joint_state_rate', 'contact_report_rate'):
             if not self.p[name] > 0:
                 raise ValueError(f'parameter {name} must be > 0, got {self.p[name]}')

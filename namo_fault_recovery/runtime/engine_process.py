@@ -52,7 +52,8 @@ def _serve(conn, robot_file, gesture_file, current, parent_pid=None):
     from ..recovery.motion import typical_points
 
     robot = load_robot(robot_file)
-    library = load_library(robot, gesture_file)
+    # The node reports the library's warnings; the engine child loads it silently.
+    library = load_library(robot, gesture_file, on_warning=lambda line: None)
     cache = {}
 
     def quantisations(vq_distortion_mm, clock=None):

@@ -1,0 +1,167 @@
+"""
+Self-contact of the capsules (arms and torso), and the load-time check of a library.
+
+The geometry that the optimiser's penalty (:mod:`..objective.collision`) and the
+simulator (:mod:`..sim.physics`, MuJoCo capsules built from :mod:`.urdf`) both use:
+each arm is three capsules, the upper arm (shoulder-elbow), the forearm (elbow-wrist)
+and the hand (wrist-fingertip), and the torso is one more (``robot.capsules``).  Two
+capsules interpenetrate when the distance between their axis segments is below the
+sum of their radii.  The checked pairs are each arm segment against the torso and
+every right-left segment pair; adjacent links never touch by construction.
+
+*Designed contact* is the hands of a two-handed gesture meeting (the Wai palms pressed
+together: a capsule is a round stand-in for a flat palm, so pressed palms overlap):
+only the right-left pairs of a two-handed gesture.  Nothing is designed to go into
+the torso, and the resting arm of a one-handed gesture is not to be touched.
+
+A reference keyframe that brings an undesigned pair closer than its radii is a pose
+the robot's own body blocks: the simulated (or real) torso stops the arm short, and
+the player reports a stuck joint where there is none.  :func:`check_library` reports
+it when a library is loaded, deepest first:
+
+- deeper than :data:`REFUSE_MM` (5 mm): a library error, the library is refused.  5 mm
+  is where a blocked hand capsule, whose shortest lever is the 130 mm hand, is held
+  more than 2 deg (the player's stuck-joint threshold) away from its command: the
+  play would end in a false alarm.  The demo circle's first design went 124 mm deep;
+- from the 1 mm tolerance (:data:`TOLERANCE_MM`, the objective's and the simulator's
+  numerical slack) to 5 mm: a warning.  A graze of a library a user already has is
+  within what the capsule stand-ins can tell and what the player tolerates, so it
+  still loads, and says where to fix it.
+"""
+
+from typing import NamedTuple
+
+import numpy as np
+
+from .kinematics import forward_kinematics, shoulder_position
+
+SEGMENTS = ('upper_arm', 'forearm', 'hand')
+# Pairs checked: each arm segment against the torso, and every right-left segment pair.
+PAIRS = ([('right', i, 'torso', 0) for i in range(3)]
+         + [('left', i, 'torso', 0) for i in range(3)]
+         + [('right', i, 'left', k) for i in range(3) for k in range(3)])
+TOLERANCE_MM = 1.0     # penetration tolerated as numerical slack (objective, simulator)
+REFUSE_MM = 5.0        # a reference deeper than this is refused at load time
+
+
+def pair_name(pair):
+    """Return a pair's name as the results print it, e.g. ``right_upper_arm-torso``."""
+    a, i, b, k = pair
+    return f'{a}_{SEGMENTS[i]}-{b}' + ('' if b == 'torso' else f'_{SEGMENTS[k]}')
+
+
+PAIR_NAMES = tuple(pair_name(p) for p in PAIRS)
+
+
+def designed_pairs(two_handed):
+    """Return a bool per pair of :data:`PAIRS`: True where a reference may touch it."""
+    return np.array([two_handed and b != 'torso' for _, _, b, _ in PAIRS])
+
+
+def segment_distance(p1, q1, p2, q2):
+    """
+    Closest distance between segments [p1, q1] and [p2, q2], batched over leading axes.
+
+    Returns ``(distance, s, t)`` with the closest points ``p1 + s (q1 - p1)`` and
+    ``p2 + t (q2 - p2)`` (Ericson, Real-Time Collision Detection, 5.1.9).
+    """
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a = np.einsum('...i,...i->...', d1, d1)
+    e = np.einsum('...i,...i->...', d2, d2)
+    f = np.einsum('...i,...i->...', d2, r)
+    c = np.einsum('...i,...i->...', d1, r)
+    b = np.einsum('...i,...i->...', d1, d2)
+    denom = a * e - b * b
+    eps = 1e-12
+    safe_a = np.where(a > eps, a, 1.0)
+    safe_e = np.where(e > eps, e, 1.0)
+    s = np.where(denom > eps * np.maximum(a * e, eps),
+                 np.clip((b * f - c * e) / np.where(denom > 0, denom, 1.0), 0.0, 1.0), 0.0)
+    s = np.where(a > eps, s, 0.0)
+    t = (b * s + f) / safe_e
+    # t outside [0, 1]: clamp it and recompute s for the clamped t.
+    s = np.where(t < 0.0, np.clip(-c / safe_a, 0.0, 1.0), s)
+    s = np.where(t > 1.0, np.clip((b - c) / safe_a, 0.0, 1.0), s)
+    s = np.where(a > eps, s, 0.0)
+    t = np.clip(t, 0.0, 1.0)
+    t = np.where(e > eps, t, 0.0)
+    diff = (p1 + s[..., None] * d1) - (p2 + t[..., None] * d2)
+    return np.sqrt(np.einsum('...i,...i->...', diff, diff)), s, t
+
+
+def radius_sums(capsules):
+    """Return the sum of the two radii (mm) of every pair of :data:`PAIRS`."""
+    radii = capsules.radii
+    return np.array([radii[i] + (capsules.torso_radius if b == 'torso' else radii[k])
+                     for _, i, b, k in PAIRS])
+
+
+def arm_segments(robot, lm, side):
+    """Return an arm's segment end points (N, 3 segments, 2, 3) mm from its landmarks."""
+    shoulder = np.broadcast_to(shoulder_position(robot, side), lm.elbow.shape)
+    return np.stack((np.stack((shoulder, lm.elbow), axis=1),
+                     np.stack((lm.elbow, lm.wrist), axis=1),
+                     np.stack((lm.wrist, lm.tip), axis=1)), axis=1)
+
+
+def pair_distances(robot, lm_right, lm_left):
+    """Return the axis distance (mm) of every pair, (N, pairs), and the closest points' s, t."""
+    seg = {'right': arm_segments(robot, lm_right, 'right'),
+           'left': arm_segments(robot, lm_left, 'left')}
+    n = seg['right'].shape[0]
+    cap = robot.capsules
+    torso = np.array((cap.torso_top, cap.torso_bottom), dtype=float)
+    seg['torso'] = np.broadcast_to(torso[None, None], (n, 1, 2, 3))
+    p1 = np.stack([seg[a][:, i, 0] for a, i, _, _ in PAIRS], axis=1)
+    q1 = np.stack([seg[a][:, i, 1] for a, i, _, _ in PAIRS], axis=1)
+    p2 = np.stack([seg[b][:, k, 0] for _, _, b, k in PAIRS], axis=1)
+    q2 = np.stack([seg[b][:, k, 1] for _, _, b, k in PAIRS], axis=1)
+    return segment_distance(p1, q1, p2, q2)
+
+
+def penetrations(robot, q14):
+    """Return how deep (mm, >= 0) every pair interpenetrates at poses ``q14`` (N, 14) rad."""
+    q14 = np.atleast_2d(np.asarray(q14, dtype=float))
+    d = pair_distances(robot, forward_kinematics(robot, q14[:, :7], 'right'),
+                       forward_kinematics(robot, q14[:, 7:], 'left'))[0]
+    return np.maximum(radius_sums(robot.capsules)[None, :] - d, 0.0)
+
+
+class ReferenceContact(NamedTuple):
+    """The deepest undesigned contact of one gesture's reference keyframes."""
+
+    gesture: str
+    keyframe: int
+    time: float
+    pair: str
+    depth_mm: float
+    keyframes_touching: int
+
+    @property
+    def refused(self):
+        """Return True when it is too deep to load (:data:`REFUSE_MM`)."""
+        return self.depth_mm > REFUSE_MM
+
+    def problem(self):
+        """Return the one-line problem text (without the file and key)."""
+        more = (f' (and {self.keyframes_touching - 1} more keyframe(s))'
+                if self.keyframes_touching > 1 else '')
+        verdict = (f'refused: deeper than {REFUSE_MM:g} mm' if self.refused else
+                   f'loaded: a graze of at most {REFUSE_MM:g} mm')
+        return (f'gesture {self.gesture!r} keyframe {self.keyframe} (t = {self.time:g} s): '
+                f'{self.pair} interpenetrate by {self.depth_mm:.1f} mm{more}; the '
+                f"robot's own body blocks this reference ({verdict})")
+
+
+def reference_contact(robot, gesture):
+    """Return the deepest undesigned contact of ``gesture`` beyond the tolerance, or None."""
+    pen = penetrations(robot, gesture.joint_matrix())
+    pen[:, designed_pairs(gesture.two_handed)] = 0.0
+    worst = pen.max(axis=1)
+    touching = np.nonzero(worst > TOLERANCE_MM)[0]
+    if not touching.size:
+        return None
+    k = int(np.argmax(worst))
+    return ReferenceContact(gesture.name, k, float(gesture.keyframes[k].time_from_start),
+                            PAIR_NAMES[int(np.argmax(pen[k]))], float(worst[k]),
+                            int(touching.size))
