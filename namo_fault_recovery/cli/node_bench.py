@@ -137,6 +137,15 @@ def _add_idle(bench_subparsers):
     return p
 
 
+def add_private_node_arguments(parser):
+    """Add ``--start-node`` and ``--node-param``: a private recovery_node and its parameters."""
+    parser.add_argument('--start-node', action='store_true',
+                        help='start a private recovery_node for the benchmark')
+    parser.add_argument('--node-param', dest='node_params', action='append', default=[],
+                        metavar='NAME:=VALUE',
+                        help='a parameter of the private node (--start-node; repeatable)')
+
+
 def _add_latency(bench_subparsers):
     """Add ``latency``: fault -> library latency (benchmarks.latency)."""
     p = bench_subparsers.add_parser(
@@ -145,16 +154,12 @@ def _add_latency(bench_subparsers):
                    help='number of single-joint faults (default 50)')
     p.add_argument('--joints', nargs='+', metavar='JOINT',
                    help='joints to fault in turn (default: all 14)')
-    p.add_argument('--start-node', action='store_true',
-                   help='start a private recovery_node for the benchmark')
     p.add_argument('--joint-states-hz', type=float, default=0.0, metavar='HZ',
                    help='stream /joint_states at HZ from another process meanwhile')
     p.add_argument('--settle', type=float, default=0.0, metavar='SEC',
                    help='wait this long after each clear before the next fault (default 0: '
                         'at once)')
-    p.add_argument('--node-param', dest='node_params', action='append', default=[],
-                   metavar='NAME:=VALUE',
-                   help='a parameter of the private node (--start-node; repeatable)')
+    add_private_node_arguments(p)
     p.add_argument('--json', action='store_true', help='print one JSON document')
     p.add_argument('-v', '--verbose', action='store_true', help='print every sample')
     add_connection_arguments(p, timeout=30.0)
@@ -260,11 +265,7 @@ def _add_callers(bench_subparsers):
                    help='rounds of both crowds (default 3)')
     p.add_argument('--single', type=int, default=20, metavar='N',
                    help="a lone caller's calls in a row, for its round trip (default 20)")
-    p.add_argument('--start-node', action='store_true',
-                   help='start a private recovery_node for the benchmark')
-    p.add_argument('--node-param', dest='node_params', action='append', default=[],
-                   metavar='NAME:=VALUE',
-                   help='a parameter of the private node (--start-node; repeatable)')
+    add_private_node_arguments(p)
     p.add_argument('--json', action='store_true', help='also print one JSON document')
     add_connection_arguments(p, timeout=30.0)
     p.set_defaults(func=wrap(cmd_callers))

@@ -156,14 +156,9 @@ class RunBook:
 
     def wait_published(self, timeout):
         """Wait up to ``timeout`` s until nothing is pending; return True if nothing is."""
-        end = time.monotonic() + timeout
         with self._cond:
-            while self._pending_locked() and not self.stopping:
-                remaining = end - time.monotonic()
-                if remaining <= 0:
-                    return False
-                self._cond.wait(remaining)
-            return True
+            return self._cond.wait_for(lambda: not self._pending_locked() or self.stopping,
+                                       timeout)
 
     def _pending_locked(self):
         failed_gen = self._failed[0] if self._failed else 0

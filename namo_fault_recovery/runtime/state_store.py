@@ -349,14 +349,10 @@ class BackgroundWriter:
 
     def flush(self, timeout=5.0):
         """Wait until every queued snapshot is written (e.g. before stopping)."""
-        end = time.monotonic() + timeout
         with self._cond:
-            while (self._pending is not None or self._busy) and self._thread.is_alive():
-                remaining = end - time.monotonic()
-                if remaining <= 0:
-                    return False
-                self._cond.wait(remaining)
-        return True
+            return self._cond.wait_for(
+                lambda: (self._pending is None and not self._busy)
+                or not self._thread.is_alive(), timeout)
 
     def _loop(self):
         while True:
