@@ -108,7 +108,13 @@ def _check_xml(text_or_path, source):
                           'expected <robot>')
 
 
-def _load_yourdfpy(text_or_path, source):
+def load_urdf_document(text_or_path: str | Path, source: str):
+    """
+    Parse a URDF document (``str``) or file (a ``Path``) with yourdfpy, links and joints only.
+
+    Returns yourdfpy's ``URDF`` (for code that edits a description and writes it again);
+    raises ConfigError (one line naming ``source``) if it does not parse.
+    """
     import yourdfpy
     _check_xml(text_or_path, source)
     # yourdfpy logs its own complaints before raising; our one-line error says it all.
@@ -188,7 +194,7 @@ def load_urdf_tree(urdf: str | os.PathLike, source: str | None = None) -> UrdfTr
         if not path.is_file():
             raise ConfigError(source, None, 'no such URDF file; expected a readable file')
         urdf = path
-    model = _load_yourdfpy(urdf, source)
+    model = load_urdf_document(urdf, source)
     links = tuple(link.name for link in model.robot.links)
     joints = {}
     for raw in model.robot.joints:

@@ -113,14 +113,15 @@ class NamoSim:
 
     def __init__(self, robot, timestep=0.002, kp=300.0, kv=30.0, armature=0.05,
                  damping=0.5, gravity=True, allowances=None,
-                 tolerance=CONTACT_TOLERANCE):
+                 tolerance=CONTACT_TOLERANCE, urdf=None):
         if timestep <= 0 or kp <= 0 or kv < 0:
             raise ValueError('timestep and kp must be > 0 and kv >= 0')
         self.robot = robot
         self.joint_names = tuple(robot.joint_names)
         self.kp, self.kv = float(kp), float(kv)
         self.allowances = dict(allowances or {})
-        spec = mujoco.MjSpec.from_string(urdf_string(robot))
+        # urdf: the simulator's own copy (a change the planner does not know), or the planner's.
+        spec = mujoco.MjSpec.from_string(urdf or urdf_string(robot))
         spec.option.timestep = timestep
         spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
         spec.option.gravity = GRAVITY if gravity else (0.0, 0.0, 0.0)
