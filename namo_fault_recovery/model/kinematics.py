@@ -133,6 +133,9 @@ def forward_kinematics(robot: RobotModel, q: ArrayLike, arm: str = 'right') -> A
 
 def batch_forward(robot, q, arm):
     """Forward kinematics without input checks, for callers that already validated q."""
+    chains = getattr(robot, 'chains', None)
+    if chains is not None:        # a robot from a URDF profile: its compiled chain
+        return chains[arm].forward(q, robot.tool_length(arm))
     lead = q.shape[:-1]
     elbow, wrist, tip, palm = _chain(robot, q.reshape(-1, N_JOINTS),
                                      tool=robot.tool_length(arm))
@@ -145,6 +148,9 @@ def batch_forward(robot, q, arm):
 
 def shoulder_position(robot, arm='right'):
     """Return the shoulder position (mm): the origin of frame 1, which does not move."""
+    chains = getattr(robot, 'chains', None)
+    if chains is not None:
+        return chains[arm].shoulder.copy()
     y = -np.sin(robot.alpha_prev[0]) * robot.d[0]
     pos = np.array([robot.a_prev[0], y, np.cos(robot.alpha_prev[0]) * robot.d[0]])
     if robot.arms[arm].mirrored:
@@ -172,6 +178,10 @@ def forward_kinematics_jacobian(robot, q, arm='right'):
 
 
 def batch_forward_jacobian(robot, q, arm):
+    """:func:`forward_kinematics_jacobian` without input checks, on q of shape (N, 7)."""
+    chains = getattr(robot, 'chains', None)
+    if chains is not None:
+        return chains[arm].jacobian(q, robot.tool_length(arm))
     n = q.shape[0]
     axes = np.empty((n, N_JOINTS, 3))
     origins = np.empty((n, N_JOINTS, 3))

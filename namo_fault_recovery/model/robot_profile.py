@@ -59,6 +59,7 @@ class ProfileArm:
     expansion: tuple        # the staged-expansion joints (torso, waist)
     held: tuple             # the other chain joints, held at 0
     landmark_links: dict    # role -> link
+    marks: dict | None = None   # chain role -> link or (link, offset m), as compiled
 
 
 @dataclass(frozen=True)
@@ -154,7 +155,7 @@ def _compile_arm(tree, cfg, path, side):
                           f'{where}.joints; expected each joint in one role')
     held = tuple(j for j in chain.joint_names if j not in joints and j not in expansion)
     links = {role: (s if isinstance(s, str) else s[0]) for role, s in marks.items()}
-    return ProfileArm(side, chain, joints, expansion, held, links)
+    return ProfileArm(side, chain, joints, expansion, held, links, marks)
 
 
 def _check_shared(arms, shared, path):
