@@ -25,6 +25,9 @@ fits them to the URDF's ``<collision>`` geometry:
   pose clear it by :data:`REST_CLEARANCE_MM` (a torso mesh often includes the shoulder
   mounts, which the upper arms touch by design: adjacent links are not a collision).
 
+A profile's ``capsules`` key overrides fitted radii (mm); the torso radius given there
+is still capped by the arms at rest.
+
 Pairs: the checked pairs are :data:`.self_contact.PAIRS` (every segment against the
 torso and every right-left pair; the segments of one arm are adjacent and never
 checked); a two-handed gesture's reference defines its designed right-left contact
@@ -207,7 +210,14 @@ def fit_report(robot) -> FittedCapsules:
         for seg, r in arm.items():
             radii.setdefault(seg, []).append(r)
     values = {seg: max(r) for seg, r in radii.items()}
-    values.update(_fit_torso(np.vstack(torso_pts), rest, {**vars(default), **values}, notes))
+    for key, value in (robot.profile.capsules or {}).items():
+        if key in SEGMENTS:
+            notes.append(f'{key}: {value:g} mm from the profile (fitted '
+                         f'{values.get(key, getattr(default, key)):.1f} mm)')
+            values[key] = value
+    given = (robot.profile.capsules or {}).get('torso_radius')
+    known = {**vars(default), **values, **({} if given is None else {'torso_given': given})}
+    values.update(_fit_torso(np.vstack(torso_pts), rest, known, notes))
     return FittedCapsules(CapsuleModel(**values), tuple(notes))
 
 
@@ -226,7 +236,7 @@ def _fit_torso(points, rest, radii, notes):
         return {'torso_radius': 0.0}
     centre = points[:, :2].mean(axis=0)
     radial = np.linalg.norm(points[:, :2] - centre, axis=1)
-    fitted = radius = float(np.quantile(radial, COVER))
+    fitted = radius = float(radii.get('torso_given', np.quantile(radial, COVER)))
     for _ in range(4):      # the ends move with the radius: cap, re-place, cap again
         axis = _torso_axis(points, centre, radius)
         clear = [float(segment_distance(np.asarray(ends[i]), np.asarray(ends[i + 1]),

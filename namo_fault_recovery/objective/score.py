@@ -66,7 +66,8 @@ class SimilarityScore:
 
     def __init__(self, robot: RobotModel, targets: Iterable[Target],
                  weights: ScoreWeights | None = None,
-                 reference_robot: RobotModel | None = None) -> None:
+                 reference_robot: RobotModel | None = None,
+                 reference_landmarks: tuple | None = None) -> None:
         targets = list(targets)
         if not targets:
             raise ValueError('SimilarityScore: expected at least one target, got none')
@@ -77,9 +78,14 @@ class SimilarityScore:
         ql = np.array([t.q_left for t in targets])
         # After a structure change (a tool) the candidates move on the changed robot but
         # the references stay those of the designed motion on the original one.
+        # Retargeting (another robot's gesture, scaled) gives the references as landmarks
+        # (right, left), one per target, instead of angles.
         reference_robot = reference_robot if reference_robot is not None else robot
-        self._ref_r = forward_kinematics(reference_robot, qr, 'right')
-        self._ref_l = forward_kinematics(reference_robot, ql, 'left')
+        if reference_landmarks is not None:
+            self._ref_r, self._ref_l = reference_landmarks
+        else:
+            self._ref_r = forward_kinematics(reference_robot, qr, 'right')
+            self._ref_l = forward_kinematics(reference_robot, ql, 'left')
         self._arm_mask = np.array([[('right' in t.arms), ('left' in t.arms)] for t in targets],
                                   dtype=float)
         self._two = np.array([t.two_handed for t in targets], dtype=bool)
