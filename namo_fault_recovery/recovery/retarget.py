@@ -11,7 +11,8 @@ forward, z up (a humanoid's ``base_link`` convention, REP 103).  The target robo
 angles are then found with the engine's own objective: the similarity score against
 these scaled landmarks (:class:`~..objective.score.SimilarityScore` with
 ``reference_landmarks``) plus the capsule self-collision penalty, on the problem the
-keyframe search solves (:class:`~.keyframes.PoseProblem`), polished from many starts.
+keyframe search solves (:class:`~.keyframes.PoseProblem`), searched by the engine's
+bee colony with a larger budget (no deadline: this runs once, offline).
 Both arms are matched in every keyframe, the resting arm of a one-handed gesture to
 the source's resting arm, so that the library's resting pose is also the source's.
 A motion's later keyframes start from the keyframe before them and are drawn towards
@@ -28,11 +29,11 @@ from ..model.robot import ARMS
 from ..model.self_contact import designed_pairs
 from ..objective.collision import CollisionModel
 from ..objective.score import SimilarityScore, Target
-from ..optimize.base import Clock
-from ..optimize.polish import polish
+from ..optimize.base import Clock, minimize
+from ..optimize.registry import make_algorithm
 
-STARTS = 48             # random starts of a motion's first keyframe (plus the zero pose)
-LATER_STARTS = 8        # random starts of a later keyframe (plus the keyframe before)
+SOURCES = 64            # food sources of the engine's colony (its default preset has 8)
+CYCLES = 60             # colony cycles per keyframe (each source polished as the engine does)
 STAY_CLOSE = 1e-3       # per deg^2 away from the keyframe before (a motion's branch)
 
 
@@ -77,13 +78,13 @@ def _problem(target, scorer, checker, ids, starts, anchor=None):
                        x0=starts[:, 0])
 
 
-def _solve_keyframe(target, scorer, checker, k, starts, anchor, clock, maxiter):
-    """Polish ``starts`` (S, D) for target k; return the best (D,) and its objective."""
-    problem = _problem(target, scorer, checker, np.array([k]), starts[None],
+def _solve_keyframe(target, scorer, checker, k, start, anchor, seed):
+    """Search keyframe k with the engine's colony from ``start`` (D,); return the best x."""
+    problem = _problem(target, scorer, checker, np.array([k]), start[None, None],
                        None if anchor is None else anchor[None])
-    x, f = polish(problem, problem.clip(starts[None]), clock, maxiter=maxiter)
-    best = int(np.argmin(f[0]))
-    return x[0, best], float(f[0, best])
+    algo = make_algorithm('abc', 'default', n_sources=SOURCES, max_cycles=CYCLES)
+    res = minimize(problem, algo, clock=Clock(None), seed=seed)
+    return np.atleast_2d(res.x)[0]
 
 
 def _designed_allowance(checker, targets, ref_r, ref_l):
@@ -94,7 +95,7 @@ def _designed_allowance(checker, targets, ref_r, ref_l):
                                checker.radius_sum[None, :])
 
 
-def retarget_gesture(source, target, gesture, rng, maxiter=200):
+def retarget_gesture(source, target, gesture, rng):
     """Return the :class:`RetargetedGesture` of one gesture of ``source`` on ``target``."""
     qr = np.array([kf.right for kf in gesture.keyframes])
     ql = np.array([kf.left for kf in gesture.keyframes])
@@ -109,14 +110,11 @@ def retarget_gesture(source, target, gesture, rng, maxiter=200):
     _designed_allowance(checker, targets, ref_r, ref_l)
     low = np.concatenate([target.arms[s].lower for s in ARMS])
     high = np.concatenate([target.arms[s].upper for s in ARMS])
-    clock = Clock(None)
     out, prev = [], None
     for k in range(len(qr)):
-        count = STARTS if prev is None else LATER_STARTS
-        starts = rng.uniform(low, high, (count, 2 * n))
-        first = np.zeros(2 * n) if prev is None else prev
-        starts = np.vstack((np.clip(first, low, high), starts))
-        prev, _ = _solve_keyframe(target, scorer, checker, k, starts, prev, clock, maxiter)
+        start = np.clip(np.zeros(2 * n) if prev is None else prev, low, high)
+        prev = _solve_keyframe(target, scorer, checker, k, start, prev,
+                               int(rng.integers(2 ** 63)))
         out.append(prev)
     x = np.array(out)
     right, left = x[:, :n], x[:, n:]
