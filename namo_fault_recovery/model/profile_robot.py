@@ -23,8 +23,8 @@ whenever a robot has ``chains``.
   is False), so a library for such a robot gives each arm its own angles.
 """
 
-from dataclasses import dataclass, field, replace
 import copy
+from dataclasses import dataclass, field, replace
 import os
 
 import numpy as np
@@ -64,7 +64,7 @@ class ArmChain:
             offset = np.asarray(tip.pos, dtype=float)
             reach = float(np.linalg.norm(offset))
             if reach < 1e-9:
-                raise ValueError(f'{self.side} arm: the fingertip is at its joint\'s origin; '
+                raise ValueError(f"{self.side} arm: the fingertip is at its joint's origin; "
                                  'expected a fingertip offset to lengthen with a tool')
             found = copy.copy(self.chain)
             found.landmarks = dict(self.chain.landmarks)
@@ -153,8 +153,9 @@ def robot_from_profile(profile: RobotProfile | str | os.PathLike,
     chains = {side: _reduced_arm(profile, side) for side in ARMS}
     counts = {chains[side].n_joints for side in ARMS}
     if len(counts) != 1:
-        raise ConfigError(profile.source, 'arms', f'the arms have {" and ".join(map(str, sorted(counts)))} '
-                          'joints; the recovery engine takes arms of one joint count for now')
+        raise ConfigError(profile.source, 'arms',
+                          f'the arms have {" and ".join(map(str, sorted(counts)))} joints; the '
+                          'recovery engine takes arms of one joint count for now')
     arms = {side: ArmModel(side, chains[side].chain.joint_names,
                            chains[side].chain.lower.copy(), chains[side].chain.upper.copy(),
                            mirrored=False) for side in ARMS}

@@ -193,7 +193,7 @@ def _fit_arm(robot, side, urdf, urdf_dir, notes):
             continue
         radii[seg] = float(np.quantile(mine, COVER))
         notes.append(f'{side} {seg}: {radii[seg]:.1f} mm from {len(mine)} points')
-    shapes = sorted(set(k.split(': ')[1] for k in kinds))
+    shapes = sorted({k.split(': ')[1] for k in kinds})
     notes.append(f'{side} arm: points of {", ".join(shapes) or "nothing"} on '
                  f'{len(links)} links ({", ".join(links)})')
     return radii, ends, torso

@@ -137,4 +137,3 @@ def gesture_score(target, gesture_result, gesture, source):
                for k in range(len(qr))]
     scorer = SimilarityScore(target, targets, reference_landmarks=ref)
     return scorer(gesture_result.right, gesture_result.left, np.arange(len(qr)))
-
