@@ -85,3 +85,45 @@ def register(sub):
     p.add_argument('--seed', type=int, default=0, help='seed of the random starts (0)')
     p.set_defaults(func=cmd_retarget)
     return p
+
+
+def cmd_bench_robots(args, out):
+    """Run ``bench robots`` (optima with ``--update-optima``, then quality); return 0."""
+    import yaml
+    from ..benchmarks import robots
+    if args.seeds < 1 or args.optima_seeds < 1:
+        raise UsageError(f'--seeds/--optima-seeds: expected integers >= 1, got '
+                         f'{args.seeds}/{args.optima_seeds}')
+    joints = args.joints.split(',') if args.joints else None
+    if args.update_optima:
+        doc = robots.generate_optima(out, args.robot, seeds=args.optima_seeds, joints=joints)
+        path = robots.optima_path(args.robot)
+        path.write_text(yaml.safe_dump(doc, sort_keys=False), encoding='utf-8')
+        out.write(f'wrote {path}\n')
+    if not args.skip_quality:
+        try:
+            best = robots.load_optima(args.robot)
+        except FileNotFoundError as exc:
+            raise UsageError(f'no best-known optima for {args.robot} ({exc}); run with '
+                             '--update-optima first') from None
+        robots.run_quality(out, args.robot, best, seeds=args.seeds, joints=joints,
+                           deadline=args.deadline)
+    return 0
+
+
+def register_bench(bench_sub):
+    """Add ``bench robots`` to the ``bench`` command's subcommands."""
+    p = bench_sub.add_parser('robots', help='every single fault x the four gestures on '
+                                            'Talos or TIAGo++ at the deadline')
+    p.add_argument('--robot', required=True, choices=['talos', 'tiago_dual'])
+    p.add_argument('--seeds', type=int, default=10, help='seeds per fault (default 10)')
+    p.add_argument('--update-optima', action='store_true',
+                   help='recompute the best-known optima first (no deadline)')
+    p.add_argument('--optima-seeds', type=int, default=16,
+                   help='seeds per fault of the optima (default 16)')
+    p.add_argument('--skip-quality', action='store_true', help='only the optima')
+    p.add_argument('--joints', default=None, help='comma-separated joints to fail (all)')
+    p.add_argument('--deadline', type=float, default=None,
+                   help="seconds (default: the node's 1 s)")
+    p.set_defaults(func=cmd_bench_robots)
+    return p

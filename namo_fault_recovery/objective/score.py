@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..model.gestures import Gesture
-from ..model.kinematics import (ArmLandmarks, as_joint_array, batch_forward,
+from ..model.kinematics import (arm_joint_count, ArmLandmarks, as_joint_array, batch_forward,
                                 batch_forward_jacobian, forward_kinematics, take_landmarks)
 from ..model.robot import RobotModel
 from ..model.weights import ARM_COMPONENTS, COMPONENTS, ScoreWeights
@@ -72,6 +72,7 @@ class SimilarityScore:
         if not targets:
             raise ValueError('SimilarityScore: expected at least one target, got none')
         self.robot = robot
+        self._n = arm_joint_count(robot)       # joints per arm (7 on Namo)
         self.targets = targets
         self.weights = weights if weights is not None else ScoreWeights()
         qr = np.array([t.q_right for t in targets])
@@ -148,9 +149,9 @@ class SimilarityScore:
             raise ValueError(f'target: expected indices in 0..{len(self.targets) - 1}, '
                              f'got {target!r}')
         if not isinstance(q_right, ArmLandmarks):
-            q_right = np.atleast_2d(as_joint_array(q_right, 'q_right'))
+            q_right = np.atleast_2d(as_joint_array(q_right, 'q_right', self._n))
         if q_left is not None and not isinstance(q_left, ArmLandmarks):
-            q_left = np.atleast_2d(as_joint_array(q_left, 'q_left'))
+            q_left = np.atleast_2d(as_joint_array(q_left, 'q_left', self._n))
         rows = [target.size]
         for q in (q_right, q_left):
             if q is not None and not isinstance(q, ArmLandmarks):
@@ -226,7 +227,7 @@ class SimilarityScore:
         lms, jacs = self._landmarks_and_jacobians(q_right, q_left, target)
         w = self._w[target]
         total = np.zeros(n)
-        grads = {side: np.zeros((n, 7)) for side in ('right', 'left')}
+        grads = {side: np.zeros((n, self._n)) for side in ('right', 'left')}
         for k, side in enumerate(('right', 'left')):
             if k == 1 and not self._uses_left:
                 break
@@ -288,7 +289,7 @@ class SimilarityScore:
         terms[:, 3] = np.degrees(2.0 * np.arcsin(half))
         if jac is None:
             return terms, None
-        d_terms = np.empty((target.shape[0], ARM_COMPONENTS, 7))
+        d_terms = np.empty((target.shape[0], ARM_COMPONENTS, jac.axes.shape[1]))
         unit = diff / np.where(dist > 0, dist, 1.0)[..., None]
         d_terms[:, :3] = np.einsum('nlc,nlic->nli', unit, jac.positions)
         # d|R - Rr|_F / dq_i = -tr([z_i]x R Rr^T) / |R - Rr|_F = -z_i . v / |R - Rr|_F.
