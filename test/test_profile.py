@@ -176,7 +176,7 @@ def test_bench_fk_prints_the_ratio_and_agrees(tmp_path):
     argv = ['bench', 'fk', '--batch', '50', '--rounds', '3', '--out', str(tmp_path)]
     assert cli_main(argv, out=out) == 0
     text = out.getvalue()
-    assert 'FK ratio' in text and 'URDF / DH' in text
+    assert 'fk ratio' in text and 'fk (engine robot) ratio' in text and 'URDF / DH' in text
     doc = yaml.safe_load((tmp_path / 'fk.json').read_text())
     assert doc['max_difference_mm'] < 1e-5 and doc['fk']['ratio'] > 0
 

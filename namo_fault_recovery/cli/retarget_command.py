@@ -50,12 +50,13 @@ def cmd_retarget(args, out):
     from ..model.gestures import load_library
     from ..model.profile_robot import robot_from_profile
     from ..model.robot import load_robot
-    from ..recovery.retarget import retarget_gesture
+    from ..recovery.retarget import rest_palms, retarget_gesture
     source = load_robot(args.robot_file)
     library = load_library(source, args.source)
     target = robot_from_profile(args.to)
     rng = np.random.default_rng(args.seed)
-    result = [retarget_gesture(source, target, g, rng) for g in library]
+    rest = rest_palms(source, target, rng)
+    result = [retarget_gesture(source, target, g, rng, rest) for g in library]
     text = library_text(result, library, args.to, args.source)
     for g in result:
         out.write(f'{g.name}: score {np.mean(g.scores):.2f} against the scaled reference'
