@@ -18,6 +18,7 @@ from namo_fault_recovery.model.robot_capsules import fit_report
 from namo_fault_recovery.model.self_contact import pair_distances, radius_sums
 from namo_fault_recovery.optimize.base import Clock
 from namo_fault_recovery.recovery.engine import recover
+from namo_fault_recovery.recovery import retarget
 from namo_fault_recovery.recovery.retarget import arm_length, retarget_gesture
 from namo_fault_recovery.recovery.settings import RecoverySettings
 import numpy as np
@@ -116,7 +117,8 @@ def test_fitted_capsules_come_from_the_urdf_and_clear_at_rest(others, name):
     assert np.all(d >= radius_sums(cap) - 1e-6)        # nothing collides at the zero pose
 
 
-def test_retargeting_namo_to_itself_reaches_the_reference(namo):
+def test_retargeting_namo_to_itself_reaches_the_reference(namo, monkeypatch):
+    monkeypatch.setattr(retarget, 'RESTARTS', 2)     # one from the zero pose, one own
     dh, urdf = namo
     assert arm_length(urdf, 'right') == pytest.approx(arm_length(dh, 'right'))
     wai = load_library(dh)['wai']
@@ -136,3 +138,43 @@ def test_shipped_libraries_load_and_recover_a_fault(others, name):
         assert gesture.score_after <= gesture.score_before + 1e-9
         if 'right' not in before.arms:
             assert gesture.score_after == pytest.approx(0.0, abs=1e-9)
+
+
+def test_the_model_fingerprint_tells_the_robots_apart(namo, others):
+    from namo_fault_recovery.benchmarks.common import model_fingerprint
+    dh, urdf = namo
+    library = load_library(dh)
+    prints = {model_fingerprint(dh, library), model_fingerprint(urdf, library)}
+    for robot in others.values():
+        prints.add(model_fingerprint(robot, load_library(
+            robot, ROBOTS / f'{robot.name}_gestures.yaml')))
+    assert len(prints) == 4
+
+
+def test_retarget_command_writes_a_library_that_loads(tmp_path, monkeypatch):
+    monkeypatch.setattr(retarget, 'RESTARTS', 2)
+    import io
+    from namo_fault_recovery.cli.main import main as cli_main
+    source = tmp_path / 'wai.yaml'
+    source.write_text('units: deg\ngestures:\n  - name: wai\n    arms: [right, left]\n'
+                      '    two_handed: true\n    keyframes:\n      - time_from_start: 2.0\n'
+                      '        right: [30, 5, -45, 90, -10, -45, 45]\n        left: mirror\n')
+    out, target = io.StringIO(), tmp_path / 'namo_wai.yaml'
+    argv = ['retarget', '--from', str(source), '--to', str(NAMO), '--out', str(target)]
+    assert cli_main(argv, out=out) == 0
+    text = out.getvalue()
+    assert 'wai: score' in text and 'it loads on namo' in text
+    score = float(text.split('wai: score ')[1].split()[0])
+    assert score < 1.0                                  # Namo to itself: the reference
+    assert load_library(robot_from_profile(NAMO), target)['wai'].two_handed
+
+
+def test_bench_robots_prints_the_deadline_figures(tmp_path):
+    import io
+    from namo_fault_recovery.cli.main import main as cli_main
+    out, optima = io.StringIO(), tmp_path / 'talos_best_known.yaml'
+    argv = ['bench', 'robots', '--robot', 'talos', '--joints', 'arm_right_4_joint',
+            '--seeds', '1', '--update-optima', '--optima-seeds', '1', '--optima', str(optima)]
+    assert cli_main(argv, out=out) == 0
+    text = out.getvalue()
+    assert optima.is_file() and 'solve p95 ms' in text and 'all within 1%' in text

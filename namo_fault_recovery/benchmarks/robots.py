@@ -88,9 +88,9 @@ def generate_optima(out, name, seeds=16, joints=None):
             'fault_sets': cases}
 
 
-def load_optima(name):
+def load_optima(name, path=None):
     """Return a robot's stored best-known document, or raise FileNotFoundError."""
-    path = optima_path(name)
+    path = optima_path(name) if path is None else path
     with open(path, encoding='utf-8') as handle:
         return yaml.safe_load(handle)
 

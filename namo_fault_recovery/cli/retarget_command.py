@@ -19,13 +19,21 @@ import yaml
 from .common import UsageError
 
 
-def library_text(result, library, profile_path, source_path):
+def _degrees(robot, side, q):
+    """Return angles (rad) in degrees to 4 decimals, rounded inside the joints' limits."""
+    arm = robot.arms[side]
+    lo = [math.ceil(math.degrees(v) * 1e4) / 1e4 for v in arm.lower]
+    hi = [math.floor(math.degrees(v) * 1e4) / 1e4 for v in arm.upper]
+    return [min(max(round(math.degrees(v), 4), a), b) for v, a, b in zip(q, lo, hi)]
+
+
+def library_text(result, library, profile_path, source_path, robot):
     """Return the YAML text of a retargeted library (angles in degrees)."""
     gestures = []
     for gesture, done in zip(library, result):
         frames = [{'time_from_start': float(kf.time_from_start),
-                   'right': [round(math.degrees(v), 4) for v in done.right[k]],
-                   'left': [round(math.degrees(v), 4) for v in done.left[k]]}
+                   'right': _degrees(robot, 'right', done.right[k]),
+                   'left': _degrees(robot, 'left', done.left[k])}
                   for k, kf in enumerate(gesture.keyframes)]
         entry = {'name': gesture.name}
         if gesture.description:
@@ -57,7 +65,7 @@ def cmd_retarget(args, out):
     rng = np.random.default_rng(args.seed)
     rest = rest_palms(source, target, rng)
     result = [retarget_gesture(source, target, g, rng, rest) for g in library]
-    text = library_text(result, library, args.to, args.source)
+    text = library_text(result, library, args.to, args.source, target)
     for g in result:
         out.write(f'{g.name}: score {np.mean(g.scores):.2f} against the scaled reference'
                   f'{" (a capsule pair still penetrates)" if g.collides.any() else ""}\n')
@@ -98,12 +106,12 @@ def cmd_bench_robots(args, out):
     joints = args.joints.split(',') if args.joints else None
     if args.update_optima:
         doc = robots.generate_optima(out, args.robot, seeds=args.optima_seeds, joints=joints)
-        path = robots.optima_path(args.robot)
+        path = Path(args.optima) if args.optima else robots.optima_path(args.robot)
         path.write_text(yaml.safe_dump(doc, sort_keys=False), encoding='utf-8')
         out.write(f'wrote {path}\n')
     if not args.skip_quality:
         try:
-            best = robots.load_optima(args.robot)
+            best = robots.load_optima(args.robot, args.optima)
         except FileNotFoundError as exc:
             raise UsageError(f'no best-known optima for {args.robot} ({exc}); run with '
                              '--update-optima first') from None
@@ -123,6 +131,8 @@ def register_bench(bench_sub):
     p.add_argument('--optima-seeds', type=int, default=16,
                    help='seeds per fault of the optima (default 16)')
     p.add_argument('--skip-quality', action='store_true', help='only the optima')
+    p.add_argument('--optima', default=None, metavar='FILE',
+                   help='the best-known file (default config/robots/<robot>_best_known.yaml)')
     p.add_argument('--joints', default=None, help='comma-separated joints to fail (all)')
     p.add_argument('--deadline', type=float, default=None,
                    help="seconds (default: the node's 1 s)")

@@ -18,8 +18,9 @@ Both arms are matched in every keyframe, the resting arm of a one-handed gesture
 the source's resting arm, so that the library's resting pose is also the source's.
 A motion's later keyframes start from the keyframe before them and are drawn towards
 it (the engine's ``stay_close``), so that a motion stays on one branch.  Of
-:data:`RESTARTS` such searches per gesture, the one with the fewest capsule contacts,
-then the lowest summed score, is kept.
+:data:`RESTARTS` such searches per gesture (every other one starting each keyframe from
+the source's own angles, clipped, when the arms have as many joints), the one with the
+fewest capsule contacts, then the lowest summed score, is kept.
 """
 
 from dataclasses import dataclass
@@ -38,6 +39,7 @@ from ..optimize.registry import make_algorithm
 
 SOURCES = 64            # food sources of the engine's colony (its default preset has 8)
 CYCLES = 60             # colony cycles per keyframe (each source polished as the engine does)
+REST_PALM_WEIGHT = 0.05  # the palm's weight when the rest pose is matched
 RESTARTS = 4            # whole searches per gesture; the best (fewest contacts, then score)
 STAY_CLOSE = 1e-3       # per deg^2 away from the keyframe before (a motion's branch)
 
@@ -128,18 +130,25 @@ def rest_palms(source, target, rng) -> dict:
 
     Two robots' zero poses need not agree (TIAGo++'s arms point sideways, Namo's hang):
     a palm keeps its rotation away from the rest pose, so the target's rest is found
-    first, matching the source's zero-pose elbow, wrist and fingertip (palm weight 0).
+    first, matching the source's zero-pose elbow, wrist and fingertip; the palm, at
+    :data:`REST_PALM_WEIGHT`, only picks the roll of an arm that positions leave free
+    (a hanging straight arm), the one nearest the target's own zero pose.
     """
     zero = np.zeros((1, len(source.arms['right'].joint_names)))
-    x = _search(source, target, zero, zero, False, ScoreWeights(palm=0.0), 'rest', rng,
-                {'right': np.eye(3), 'left': np.eye(3)})[0]
+    x = _search(source, target, zero, zero, False, ScoreWeights(palm=REST_PALM_WEIGHT),
+                'rest', rng, {'right': None, 'left': None})[0]
     n = len(target.arms['right'].joint_names)
     return {side: forward_kinematics(target, x[0, k * n:(k + 1) * n], side).palm
             for k, side in enumerate(ARMS)}
 
 
-def _search(source, target, qr, ql, two_handed, weights, name, rng, rest):
-    """Return (x (K, 2n), scorer, checker) of the keyframes (qr, ql) of ``source``."""
+def _search(source, target, qr, ql, two_handed, weights, name, rng, rest, own=False):
+    """
+    Return (x (K, 2n), scorer, checker) of the keyframes (qr, ql) of ``source``.
+
+    Each keyframe starts from the one before (the first from the zero pose, or with
+    ``own`` from the source's angles, clipped: arms of one design often share them).
+    """
     ref_r = scaled_landmarks(source, target, 'right', qr, rest['right'])
     ref_l = scaled_landmarks(source, target, 'left', ql, rest['left'])
     n = len(target.arms['right'].joint_names)
@@ -153,7 +162,11 @@ def _search(source, target, qr, ql, two_handed, weights, name, rng, rest):
     high = np.concatenate([target.arms[s].upper for s in ARMS])
     out, prev = [], None
     for k in range(len(qr)):
-        start = np.clip(np.zeros(2 * n) if prev is None else prev, low, high)
+        if own:
+            first = np.concatenate((qr[k], ql[k]))
+        else:
+            first = np.zeros(2 * n) if prev is None else prev
+        start = np.clip(first, low, high)
         prev = _solve_keyframe(target, scorer, checker, k, start, prev,
                                int(rng.integers(2 ** 63)))
         out.append(prev)
@@ -172,9 +185,11 @@ def retarget_gesture(source, target, gesture, rng, rest=None):
     n = len(target.arms['right'].joint_names)
     ids = np.arange(len(qr))
     best = None
-    for _ in range(RESTARTS):       # the colony's luck: keep the best of a few searches
+    same = qr.shape[1] == n
+    for k in range(RESTARTS):       # the colony's luck: keep the best of a few searches
         x, scorer, checker = _search(source, target, qr, ql, gesture.two_handed,
-                                     gesture.weights, gesture.name, rng, rest)
+                                     gesture.weights, gesture.name, rng, rest,
+                                     own=same and k % 2 == 1)
         right, left = x[:, :n], x[:, n:]
         lm_r = forward_kinematics(target, right, 'right')
         lm_l = forward_kinematics(target, left, 'left')
