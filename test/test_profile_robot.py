@@ -17,8 +17,8 @@ from namo_fault_recovery.model.robot import load_robot
 from namo_fault_recovery.model.robot_capsules import fit_report
 from namo_fault_recovery.model.self_contact import pair_distances, radius_sums
 from namo_fault_recovery.optimize.base import Clock
-from namo_fault_recovery.recovery.engine import recover
 from namo_fault_recovery.recovery import retarget
+from namo_fault_recovery.recovery.engine import recover
 from namo_fault_recovery.recovery.retarget import arm_length, retarget_gesture
 from namo_fault_recovery.recovery.settings import RecoverySettings
 import numpy as np

@@ -31,8 +31,8 @@ from .keyframes import PoseProblem
 from ..model.kinematics import ArmLandmarks, forward_kinematics, shoulder_position
 from ..model.robot import ARMS
 from ..model.self_contact import designed_pairs
-from ..objective.collision import CollisionModel
 from ..model.weights import ScoreWeights
+from ..objective.collision import CollisionModel
 from ..objective.score import SimilarityScore, Target
 from ..optimize.base import Clock, minimize
 from ..optimize.registry import make_algorithm
@@ -199,4 +199,3 @@ def retarget_gesture(source, target, gesture, rng, rest=None):
         if best is None or key < best[0]:
             best = (key, RetargetedGesture(gesture.name, right, left, scores, hits))
     return best[1]
-
