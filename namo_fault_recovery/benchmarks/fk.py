@@ -7,8 +7,9 @@ loads it, the URDF one compiled from the URDF generated from that file
 ``batch`` configurations through both arms of each model (the chains themselves, and
 the engine's robot built from the profile through :mod:`..model.kinematics`, the path
 the score and the search take), back to back in alternating order, so that a change
-in machine load hits both; the figure is the median of the rounds' own URDF / DH ratios (target: <= 1.1 for a batch of 1,000), printed beside the
-ratio of the best times.  The Jacobians are timed the same way, and the largest
+in machine load hits both; the figure is the median of the rounds' own URDF / DH
+ratios (target: <= 1.1 for a batch of 1,000), printed beside the ratio of the best
+times.  The Jacobians are timed the same way, and the largest
 difference between the two models' landmarks is printed (they are the same kinematics).
 """
 
