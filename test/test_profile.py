@@ -135,18 +135,19 @@ def test_the_template_of_namo_is_its_packaged_profile():
                                 f'{s}_arm_fingertip' for s in ('right', 'left')]
 
 
-@pytest.mark.parametrize('profile, urdf, edited', [
+@pytest.mark.parametrize('profile, urdf, edited, top', [
     (TALOS, TALOS_URDF, {('right', 'tip'), ('left', 'tip'), ('right', 'landmarks'),
-                         ('left', 'landmarks')}),
-    (TIAGO, TIAGO_URDF, set()),
+                         ('left', 'landmarks')}, {'capsules': {'upper_arm': 100}}),
+    (TIAGO, TIAGO_URDF, set(), {}),
 ])
-def test_shipped_profiles_are_the_template_plus_the_readme_edits(profile, urdf, edited):
+def test_shipped_profiles_are_the_template_plus_the_readme_edits(profile, urdf, edited, top):
     template = yaml.safe_load(guess_profile(
         load_urdf_tree(distribution_file('example-robot-data', urdf)), 'x.urdf').text)
     shipped = yaml.safe_load(profile.read_text())
     assert shipped['urdf'] == {'file': urdf, 'distribution': 'example-robot-data'}
     assert {k: v for k, v in template.items() if k not in ('urdf', 'arms')} == \
-        {k: v for k, v in shipped.items() if k not in ('urdf', 'arms')}
+        {k: v for k, v in shipped.items() if k not in ('urdf', 'arms') and k not in top}
+    assert {k: shipped[k] for k in top} == top
     guessed, kept = _arms(template), _arms(shipped)
     differ = {(side, key) for side in kept for key in kept[side]
               if kept[side][key] != guessed[side][key]}
@@ -175,7 +176,7 @@ def test_bench_fk_prints_the_ratio_and_agrees(tmp_path):
     argv = ['bench', 'fk', '--batch', '50', '--rounds', '3', '--out', str(tmp_path)]
     assert cli_main(argv, out=out) == 0
     text = out.getvalue()
-    assert 'FK ratio' in text and 'URDF / DH' in text
+    assert 'fk ratio' in text and 'fk (engine robot) ratio' in text and 'URDF / DH' in text
     doc = yaml.safe_load((tmp_path / 'fk.json').read_text())
     assert doc['max_difference_mm'] < 1e-5 and doc['fk']['ratio'] > 0
 

@@ -422,13 +422,18 @@ def model_fingerprint(robot, library, weights=None):
     from ..objective.score import ScoreWeights
     weights = weights if weights is not None else ScoreWeights()
     h = hashlib.sha256()
-    for arr in (robot.theta_offset, robot.d, robot.a_prev, robot.alpha_prev,
-                robot.end_effector):
-        h.update(np.round(np.asarray(arr, dtype=float), 9).tobytes())
+    profile_robot = getattr(robot, 'chains', None) is not None
+    if profile_robot:                   # a robot from a URDF profile: its compiled chains
+        h.update(robot.geometry_key())
+    else:
+        for arr in (robot.theta_offset, robot.d, robot.a_prev, robot.alpha_prev,
+                    robot.end_effector):
+            h.update(np.round(np.asarray(arr, dtype=float), 9).tobytes())
     for side in ARMS:
         h.update(np.round(robot.arms[side].lower, 9).tobytes())
         h.update(np.round(robot.arms[side].upper, 9).tobytes())
-    h.update(repr((robot.elbow_frame, robot.wrist_frame)).encode())
+    if not profile_robot:
+        h.update(repr((robot.elbow_frame, robot.wrist_frame)).encode())
     for g in library:
         h.update(repr((g.name, g.arms, g.two_handed)).encode())
         for kf in g.keyframes:

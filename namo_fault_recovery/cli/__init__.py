@@ -17,6 +17,8 @@ The commands parse their options and call the package: the benchmarks in
 - :mod:`.player_commands`: ``play``, ``demo-play`` and ``bench detection``, around
   ``gesture_player``;
 - :mod:`.urdf`: ``urdf``, Namo's URDF from the robot file;
+- :mod:`.retarget_command`: ``retarget``, a gesture library moved to another robot's
+  profile;
 - :mod:`.profile_command`: ``profile``, a template recovery profile guessed from a
   URDF;
 - :mod:`.precompute`: ``precompute``, the contingency table built offline;

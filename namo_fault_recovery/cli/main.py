@@ -270,6 +270,9 @@ def build_parser():
     settings_command.register(sub)           # settings (the files that list them)
     from . import profile_command
     profile_command.register(sub)            # profile (a template from a URDF)
+    from . import retarget_command
+    retarget_command.register(sub)           # retarget (a library for another robot)
+    retarget_command.register_bench(bench_sub)   # bench robots
     profile_command.register_bench(bench_sub)    # bench fk
     return parser
 

@@ -186,7 +186,8 @@ def _refuse(tree, joint, base, tip, where):
 
 
 def compile_chain(tree: UrdfTree, base: str, tip: str, landmarks: dict | None = None,
-                  length_scale: float = 1.0, where: str = '') -> 'KinematicChain':
+                  length_scale: float = 1.0, where: str = '',
+                  locked: tuple = ()) -> 'KinematicChain':
     """
     Compile the chain ``base`` -> ``tip`` of ``tree``; raise ChainError if it cannot.
 
@@ -194,19 +195,22 @@ def compile_chain(tree: UrdfTree, base: str, tip: str, landmarks: dict | None = 
     ``(link, offset)`` with the offset in metres in that link's frame; each link must be
     on the chain or fixed to one of its links.  ``length_scale`` converts metres to the
     chain's length unit (1000 for millimetres).  ``where`` prefixes the messages.
+    The joints named in ``locked`` are held at 0 and folded like fixed joints (a
+    reduced chain, as Pinocchio's ``buildReducedModel``): the chain moves only the
+    others, at no cost for the held ones.
     """
     joints = tree.path(base, tip, where)
     compiler = ChainCompiler(length_scale)
     compiler.mark(base)
     for joint in joints:
-        if joint.kind == 'fixed':
+        if joint.kind == 'fixed' or (joint.movable and joint.name in locked):
             compiler.add_fixed(joint.origin)
         elif joint.movable:
             compiler.add_joint(joint)
         else:
             _refuse(tree, joint, base, tip, where)
         compiler.mark(joint.child)
-    movable = [j for j in joints if j.kind != 'fixed']
+    movable = [j for j in joints if j.kind != 'fixed' and j.name not in locked]
     if not movable:
         raise ChainError(tree.source, None, f'{where + ": " if where else ""}the chain '
                          f'{base} -> {tip} has no revolute or continuous joint; expected '
@@ -284,6 +288,17 @@ class KinematicChain:
         rot, pos = compiler.init
         self._init = (tuple(rot[:, k].copy() for k in range(3)), pos.copy())
         self._frames = {link: (s, c) for link, (s, c) in compiler.link_frames.items()}
+
+    def describe(self) -> tuple:
+        """Return the compiled constants (steps, offsets, signs, landmarks) as plain data."""
+        rounded = (lambda a: tuple(np.round(np.asarray(a, dtype=float), 9).ravel().tolist()))
+        marks = tuple((role, m.link, m.state, None if m.rot is None else rounded(m.rot),
+                       rounded(m.pos)) for role, m in sorted(self.landmarks.items()))
+        steps = tuple(tuple(round(v, 9) for v in vars(st).values()) for st in self._steps)
+        return (steps, rounded(self._offsets),
+                None if self._signs is None else rounded(self._signs),
+                rounded(self._init[1]), tuple(rounded(c) for c in self._init[0]),
+                rounded(self.lower), rounded(self.upper), marks)
 
     @property
     def n_joints(self) -> int:
@@ -372,6 +387,10 @@ class KinematicChain:
                   for r in LANDMARK_ROLES[:3]]
         palm = marks['palm']
         return ArmLandmarks(*points, self._rotation(states[palm.state], palm.rot, n))
+
+    def frame_states(self) -> dict:
+        """Return {link: (state, 4x4 constant)}: the chain links and what carries each."""
+        return dict(self._frames)
 
     def link_frames(self, q, links=None) -> dict:
         """Return {link: (origin (N, 3), rotation (N, 3, 3))} of chain links (all: None)."""

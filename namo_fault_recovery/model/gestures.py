@@ -17,7 +17,7 @@ import re
 import numpy as np
 
 from . import yaml_checks as chk
-from .robot import ARMS, N_JOINTS, RobotModel
+from .robot import ARMS, RobotModel
 from .self_contact import reference_contact
 from .trajectory_csv import load_trajectory_csv
 from .weights import ScoreWeights
@@ -148,7 +148,7 @@ def _arm_angles(value, side, robot, scale, file, key, right_angles):
             raise ConfigError(file, f'{key}.{missing[0]}', 'missing key')
         angles = [chk.as_number(value[j], file, f'{key}.{j}') for j in names]
     else:
-        angles = chk.as_row(value, N_JOINTS, file, key)
+        angles = chk.as_row(value, len(names), file, key)
     q = np.array(angles) * scale
     arm = robot.arms[side]
     for i, angle in enumerate(q):
@@ -273,7 +273,8 @@ def _csv_keyframes(value, robot, scale, file, key):
                           'unknown key; expected file and units')
     csv_path = Path(file).parent / csv_name
     times, angles = load_trajectory_csv(csv_path, robot, scale)
-    return tuple(Keyframe(float(t), q[:N_JOINTS].copy(), q[N_JOINTS:].copy())
+    n = len(robot.arms['right'].joint_names)
+    return tuple(Keyframe(float(t), q[:n].copy(), q[n:].copy())
                  for t, q in zip(times, angles))
 
 

@@ -26,11 +26,17 @@ class ArmLandmarks(NamedTuple):
     palm: np.ndarray    # (..., 3, 3) rotation of frame 7 (palm orientation)
 
 
-def as_joint_array(q, name='q'):
-    """Return ``q`` as a float array of shape (..., 7), or raise ValueError naming it."""
+def arm_joint_count(robot) -> int:
+    """Return the number of joints per arm: 7 on Namo, the profile's on a URDF robot."""
+    chains = getattr(robot, 'chains', None)
+    return N_JOINTS if chains is None else len(robot.arms['right'].joint_names)
+
+
+def as_joint_array(q, name='q', n_joints=N_JOINTS):
+    """Return ``q`` as a float array of shape (..., n_joints), or raise ValueError naming it."""
     arr = np.asarray(q, dtype=float)
-    if arr.ndim == 0 or arr.shape[-1] != N_JOINTS:
-        raise ValueError(f'{name}: expected joint angles of shape (..., {N_JOINTS}), '
+    if arr.ndim == 0 or arr.shape[-1] != n_joints:
+        raise ValueError(f'{name}: expected joint angles of shape (..., {n_joints}), '
                          f'got shape {arr.shape}')
     if not np.all(np.isfinite(arr)):
         bad = np.argwhere(~np.isfinite(arr))[0]
@@ -127,12 +133,15 @@ def forward_kinematics(robot: RobotModel, q: ArrayLike, arm: str = 'right') -> A
     """
     if arm not in ARMS:
         raise ValueError(f'arm: expected one of {ARMS}, got {arm!r}')
-    q = as_joint_array(q)
+    q = as_joint_array(q, n_joints=arm_joint_count(robot))
     return batch_forward(robot, q, arm)
 
 
 def batch_forward(robot, q, arm):
     """Forward kinematics without input checks, for callers that already validated q."""
+    chains = getattr(robot, 'chains', None)
+    if chains is not None:        # a robot from a URDF profile: its compiled chain
+        return chains[arm].forward(q, robot.tool_length(arm))
     lead = q.shape[:-1]
     elbow, wrist, tip, palm = _chain(robot, q.reshape(-1, N_JOINTS),
                                      tool=robot.tool_length(arm))
@@ -145,6 +154,9 @@ def batch_forward(robot, q, arm):
 
 def shoulder_position(robot, arm='right'):
     """Return the shoulder position (mm): the origin of frame 1, which does not move."""
+    chains = getattr(robot, 'chains', None)
+    if chains is not None:
+        return chains[arm].shoulder.copy()
     y = -np.sin(robot.alpha_prev[0]) * robot.d[0]
     pos = np.array([robot.a_prev[0], y, np.cos(robot.alpha_prev[0]) * robot.d[0]])
     if robot.arms[arm].mirrored:
@@ -167,11 +179,15 @@ def forward_kinematics_jacobian(robot, q, arm='right'):
     ``z_i x (p - o_i)`` and the palm rotates about z_i.  For the mirrored left arm the
     axes become ``-M z_i`` (a reflection reverses the sense of rotation).
     """
-    q = np.atleast_2d(as_joint_array(q))
+    q = np.atleast_2d(as_joint_array(q, n_joints=arm_joint_count(robot)))
     return batch_forward_jacobian(robot, q, arm)
 
 
 def batch_forward_jacobian(robot, q, arm):
+    """:func:`forward_kinematics_jacobian` without input checks, on q of shape (N, 7)."""
+    chains = getattr(robot, 'chains', None)
+    if chains is not None:
+        return chains[arm].jacobian(q, robot.tool_length(arm))
     n = q.shape[0]
     axes = np.empty((n, N_JOINTS, 3))
     origins = np.empty((n, N_JOINTS, 3))

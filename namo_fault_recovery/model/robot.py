@@ -35,28 +35,16 @@ class ArmModel:
         return np.clip(q, self.lower, self.upper)
 
 
-@dataclass(frozen=True)
-class RobotModel:
+class RobotJoints:
     """
-    Namo's two arms, sharing one modified-DH chain (the left one mirrored).
+    What the engine asks of any robot's joints and tools, whatever its kinematics.
 
-    Lengths are in millimetres and angles in radians in memory, whatever the file used.
+    Shared by Namo's DH :class:`RobotModel` and a robot built from a recovery profile
+    (:class:`~namo_fault_recovery.model.profile_robot.ProfileRobot`); a subclass is a
+    frozen dataclass with ``arms`` ({side: ArmModel}) and ``tools`` fields.  A robot
+    with a ``chains`` field has its kinematics run by its compiled chains; without one
+    (the DH model) :mod:`.kinematics` runs its DH table.
     """
-
-    name: str
-    theta_offset: np.ndarray
-    d: np.ndarray
-    a_prev: np.ndarray
-    alpha_prev: np.ndarray
-    end_effector: np.ndarray
-    elbow_frame: int
-    wrist_frame: int
-    arms: dict
-    source: str = '<memory>'
-    capsules: CapsuleModel = CapsuleModel()
-    tools: tuple = ()   # ((arm, length mm), ...): tools that lengthen the hands
-    # Speed limit (rad/s) of joints 1..7, the same for both arms; used to time playback.
-    velocity_limits: tuple = tuple(math.radians(v) for v in DEFAULT_VELOCITY_LIMITS_DEG)
 
     def tool_length(self, side: str) -> float:
         """Return the length (mm) of the tool held by one arm's hand; 0 without one."""
@@ -86,12 +74,14 @@ class RobotModel:
 
     @property
     def joint_names(self) -> tuple:
-        """All 14 joint names, right arm first."""
-        return self.arms['right'].joint_names + self.arms['left'].joint_names
+        """All joint names, arm by arm in ARMS order (right first): 14 on Namo."""
+        return sum((self.arms[side].joint_names for side in ARMS if side in self.arms), ())
 
     def locate_joint(self, name: str) -> tuple[str, int]:
         """Return ``(arm, index)`` for a joint name, or raise KeyError naming the choices."""
         for side in ARMS:
+            if side not in self.arms:
+                continue
             names = self.arms[side].joint_names
             if name in names:
                 return side, names.index(name)
@@ -101,6 +91,30 @@ class RobotModel:
         """Return True if ``angle`` (rad) lies within the limits of that joint."""
         arm = self.arms[side]
         return arm.lower[index] - tol <= angle <= arm.upper[index] + tol
+
+
+@dataclass(frozen=True)
+class RobotModel(RobotJoints):
+    """
+    Namo's two arms, sharing one modified-DH chain (the left one mirrored).
+
+    Lengths are in millimetres and angles in radians in memory, whatever the file used.
+    """
+
+    name: str
+    theta_offset: np.ndarray
+    d: np.ndarray
+    a_prev: np.ndarray
+    alpha_prev: np.ndarray
+    end_effector: np.ndarray
+    elbow_frame: int
+    wrist_frame: int
+    arms: dict
+    source: str = '<memory>'
+    capsules: CapsuleModel = CapsuleModel()
+    tools: tuple = ()   # ((arm, length mm), ...): tools that lengthen the hands
+    # Speed limit (rad/s) of joints 1..7, the same for both arms; used to time playback.
+    velocity_limits: tuple = tuple(math.radians(v) for v in DEFAULT_VELOCITY_LIMITS_DEG)
 
 
 def parse_velocity_limits(data, path, angle_scale):

@@ -13,6 +13,7 @@ key, the link or joint, and what was expected.  The format::
     urdf: {file: talos_data/robots/talos_reduced.urdf, distribution: example-robot-data}
     shared: [torso_1_joint, torso_2_joint]
     velocity_limits: {}            # rad/s, joint -> limit, where the URDF has none
+    capsules: {upper_arm: 100}     # mm: radii that override the ones fitted to the URDF
     arms:
       right:
         base: base_link
@@ -45,7 +46,8 @@ from ..resources import distribution_file
 MM_PER_M = 1000.0
 ARM_JOINTS = (5, 8)          # the model takes 5 to 8 recovery joints per arm
 LANDMARKS = ('elbow', 'wrist', 'fingertip', 'palm')
-_TOP_KEYS = ('name', 'urdf', 'arms', 'shared', 'velocity_limits')
+_TOP_KEYS = ('name', 'urdf', 'arms', 'shared', 'velocity_limits', 'capsules')
+CAPSULE_KEYS = ('upper_arm', 'forearm', 'hand', 'torso_radius')
 _ARM_KEYS = ('base', 'tip', 'landmarks', 'joints', 'expansion')
 
 
@@ -59,6 +61,7 @@ class ProfileArm:
     expansion: tuple        # the staged-expansion joints (torso, waist)
     held: tuple             # the other chain joints, held at 0
     landmark_links: dict    # role -> link
+    marks: dict | None = None   # chain role -> link or (link, offset m), as compiled
 
 
 @dataclass(frozen=True)
@@ -71,6 +74,7 @@ class RobotProfile:
     arms: dict              # side -> ProfileArm
     shared: tuple
     velocity_limits: dict   # joint -> rad/s (the URDF's, or the profile's where it has none)
+    capsules: dict | None = None    # capsule radii (mm) that override the fitted ones
 
 
 def _check_keys(mapping, known, path, where):
@@ -154,7 +158,7 @@ def _compile_arm(tree, cfg, path, side):
                           f'{where}.joints; expected each joint in one role')
     held = tuple(j for j in chain.joint_names if j not in joints and j not in expansion)
     links = {role: (s if isinstance(s, str) else s[0]) for role, s in marks.items()}
-    return ProfileArm(side, chain, joints, expansion, held, links)
+    return ProfileArm(side, chain, joints, expansion, held, links, marks)
 
 
 def _check_shared(arms, shared, path):
@@ -219,4 +223,18 @@ def load_profile(path: str | os.PathLike, urdf: str | os.PathLike | None = None)
     shared = _names(data.get('shared', []), path, 'shared')
     _check_shared(arms, shared, path)
     return RobotProfile(str(data.get('name', tree.name)), str(path), tree, arms, shared,
-                        _velocity_limits(data, arms, tree, path))
+                        _velocity_limits(data, arms, tree, path), _capsules(data, path))
+
+
+def _capsules(data, path):
+    """Return the optional ``capsules`` key: radii (mm) overriding the fitted capsules."""
+    given = data.get('capsules') or {}
+    if not isinstance(given, dict):
+        raise ConfigError(path, 'capsules', f'expected radius names: mm, got {given!r}')
+    _check_keys(given, CAPSULE_KEYS, path, 'capsules.')
+    out = {}
+    for key, value in given.items():
+        out[key] = chk.as_number(value, path, f'capsules.{key}')
+        if out[key] < 0:
+            raise ConfigError(path, f'capsules.{key}', f'expected a radius >= 0 mm, got {value!r}')
+    return out

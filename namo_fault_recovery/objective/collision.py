@@ -19,7 +19,7 @@ Jacobians.
 import numpy as np
 
 from ..model.capsules import CapsuleModel
-from ..model.kinematics import forward_kinematics, shoulder_position
+from ..model.kinematics import arm_joint_count, forward_kinematics, shoulder_position
 from ..model.self_contact import (arm_segments, designed_pairs, PAIR_NAMES, PAIRS,
                                   radius_sums, segment_distance, SEGMENTS,
                                   TOLERANCE_MM)
@@ -42,8 +42,9 @@ class CollisionModel:
         self.torso = (np.array(self.capsules.torso_top, dtype=float),
                       np.array(self.capsules.torso_bottom, dtype=float))
         self.radius_sum = radius_sums(self.capsules)
-        qr = np.array([t.q_right for t in targets]).reshape(-1, 7)
-        ql = np.array([t.q_left for t in targets]).reshape(-1, 7)
+        n = arm_joint_count(robot)
+        qr = np.array([t.q_right for t in targets]).reshape(-1, n)
+        ql = np.array([t.q_left for t in targets]).reshape(-1, n)
         ref = self.distances(forward_kinematics(robot, qr, 'right'),
                              forward_kinematics(robot, ql, 'left'))[0]
         designed = np.array([designed_pairs(t.two_handed) for t in targets],
@@ -104,7 +105,7 @@ class CollisionModel:
             zeros = np.zeros_like(jac.positions[:, 0])
             ends = np.stack((zeros, jac.positions[:, 0], jac.positions[:, 1],
                              jac.positions[:, 2]), axis=1)                  # (N, 4, 7, 3)
-            grad = np.zeros((d.shape[0], 7))
+            grad = np.zeros((d.shape[0], jac.axes.shape[1]))
             active = np.nonzero(np.any(gap > 0, axis=0))[0]
             for p in active:
                 a, i, b, k = PAIRS[p]

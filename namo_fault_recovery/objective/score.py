@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..model.gestures import Gesture
-from ..model.kinematics import (ArmLandmarks, as_joint_array, batch_forward,
+from ..model.kinematics import (arm_joint_count, ArmLandmarks, as_joint_array, batch_forward,
                                 batch_forward_jacobian, forward_kinematics, take_landmarks)
 from ..model.robot import RobotModel
 from ..model.weights import ARM_COMPONENTS, COMPONENTS, ScoreWeights
@@ -66,20 +66,27 @@ class SimilarityScore:
 
     def __init__(self, robot: RobotModel, targets: Iterable[Target],
                  weights: ScoreWeights | None = None,
-                 reference_robot: RobotModel | None = None) -> None:
+                 reference_robot: RobotModel | None = None,
+                 reference_landmarks: tuple | None = None) -> None:
         targets = list(targets)
         if not targets:
             raise ValueError('SimilarityScore: expected at least one target, got none')
         self.robot = robot
+        self._n = arm_joint_count(robot)       # joints per arm (7 on Namo)
         self.targets = targets
         self.weights = weights if weights is not None else ScoreWeights()
         qr = np.array([t.q_right for t in targets])
         ql = np.array([t.q_left for t in targets])
         # After a structure change (a tool) the candidates move on the changed robot but
         # the references stay those of the designed motion on the original one.
+        # Retargeting (another robot's gesture, scaled) gives the references as landmarks
+        # (right, left), one per target, instead of angles.
         reference_robot = reference_robot if reference_robot is not None else robot
-        self._ref_r = forward_kinematics(reference_robot, qr, 'right')
-        self._ref_l = forward_kinematics(reference_robot, ql, 'left')
+        if reference_landmarks is not None:
+            self._ref_r, self._ref_l = reference_landmarks
+        else:
+            self._ref_r = forward_kinematics(reference_robot, qr, 'right')
+            self._ref_l = forward_kinematics(reference_robot, ql, 'left')
         self._arm_mask = np.array([[('right' in t.arms), ('left' in t.arms)] for t in targets],
                                   dtype=float)
         self._two = np.array([t.two_handed for t in targets], dtype=bool)
@@ -142,9 +149,9 @@ class SimilarityScore:
             raise ValueError(f'target: expected indices in 0..{len(self.targets) - 1}, '
                              f'got {target!r}')
         if not isinstance(q_right, ArmLandmarks):
-            q_right = np.atleast_2d(as_joint_array(q_right, 'q_right'))
+            q_right = np.atleast_2d(as_joint_array(q_right, 'q_right', self._n))
         if q_left is not None and not isinstance(q_left, ArmLandmarks):
-            q_left = np.atleast_2d(as_joint_array(q_left, 'q_left'))
+            q_left = np.atleast_2d(as_joint_array(q_left, 'q_left', self._n))
         rows = [target.size]
         for q in (q_right, q_left):
             if q is not None and not isinstance(q, ArmLandmarks):
@@ -220,7 +227,7 @@ class SimilarityScore:
         lms, jacs = self._landmarks_and_jacobians(q_right, q_left, target)
         w = self._w[target]
         total = np.zeros(n)
-        grads = {side: np.zeros((n, 7)) for side in ('right', 'left')}
+        grads = {side: np.zeros((n, self._n)) for side in ('right', 'left')}
         for k, side in enumerate(('right', 'left')):
             if k == 1 and not self._uses_left:
                 break
@@ -282,7 +289,7 @@ class SimilarityScore:
         terms[:, 3] = np.degrees(2.0 * np.arcsin(half))
         if jac is None:
             return terms, None
-        d_terms = np.empty((target.shape[0], ARM_COMPONENTS, 7))
+        d_terms = np.empty((target.shape[0], ARM_COMPONENTS, jac.axes.shape[1]))
         unit = diff / np.where(dist > 0, dist, 1.0)[..., None]
         d_terms[:, :3] = np.einsum('nlc,nlic->nli', unit, jac.positions)
         # d|R - Rr|_F / dq_i = -tr([z_i]x R Rr^T) / |R - Rr|_F = -z_i . v / |R - Rr|_F.

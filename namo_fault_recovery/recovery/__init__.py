@@ -23,6 +23,7 @@ From a fault set to an adapted gesture library, free of ROS.
 - :mod:`.pacing`: the joints' velocity limits between keyframes as constraints of the
   search (step limits from the player's spline, feasible repairs, per-keyframe boxes);
 - :mod:`.vq`: vector quantisation that picks a motion's typical points;
+- :mod:`.retarget`: a gesture library moved to another robot (scaled landmarks);
 - :mod:`.kriging`: the variogram fit and ordinary Kriging;
 - :mod:`.budget`: how the caller's one deadline clock is shared out (reserves, shares).
 

@@ -127,8 +127,9 @@ class PoseProblem(Problem):
         extra = x.ndim - 2
         out = {}
         for side in ARMS:
-            base = self.base[side].reshape((-1,) + (1,) * extra + (N_JOINTS,))
-            q = np.broadcast_to(base, x.shape[:-1] + (N_JOINTS,)).copy()
+            n = self.base[side].shape[-1]
+            base = self.base[side].reshape((-1,) + (1,) * extra + (n,))
+            q = np.broadcast_to(base, x.shape[:-1] + (n,)).copy()
             for k, j in self.columns[side]:
                 q[..., j] = x[..., k]
             out[side] = q
@@ -143,10 +144,12 @@ class PoseProblem(Problem):
             if side in self.fixed:
                 arms[side] = take_landmarks(self.fixed[side], rows)
             elif jacobian:
-                arms[side] = batch_forward_jacobian(self.robot, q[side].reshape(-1, N_JOINTS),
+                arms[side] = batch_forward_jacobian(self.robot,
+                                                    q[side].reshape(-1, q[side].shape[-1]),
                                                     side)
             else:
-                arms[side] = batch_forward(self.robot, q[side].reshape(-1, N_JOINTS), side)
+                arms[side] = batch_forward(self.robot, q[side].reshape(-1, q[side].shape[-1]),
+                                           side)
         return arms, np.repeat(self.target_ids, n)
 
     def _objective(self, x):

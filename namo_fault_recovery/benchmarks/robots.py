@@ -1,0 +1,158 @@
+"""
+``bench robots``: every single fault x the four gestures on a robot from its profile.
+
+For a shipped robot (``config/robots/<name>.yaml`` and its retargeted library
+``<name>_gestures.yaml``), two parts, the way :mod:`.product` measures Namo:
+
+- optima (``--update-optima``): the best-known ``score_after`` per single fault and
+  gesture, the lowest over ``--optima-seeds`` seeds of :func:`recover` without a
+  deadline (the node's settings and preset; only seeds whose keyframes respect the
+  velocity limits), stored in ``config/robots/<name>_best_known.yaml`` with the model
+  fingerprint;
+- quality: every single fault x ``--seeds`` seeds through :func:`recover` at the node's
+  1 s deadline with the cached typical points, as the node's engine runs a table miss;
+  each run's wall time (the table miss's solve, without the node's transport) and each
+  gesture's gap to the best-known (target: every gesture within 1 % in >= 99 % of the
+  runs).  Wall times depend on load: run it under the shared lock.
+"""
+
+from datetime import datetime, timezone
+import time
+
+import numpy as np
+import yaml
+
+from . import common
+from .product import gap, git_commit, playable, QUALITY_TARGET, QUALITY_WITHIN
+from ..model.gestures import load_library
+from ..model.profile_robot import robot_from_profile
+from ..optimize.base import Clock
+from ..recovery.contingency import entry_key, fault_sets
+from ..recovery.engine import recover, RecoverySettings
+from ..recovery.motion import typical_points
+from ..resources import config_path, share_dir
+
+ROBOTS = ('talos', 'tiago_dual')
+QUALITY_SEED_BASE = 1000
+
+
+def robot_models(name):
+    """Return ``(robot, library)`` of a shipped robot profile and its retargeted library."""
+    if name not in ROBOTS:
+        raise ValueError(f'--robot: expected one of {", ".join(ROBOTS)}, got {name!r}')
+    robot = robot_from_profile(config_path(f'robots/{name}.yaml'))
+    return robot, load_library(robot, config_path(f'robots/{name}_gestures.yaml'))
+
+
+def optima_path(name):
+    """Return the path of a robot's best-known optima file."""
+    return share_dir('config') / 'robots' / f'{name}_best_known.yaml'
+
+
+def _single_faults(robot, library, settings, joints=None):
+    sets = fault_sets(robot, library, settings, joints=joints)
+    return {entry_key(f): dict.fromkeys(f) for f in sets}
+
+
+def generate_optima(out, name, seeds=16, joints=None):
+    """Return the best-known document of robot ``name`` (min over ``seeds`` per gesture)."""
+    settings = RecoverySettings()
+    robot, lib = robot_models(name)
+    quant = typical_points(robot, lib, settings.vq_distortion_mm)
+    began = time.monotonic()
+    cases = {}
+    faults_of = _single_faults(robot, lib, settings, joints)
+    prog = common.Progress(len(faults_of) * seeds, f'optima {name}')
+    for key, faults in faults_of.items():
+        best = {}
+        for seed in range(seeds):
+            res = recover(robot, lib, faults, settings, seed=seed, clock=Clock(None),
+                          quantisations=quant)
+            for g in res.gestures:
+                ok = playable(robot, g)
+                cand = (not ok, float(g.score_after))
+                best[g.name] = min(best.get(g.name, cand), cand)
+            prog.step()
+        cases[key] = {g: v[1] for g, v in best.items()}
+    wall = time.monotonic() - began
+    out.write(f'optima {name}: {len(faults_of) * seeds} runs in {wall:.0f} s\n')
+    return {'version': 1, 'robot': name, 'seeds': seeds,
+            'method': 'per single fault, recover() without a deadline, seeds 0..N-1, the '
+                      'node settings; per gesture the lowest score_after over the seeds '
+                      'whose keyframes respect the velocity limits',
+            'generated_by': f'namo-recovery bench robots --robot {name} --update-optima '
+                            f'--optima-seeds {seeds}',
+            'made': {'date': datetime.now(timezone.utc).strftime('%Y-%m-%dT%H:%M:%SZ'),
+                     'commit': git_commit(), 'wall_sec': round(wall, 1)},
+            'model_fingerprint': common.model_fingerprint(robot, lib),
+            'fault_sets': cases}
+
+
+def load_optima(name, path=None):
+    """Return a robot's stored best-known document, or raise FileNotFoundError."""
+    path = optima_path(name) if path is None else path
+    with open(path, encoding='utf-8') as handle:
+        return yaml.safe_load(handle)
+
+
+def run_quality(out, name, best_doc, seeds=10, joints=None, deadline=None):
+    """Run every single fault x ``seeds`` at the deadline; print and return the summary."""
+    settings = RecoverySettings()
+    if deadline is not None:
+        settings = settings.with_changes(deadline_sec=float(deadline))
+    robot, lib = robot_models(name)
+    if best_doc.get('model_fingerprint') != common.model_fingerprint(robot, lib):
+        out.write(f'warning: {optima_path(name)} was made for another model; rerun with '
+                  '--update-optima\n')
+    quant = typical_points(robot, lib, settings.vq_distortion_mm)
+    faults_of = _single_faults(robot, lib, settings, joints)
+    recover(robot, lib, next(iter(faults_of.values())), settings, seed=0,
+            quantisations=quant)                        # warm-up, as the engine child
+    runs = []
+    for key, faults in faults_of.items():
+        best = best_doc['fault_sets'][key]
+        for seed in range(QUALITY_SEED_BASE, QUALITY_SEED_BASE + seeds):
+            t0 = time.monotonic()
+            res = recover(robot, lib, faults, settings, seed=seed, quantisations=quant)
+            wall = time.monotonic() - t0
+            gaps = {g.name: gap(g.score_after, best[g.name]) for g in res.gestures}
+            runs.append({'fault': key, 'wall_s': wall, 'met': res.deadline_met,
+                         'gaps': gaps, 'collides': any(g.collides for g in res.gestures)})
+    summary = _summary(name, runs, lib.names, settings.deadline_sec, seeds)
+    _print(out, summary)
+    return summary
+
+
+def _summary(name, runs, names, deadline, seeds):
+    within = [max(r['gaps'].values()) <= QUALITY_WITHIN for r in runs]
+    misses = {}
+    for r, ok in zip(runs, within):
+        if not ok:
+            misses[r['fault'].split('=')[0]] = misses.get(r['fault'].split('=')[0], 0) + 1
+    return {'robot': name, 'runs': len(runs), 'seeds': seeds, 'deadline_sec': deadline,
+            'share_within': float(np.mean(within)),
+            'met': float(np.mean(within)) >= QUALITY_TARGET,
+            'wall_p50_ms': 1000 * common.percentile([r['wall_s'] for r in runs], 50),
+            'wall_p95_ms': 1000 * common.percentile([r['wall_s'] for r in runs], 95),
+            'wall_max_ms': 1000 * max(r['wall_s'] for r in runs),
+            'deadline_met_share': float(np.mean([r['met'] for r in runs])),
+            'colliding_runs': sum(r['collides'] for r in runs),
+            'max_gap_pct': {g: 100 * max(r['gaps'][g] for r in runs) for g in names},
+            'misses_by_fault': misses}
+
+
+def _print(out, s):
+    out.write(f"\n== {s['robot']}: every single fault x {s['seeds']} seeds at the "
+              f"{s['deadline_sec']:g} s deadline ==\n")
+    out.write(common.text_table(
+        ['runs', 'solve p50 ms', 'solve p95 ms', 'max ms', 'deadline met',
+         'all within 1%', 'target', 'verdict', 'colliding runs'],
+        [[s['runs'], common.fmt(s['wall_p50_ms'], 1), common.fmt(s['wall_p95_ms'], 1),
+          common.fmt(s['wall_max_ms'], 1), f"{100 * s['deadline_met_share']:.0f}%",
+          f"{100 * s['share_within']:.1f}%", f'{100 * QUALITY_TARGET:.0f}%',
+          'met' if s['met'] else 'MISSED', s['colliding_runs']]]))
+    out.write('  worst gap per gesture: ' + ', '.join(
+        f'{g} {v:.2f}%' for g, v in s['max_gap_pct'].items()) + '\n')
+    if s['misses_by_fault']:
+        out.write('  runs beyond 1% by fault: ' + ', '.join(
+            f'{k}: {n}' for k, n in sorted(s['misses_by_fault'].items())) + '\n')

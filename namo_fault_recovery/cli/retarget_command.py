@@ -1,0 +1,140 @@
+"""
+The ``retarget`` command of ``namo-recovery``: a gesture library for another robot.
+
+``namo-recovery retarget --from LIBRARY --to PROFILE [--out FILE] [--seed N]`` loads
+LIBRARY on Namo (the DH robot file, ``--robot-file``), retargets every gesture to the
+robot of PROFILE (:mod:`..recovery.retarget`: the landmarks in each arm's shoulder
+frame, scaled by arm length, matched with the engine's objective), writes the library
+(or prints it), and prints each gesture's score against the scaled reference and
+whether a capsule pair still penetrates.  The written library loads on that robot
+(``load_library`` checks it, as the node does).
+"""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from .common import UsageError
+
+
+def _degrees(robot, side, q):
+    """Return angles (rad) in degrees to 4 decimals, rounded inside the joints' limits."""
+    arm = robot.arms[side]
+    lo = [math.ceil(math.degrees(v) * 1e4) / 1e4 for v in arm.lower]
+    hi = [math.floor(math.degrees(v) * 1e4) / 1e4 for v in arm.upper]
+    return [min(max(round(math.degrees(v), 4), a), b) for v, a, b in zip(q, lo, hi)]
+
+
+def library_text(result, library, profile_path, source_path, robot):
+    """Return the YAML text of a retargeted library (angles in degrees)."""
+    gestures = []
+    for gesture, done in zip(library, result):
+        frames = [{'time_from_start': float(kf.time_from_start),
+                   'right': _degrees(robot, 'right', done.right[k]),
+                   'left': _degrees(robot, 'left', done.left[k])}
+                  for k, kf in enumerate(gesture.keyframes)]
+        entry = {'name': gesture.name}
+        if gesture.description:
+            entry['description'] = gesture.description
+        entry.update({'arms': list(gesture.arms), 'two_handed': bool(gesture.two_handed),
+                      'keyframes': frames})
+        gestures.append(entry)
+    head = (f'# Gesture library retargeted by `namo-recovery retarget` from {source_path}\n'
+            f'# to the robot of {profile_path}; per gesture, the score against the '
+            'scaled reference\n'
+            + ''.join(f'#   {g.name}: {np.mean(g.scores):.2f} (keyframes '
+                      f'{", ".join(f"{s:.2f}" for s in g.scores)})'
+                      f'{"; a capsule pair still penetrates" if g.collides.any() else ""}\n'
+                      for g in result))
+    body = yaml.safe_dump({'units': 'deg', 'gestures': gestures}, sort_keys=False,
+                          default_flow_style=None, width=95)
+    return head + body
+
+
+def cmd_retarget(args, out):
+    """Retarget ``--from`` to ``--to``; write ``--out`` or print; return 0."""
+    from ..model.gestures import load_library
+    from ..model.profile_robot import robot_from_profile
+    from ..model.robot import load_robot
+    from ..recovery.retarget import rest_palms, retarget_gesture
+    source = load_robot(args.robot_file)
+    library = load_library(source, args.source)
+    target = robot_from_profile(args.to)
+    rng = np.random.default_rng(args.seed)
+    rest = rest_palms(source, target, rng)
+    result = [retarget_gesture(source, target, g, rng, rest) for g in library]
+    text = library_text(result, library, args.to, args.source, target)
+    for g in result:
+        out.write(f'{g.name}: score {np.mean(g.scores):.2f} against the scaled reference'
+                  f'{" (a capsule pair still penetrates)" if g.collides.any() else ""}\n')
+    if args.out is None:
+        out.write(text)
+        return 0
+    try:
+        Path(args.out).write_text(text, encoding='utf-8')
+    except OSError as exc:
+        raise UsageError(f'--out: cannot write {args.out}: {exc.strerror or exc}') from None
+    load_library(target, args.out, on_warning=lambda line: out.write(line + '\n'))
+    out.write(f'wrote {args.out}; it loads on {target.name}\n')
+    return 0
+
+
+def register(sub):
+    """Add the ``retarget`` subcommand to the main parser's subcommands."""
+    p = sub.add_parser('retarget', help="retarget a gesture library to another robot's profile")
+    p.add_argument('--from', dest='source', required=True, metavar='LIBRARY',
+                   help="a gesture library of Namo's (the DH robot file)")
+    p.add_argument('--to', required=True, metavar='PROFILE', help="the robot's recovery profile")
+    p.add_argument('--out', default=None, metavar='FILE',
+                   help='write the library to FILE (default: print it)')
+    p.add_argument('--robot-file', default=None, metavar='FILE',
+                   help="the source robot file (default: Namo's)")
+    p.add_argument('--seed', type=int, default=0, help='seed of the random starts (0)')
+    p.set_defaults(func=cmd_retarget)
+    return p
+
+
+def cmd_bench_robots(args, out):
+    """Run ``bench robots`` (optima with ``--update-optima``, then quality); return 0."""
+    import yaml
+    from ..benchmarks import robots
+    if args.seeds < 1 or args.optima_seeds < 1:
+        raise UsageError(f'--seeds/--optima-seeds: expected integers >= 1, got '
+                         f'{args.seeds}/{args.optima_seeds}')
+    joints = args.joints.split(',') if args.joints else None
+    if args.update_optima:
+        doc = robots.generate_optima(out, args.robot, seeds=args.optima_seeds, joints=joints)
+        path = Path(args.optima) if args.optima else robots.optima_path(args.robot)
+        path.write_text(yaml.safe_dump(doc, sort_keys=False), encoding='utf-8')
+        out.write(f'wrote {path}\n')
+    if not args.skip_quality:
+        try:
+            best = robots.load_optima(args.robot, args.optima)
+        except FileNotFoundError as exc:
+            raise UsageError(f'no best-known optima for {args.robot} ({exc}); run with '
+                             '--update-optima first') from None
+        robots.run_quality(out, args.robot, best, seeds=args.seeds, joints=joints,
+                           deadline=args.deadline)
+    return 0
+
+
+def register_bench(bench_sub):
+    """Add ``bench robots`` to the ``bench`` command's subcommands."""
+    p = bench_sub.add_parser('robots', help='every single fault x the four gestures on '
+                                            'Talos or TIAGo++ at the deadline')
+    p.add_argument('--robot', required=True, choices=['talos', 'tiago_dual'])
+    p.add_argument('--seeds', type=int, default=10, help='seeds per fault (default 10)')
+    p.add_argument('--update-optima', action='store_true',
+                   help='recompute the best-known optima first (no deadline)')
+    p.add_argument('--optima-seeds', type=int, default=16,
+                   help='seeds per fault of the optima (default 16)')
+    p.add_argument('--skip-quality', action='store_true', help='only the optima')
+    p.add_argument('--optima', default=None, metavar='FILE',
+                   help='the best-known file (default config/robots/<robot>_best_known.yaml)')
+    p.add_argument('--joints', default=None, help='comma-separated joints to fail (all)')
+    p.add_argument('--deadline', type=float, default=None,
+                   help="seconds (default: the node's 1 s)")
+    p.set_defaults(func=cmd_bench_robots)
+    return p

@@ -1,0 +1,180 @@
+"""
+The engine's robot built from a recovery profile: kinematics, capsules, retargeting.
+
+Namo through its profile must be Namo (the DH model's landmarks, Jacobians, tool,
+capsules and recovery results); Talos and TIAGo++ (example-robot-data) run the engine
+on their own arms, with capsules fitted to their URDFs and their shipped libraries.
+"""
+
+from pathlib import Path
+
+from namo_fault_recovery.model.gestures import load_library
+from namo_fault_recovery.model.kinematics import (forward_kinematics,
+                                                  forward_kinematics_jacobian,
+                                                  shoulder_position)
+from namo_fault_recovery.model.profile_robot import robot_from_profile
+from namo_fault_recovery.model.robot import load_robot
+from namo_fault_recovery.model.robot_capsules import fit_report
+from namo_fault_recovery.model.self_contact import pair_distances, radius_sums
+from namo_fault_recovery.optimize.base import Clock
+from namo_fault_recovery.recovery import retarget
+from namo_fault_recovery.recovery.engine import recover
+from namo_fault_recovery.recovery.retarget import arm_length, retarget_gesture
+from namo_fault_recovery.recovery.settings import RecoverySettings
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+NAMO = ROOT / 'config' / 'namo_profile.yaml'
+ROBOTS = ROOT / 'config' / 'robots'
+
+
+@pytest.fixture(scope='module')
+def namo():
+    return load_robot(), robot_from_profile(NAMO)
+
+
+@pytest.fixture(scope='module')
+def others():
+    return {name: robot_from_profile(ROBOTS / f'{name}.yaml') for name in ('talos', 'tiago_dual')}
+
+
+def test_namo_through_its_profile_has_the_dh_landmarks_jacobians_and_tool(namo):
+    dh, urdf = namo
+    q = np.random.default_rng(3).uniform(-np.pi, np.pi, (50, 7))
+    for side in ('right', 'left'):
+        for a, b in zip(forward_kinematics(dh, q, side), forward_kinematics(urdf, q, side)):
+            assert np.abs(a - b).max() < 1e-5          # mm (and rotation entries)
+        for a, b in zip(forward_kinematics_jacobian(dh, q, side)[1],
+                        forward_kinematics_jacobian(urdf, q, side)[1]):
+            assert np.abs(a - b).max() < 1e-5
+        assert np.allclose(shoulder_position(dh, side), shoulder_position(urdf, side))
+        tip_dh = forward_kinematics(dh.with_tool(60.0, side), q, side).tip
+        tip_urdf = forward_kinematics(urdf.with_tool(60.0, side), q, side).tip
+        assert np.abs(tip_dh - tip_urdf).max() < 1e-5
+        assert not np.allclose(tip_urdf, forward_kinematics(urdf, q, side).tip)
+    assert urdf.joint_names == dh.joint_names
+    assert np.allclose(urdf.velocity_limits, dh.velocity_limits)
+    for side in ('right', 'left'):
+        assert np.allclose(urdf.arms[side].lower, dh.arms[side].lower)
+
+
+def test_namo_capsules_fitted_to_its_urdf_are_the_robot_files(namo):
+    dh, urdf = namo
+    for key, value in vars(dh.capsules).items():
+        assert np.allclose(getattr(urdf.capsules, key), value, atol=1e-5), key
+
+
+def test_namo_through_its_profile_recovers_as_the_dh_model(namo):
+    results = []
+    for robot in namo:
+        library = load_library(robot)
+        res = recover(robot, library, {'right_arm_joint4': 0.3}, RecoverySettings(), seed=1,
+                      clock=Clock(None))
+        results.append([g.score_after for g in res.gestures])
+    assert np.allclose(results[0], results[1], atol=1e-3)
+
+
+@pytest.mark.parametrize('name', ['talos', 'tiago_dual'])
+def test_a_profile_robot_moves_its_seven_arm_joints_with_the_rest_held(others, name):
+    robot = others[name]
+    profile = robot.profile
+    q = np.random.default_rng(4).uniform(-1.0, 1.0, (20, 7))
+    for side, arm in profile.arms.items():
+        assert robot.arms[side].joint_names == arm.joints
+        full = np.zeros((20, arm.chain.n_joints))
+        for k, joint in enumerate(arm.joints):
+            full[:, arm.chain.joint_names.index(joint)] = q[:, k]
+        want = arm.chain.forward(full)
+        got = forward_kinematics(robot, q, side)
+        for a, b in zip(want, got):
+            assert np.abs(a - b).max() < 1e-9
+        urdf = [profile.tree.joints[j] for j in arm.joints]
+        assert np.allclose(robot.arms[side].lower, [j.lower for j in urdf])
+        assert robot.arm_velocity[side] == tuple(profile.velocity_limits[j] for j in arm.joints)
+    # The analytic Jacobian of the reduced chain against central differences.
+    lm, jac = forward_kinematics_jacobian(robot, q[:2], 'right')
+    for j in range(7):
+        step = np.zeros(7)
+        step[j] = 1e-6
+        plus = forward_kinematics(robot, q[:2] + step, 'right')
+        minus = forward_kinematics(robot, q[:2] - step, 'right')
+        num = (plus.tip - minus.tip) / 2e-6
+        assert np.abs(num - jac.positions[:, 2, j]).max() < 1e-4
+
+
+@pytest.mark.parametrize('name', ['talos', 'tiago_dual'])
+def test_fitted_capsules_come_from_the_urdf_and_clear_at_rest(others, name):
+    robot = others[name]
+    report = fit_report(robot)
+    assert any('mesh' in line for line in report.notes)
+    cap = robot.capsules
+    assert all(10.0 < r < 250.0 for r in cap.radii)
+    assert cap.torso_top[2] > cap.torso_bottom[2] or cap.torso_radius == 0.0
+    zero = np.zeros((1, 7))
+    d = pair_distances(robot, forward_kinematics(robot, zero, 'right'),
+                       forward_kinematics(robot, zero, 'left'))[0]
+    assert np.all(d >= radius_sums(cap) - 1e-6)        # nothing collides at the zero pose
+
+
+def test_retargeting_namo_to_itself_reaches_the_reference(namo, monkeypatch):
+    monkeypatch.setattr(retarget, 'RESTARTS', 2)     # one from the zero pose, one own
+    dh, urdf = namo
+    assert arm_length(urdf, 'right') == pytest.approx(arm_length(dh, 'right'))
+    wai = load_library(dh)['wai']
+    done = retarget_gesture(dh, urdf, wai, np.random.default_rng(0))
+    assert done.scores.max() < 0.5 and not done.collides.any()
+
+
+@pytest.mark.parametrize('name', ['talos', 'tiago_dual'])
+def test_shipped_libraries_load_and_recover_a_fault(others, name):
+    robot = others[name]
+    library = load_library(robot, ROBOTS / f'{name}_gestures.yaml')
+    assert [g.name for g in library] == ['wai', 'bye', 'salute', 'side_invite']
+    fault = robot.arms['right'].joint_names[3]
+    res = recover(robot, library, {fault: None}, RecoverySettings(), seed=2,
+                  clock=Clock(None))
+    for gesture, before in zip(res.gestures, library):
+        assert gesture.score_after <= gesture.score_before + 1e-9
+        if 'right' not in before.arms:
+            assert gesture.score_after == pytest.approx(0.0, abs=1e-9)
+
+
+def test_the_model_fingerprint_tells_the_robots_apart(namo, others):
+    from namo_fault_recovery.benchmarks.common import model_fingerprint
+    dh, urdf = namo
+    library = load_library(dh)
+    prints = {model_fingerprint(dh, library), model_fingerprint(urdf, library)}
+    for robot in others.values():
+        prints.add(model_fingerprint(robot, load_library(
+            robot, ROBOTS / f'{robot.name}_gestures.yaml')))
+    assert len(prints) == 4
+
+
+def test_retarget_command_writes_a_library_that_loads(tmp_path, monkeypatch):
+    monkeypatch.setattr(retarget, 'RESTARTS', 2)
+    import io
+    from namo_fault_recovery.cli.main import main as cli_main
+    source = tmp_path / 'wai.yaml'
+    source.write_text('units: deg\ngestures:\n  - name: wai\n    arms: [right, left]\n'
+                      '    two_handed: true\n    keyframes:\n      - time_from_start: 2.0\n'
+                      '        right: [30, 5, -45, 90, -10, -45, 45]\n        left: mirror\n')
+    out, target = io.StringIO(), tmp_path / 'namo_wai.yaml'
+    argv = ['retarget', '--from', str(source), '--to', str(NAMO), '--out', str(target)]
+    assert cli_main(argv, out=out) == 0
+    text = out.getvalue()
+    assert 'wai: score' in text and 'it loads on namo' in text
+    score = float(text.split('wai: score ')[1].split()[0])
+    assert score < 1.0                                  # Namo to itself: the reference
+    assert load_library(robot_from_profile(NAMO), target)['wai'].two_handed
+
+
+def test_bench_robots_prints_the_deadline_figures(tmp_path):
+    import io
+    from namo_fault_recovery.cli.main import main as cli_main
+    out, optima = io.StringIO(), tmp_path / 'talos_best_known.yaml'
+    argv = ['bench', 'robots', '--robot', 'talos', '--joints', 'arm_right_4_joint',
+            '--seeds', '1', '--update-optima', '--optima-seeds', '1', '--optima', str(optima)]
+    assert cli_main(argv, out=out) == 0
+    text = out.getvalue()
+    assert optima.is_file() and 'solve p95 ms' in text and 'all within 1%' in text
