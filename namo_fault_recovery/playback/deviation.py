@@ -96,7 +96,7 @@ class DeviationWatch:
                 self.designed[side] = forward_kinematics(robot, q, side).tip
         self._states = deque(maxlen=_JOINT_HISTORY)      # (stamp, {joint: angle})
         self._samples = {side: deque() for side in self.designed}
-        self._seen = {side: None for side in self.designed}   # first capture in the play
+        self._seen = dict.fromkeys(self.designed)      # first capture in the play
         self.suspected = {}
 
     def joint_state(self, stamp: float, names, positions) -> None:

@@ -106,7 +106,7 @@ PARAMETERS = {
     'sim_urdf_file': ('', "the simulator's own URDF (empty: the planner's, generated from "
                       'robot_file)', _T.PARAMETER_STRING),
     'profile_file': ('', 'recovery profile naming the fingertip links of that URDF (empty: '
-                     "the packaged Namo profile)", _T.PARAMETER_STRING),
+                     'the packaged Namo profile)', _T.PARAMETER_STRING),
     'structure_changes': ([''], "hidden changes 'KIND:JOINT:AMOUNT', KIND tool (mm), bend "
                           '(deg), encoder_offset (deg) or link_length (mm)',
                           _T.PARAMETER_STRING_ARRAY),
@@ -127,6 +127,24 @@ PARAMETERS = {
                              '~/ground_truth/<side>, at capture (for benchmarks only)',
                              _T.PARAMETER_BOOL),
 }
+
+
+def create_tracker(node, sides):
+    """Return the tracker of ``node``'s parameters and its publishers {side: (measured, truth)}."""
+    p = node.p
+    seed = p['tracker_seed']
+    tracker = FingertipTracker(TrackerSettings(
+        p['tracker_sigma_mm'], p['tracker_latency_sec'], p['tracker_rate_hz'],
+        p['tracker_dropout'], None if seed < 0 else seed))
+    pubs = {}
+    if p['tracker_topic']:
+        for side in sides:
+            truth = (node.create_publisher(PointStamped, f'{GROUND_TRUTH_TOPIC}/{side}',
+                                           TRACKER_QOS)
+                     if p['publish_ground_truth'] else None)
+            pubs[side] = (node.create_publisher(PointStamped, topic(p['tracker_topic'], side),
+                                                TRACKER_QOS), truth)
+    return tracker, pubs
 
 
 def _describe(text, kind, read_only=True):
@@ -150,7 +168,7 @@ class SimNode(Node):
                            kv=self.p['kv'], gravity=self.p['gravity'],
                            allowances=designed_allowances(self.robot, library),
                            tolerance=self.p['contact_tolerance_mm'] * 1e-3, urdf=urdf)
-        self.tracker = self._create_tracker()
+        self.tracker, self.tracker_pubs = create_tracker(self, self.truth.chains)
         self.desired = self._initial_state()
         self.lock = threading.Lock()
         self.controllers = self._create_controllers()
@@ -191,23 +209,6 @@ class SimNode(Node):
         urdf = apply_changes(base, changes, self.p['sim_urdf_file'] or None)
         self.truth = TrueFingertips(urdf, profile)
         return changes, urdf
-
-    def _create_tracker(self):
-        """Return the tracker and create its publishers ({side: (measured, truth)})."""
-        seed = self.p['tracker_seed']
-        tracker = FingertipTracker(TrackerSettings(
-            self.p['tracker_sigma_mm'], self.p['tracker_latency_sec'],
-            self.p['tracker_rate_hz'], self.p['tracker_dropout'],
-            None if seed < 0 else seed))
-        self.tracker_pubs = {}
-        if self.p['tracker_topic']:
-            for side in self.truth.chains:
-                truth = (self.create_publisher(PointStamped, f'{GROUND_TRUTH_TOPIC}/{side}',
-                                               TRACKER_QOS)
-                         if self.p['publish_ground_truth'] else None)
-                self.tracker_pubs[side] = (self.create_publisher(
-                    PointStamped, topic(self.p['tracker_topic'], side), TRACKER_QOS), truth)
-        return tracker
 
     def _initial_state(self):
         """Set the start angles and the stuck joints; return the (q, qd) first desired."""
@@ -397,23 +398,7 @@ class SimNode(Node):
                 truth.publish(point_message(m.truth_mm, m.capture, self.truth.frame))
 
     def _publish_structure(self):
-        """Say on /diagnostics what the simulator hides from the planner, and the tracker."""
-        t = self.tracker.settings
-        values = {'hidden_changes': ' '.join(f'{c.kind}:{c.joint}:{c.amount:g}'
-                                             for c in self.changes),
-                  'urdf': self.p['sim_urdf_file'] or "the planner's",
-                  'tracker_topic': self.p['tracker_topic'],
-                  'tracker': f'{t.rate_hz:g} Hz, sigma {t.sigma_mm:g} mm, latency '
-                             f'{t.latency_s:g} s, dropout {t.dropout:g}',
-                  'tracker_captures': self.tracker.captured,
-                  'tracker_dropped': self.tracker.dropped,
-                  'ground_truth_published': str(self.p['publish_ground_truth']).lower()}
-        status = DiagnosticStatus(
-            level=DiagnosticStatus.OK, name=f'{NODE_NAME}: hidden structure',
-            message=f'hidden from the planner: {self._hidden_text()}',
-            hardware_id=self.robot.name,
-            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
-        msg = DiagnosticArray(status=[status])
+        msg = structure_status(self.p, self.changes, self.tracker, self.robot.name)
         msg.header.stamp = self.get_clock().now().to_msg()
         self.diag_pub.publish(msg)
 
@@ -451,6 +436,24 @@ class SimNode(Node):
         """Stop the physics thread."""
         self._stop.set()
         self._thread.join(timeout=2.0)
+
+
+def structure_status(p, changes, tracker, hardware_id):
+    """Return the ``namo_sim: hidden structure`` status: what the planner is not told."""
+    t = tracker.settings
+    values = {'hidden_changes': ' '.join(f'{c.kind}:{c.joint}:{c.amount:g}' for c in changes),
+              'urdf': p['sim_urdf_file'] or "the planner's",
+              'tracker_topic': p['tracker_topic'],
+              'tracker': f'{t.rate_hz:g} Hz, sigma {t.sigma_mm:g} mm, latency '
+                         f'{t.latency_s:g} s, dropout {t.dropout:g}',
+              'tracker_captures': tracker.captured, 'tracker_dropped': tracker.dropped,
+              'ground_truth_published': str(p['publish_ground_truth']).lower()}
+    hidden = '; '.join(c.describe() for c in changes) or 'nothing'
+    status = DiagnosticStatus(
+        level=DiagnosticStatus.OK, name=f'{NODE_NAME}: hidden structure',
+        message=f'hidden from the planner: {hidden}', hardware_id=hardware_id,
+        values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+    return DiagnosticArray(status=[status])
 
 
 def main(args=None):
