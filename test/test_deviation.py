@@ -9,53 +9,30 @@ commanded at every 2 ms step, joint states are fed at 100 Hz and tracker samples
 import math
 
 from namo_fault_recovery import load_library, load_robot
+from namo_fault_recovery.benchmarks.notice import plan_from_rest, play_watched
 from namo_fault_recovery.model.urdf import urdf_string
 from namo_fault_recovery.playback.deviation import DeviationThresholds, DeviationWatch
-from namo_fault_recovery.playback.timing import plan_motion
 from namo_fault_recovery.resources import config_path, DEMO_MOTION_FILE
-from namo_fault_recovery.sim.physics import NamoSim
 from namo_fault_recovery.sim.structure_change import apply_changes, parse_change
-from namo_fault_recovery.sim.tracker import FingertipTracker, TrackerSettings, TrueFingertips
+from namo_fault_recovery.sim.tracker import TrackerSettings
 import numpy as np
 import pytest
 
 ROBOT = load_robot()
 LIBRARY = load_library(ROBOT, config_path(DEMO_MOTION_FILE))
-NAMES = list(ROBOT.joint_names)
 
 
 def plan_of(gesture):
-    g = LIBRARY[gesture]
-    frames = [np.concatenate([kf.right, kf.left]) for kf in g.keyframes]
-    limits = list(ROBOT.velocity_limits) * 2
-    return plan_motion(NAMES, np.zeros(14), [kf.time_from_start for kf in g.keyframes],
-                       frames, limits)
+    return plan_from_rest(ROBOT, LIBRARY[gesture])
 
 
 def play(gesture, changes=(), sigma=1.0, seed=0, stuck=None, dropout=0.0):
     """Play ``gesture`` on a changed copy; return (the watch, the first suspicion or None)."""
     urdf = apply_changes(urdf_string(ROBOT), [parse_change(c) for c in changes])
-    sim, truth = NamoSim(ROBOT, urdf=urdf), TrueFingertips(urdf)
-    tracker = FingertipTracker(TrackerSettings(sigma_mm=sigma, seed=seed, dropout=dropout))
-    plan = plan_of(gesture)
-    if stuck:
-        sim.stick(*stuck)
-    watch = DeviationWatch(ROBOT, plan, 0.0, DeviationThresholds())
-    found = None
-    times = np.arange(int((plan.duration + 1.0) / sim.timestep)) * sim.timestep
-    commands, velocities = plan.command_at(times), plan.velocity_at(times)
-    for k, t in enumerate(times):
-        sim.set_targets(commands[k], velocities[k])
-        sim.step(1)
-        now = t + sim.timestep
-        q = sim.positions()
-        if k % 5 == 0:
-            watch.joint_state(now, NAMES, q)
-        if tracker.due(now):
-            tracker.capture(now, truth(dict(zip(NAMES, q))))
-        for m in tracker.deliver(now):
-            found = watch.fingertip(m.side, m.capture, m.point_mm) or found
-    return watch, found
+    watch, found = play_watched(ROBOT, plan_of(gesture), urdf,
+                                TrackerSettings(sigma_mm=sigma, seed=seed, dropout=dropout),
+                                stuck=stuck)
+    return watch, (found[0] if found else None)
 
 
 @pytest.mark.parametrize('gesture, sigma', [('wai', 1.0), ('bye', 4.0)])
