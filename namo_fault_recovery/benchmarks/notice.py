@@ -1,5 +1,5 @@
 """
-``bench notice``: how fast the player's structure watch notices a change, and how often it cries wolf.
+``bench notice``: how fast a structure change is noticed, and how often it cries wolf.
 
 In process, on the simulator's clock (load-independent): the player's plan of a gesture
 from rest is commanded at every physics step of a changed copy of Namo (MuJoCo), joint
