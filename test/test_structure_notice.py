@@ -4,11 +4,13 @@ Over DDS: ``namo_sim`` with a hidden 50 mm tool in the right hand, ``gesture_pla
 The test publishes the demo library itself (no recovery_node: nothing here may know the
 tool).  It plays bye (the right hand waves) and checks the tracker's messages (frame,
 capture stamps at the rate, noise against the opt-in ground truth) and the player's
-``structure change suspected`` status, on the right arm and not on the unchanged left.
+``structure change suspected`` status, on the right arm and not on the unchanged left,
+with its request on ``/structure_change`` (``on_structure_change:=adapt``).
 """
 
 import threading
 
+from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
 from namo_fault_recovery.ros.fingertip_topics import measurement, TRACKER_QOS
 from namo_fault_recovery.ros.sim_node import sim_command
@@ -17,6 +19,7 @@ from node_harness import NodeProcess, ros_env, session_domain, TIMEOUT
 import numpy as np
 from player_harness import Recorder
 import pytest
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 pytestmark = pytest.mark.slow
 
@@ -37,6 +40,11 @@ class TrackerRecorder(Recorder):
                 self.node.create_subscription(
                     PointStamped, name, lambda msg, k=(kind, side): self._on_point(k, msg),
                     TRACKER_QOS)
+        self.requests = []
+        latched = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.node.create_subscription(DiagnosticStatus, '/structure_change',
+                                      self.requests.append, latched)
 
     def _on_point(self, key, msg):
         with self.points_lock:
@@ -53,7 +61,8 @@ def world():
     sim = NodeProcess(DOMAIN, command=sim_command(), env=env,
                       args=['-p', 'hidden_tool_right_mm:=50.0',
                             '-p', 'publish_ground_truth:=true'])
-    player = NodeProcess(DOMAIN, command=player_command(), env=env)
+    player = NodeProcess(DOMAIN, command=player_command(), env=env,
+                         args=['-p', 'on_structure_change:=adapt'])
     arms = TrackerRecorder(DOMAIN)
     try:
         arms.wait(lambda: arms.states > 10 and arms.points[('measured', 'right')],
@@ -78,7 +87,9 @@ def test_a_hidden_tool_is_tracked_and_noticed(world):
     assert [s['arm'] for s in found] == ['right'], found      # not the unchanged left arm
     assert 'structure change suspected: right arm' in found[0]['message']
     assert 35.0 < float(found[0]['error_mm']) < 55.0, found
-    assert found[0]['on_structure_change'] == 'report' and found[0]['adapt'] == 'false'
+    assert found[0]['on_structure_change'] == 'adapt' and found[0]['adapt'] == 'true'
+    request = arms.wait(lambda: arms.requests, 5.0, 'the request on /structure_change')[0]
+    assert {kv.key: kv.value for kv in request.values}['arm'] == 'right'
     with arms.points_lock:
         measured = list(arms.points[('measured', 'right')])
         truth = {stamp: p for _, stamp, p in arms.points[('truth', 'right')]}
