@@ -103,3 +103,21 @@ def test_a_hidden_tool_is_tracked_and_noticed(world):
     status = [s for msg in arms.diagnostics for s in msg.status
               if s.name == 'namo_sim: hidden structure']
     assert status and 'tool 50 mm' in status[-1].message
+
+
+@pytest.mark.parametrize('args, words', [
+    (["structure_changes:=['twist:right_arm_joint5:3']"], "kind 'twist'"),
+    (["structure_changes:=['bend:no_such_joint:5']"], 'no_such_joint: bend 5 deg'),
+    (['hidden_tool_left_mm:=-5.0'], 'hidden_tool_left_mm'),
+    (['tracker_rate_hz:=0.0'], 'tracker rate_hz'),
+])
+def test_a_bad_hidden_structure_is_a_one_line_error(args, words):
+    process = NodeProcess(DOMAIN + 1, command=sim_command(),
+                          args=[a for arg in args for a in ('-p', arg)])
+    try:
+        assert process.wait() == 1
+    finally:
+        process.stop()
+    lines = [line for line in process.stderr.splitlines() if 'namo_sim: error' in line]
+    assert len(lines) == 1 and words in lines[0], process.stderr
+    assert 'Traceback' not in process.stderr
