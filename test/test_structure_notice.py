@@ -107,7 +107,8 @@ def test_a_hidden_tool_is_tracked_and_noticed(world):
 
 @pytest.mark.parametrize('args, words', [
     (["structure_changes:=['twist:right_arm_joint5:3']"], "kind 'twist'"),
-    (["structure_changes:=['bend:no_such_joint:5']"], 'no_such_joint: bend 5 deg'),
+    (["structure_changes:=['bend:no_such_joint:5']"],
+     "copy of the planner's URDF): key 'no_such_joint': bend 5 deg at no_such_joint: no such"),
     (['hidden_tool_left_mm:=-5.0'], 'hidden_tool_left_mm'),
     (['tracker_rate_hz:=0.0'], 'tracker rate_hz'),
 ])

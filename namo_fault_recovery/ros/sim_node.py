@@ -206,7 +206,8 @@ class SimNode(Node):
         tools = {side: float(self.p[f'hidden_tool_{side}_mm']) for side in ('right', 'left')}
         changes = hidden_changes(self.p['structure_changes'], tools,
                                  self.truth.fingertip_joints, 'namo_sim parameters')
-        urdf = apply_changes(base, changes, self.p['sim_urdf_file'] or None)
+        urdf = apply_changes(base, changes, self.p['sim_urdf_file']
+                             or "structure_changes (namo_sim's copy of the planner's URDF)")
         self.truth = TrueFingertips(urdf, profile)
         return changes, urdf
 
