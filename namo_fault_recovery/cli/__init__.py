@@ -8,6 +8,7 @@ The commands parse their options and call the package: the benchmarks in
 - :mod:`.main`: the parser and the offline commands (``show``, ``score``, ``solve``);
 - :mod:`.bench`: ``bench paper | optimum | speed | deadline`` and ``plot``;
 - :mod:`.beyond`: the benchmarks of the extensions beyond the paper;
+- :mod:`.notice_bench`: ``bench notice``, noticing a structure change;
 - :mod:`.node_bench`: ``bench latency | stream | product | callers``, the benchmarks of
   a node;
 - :mod:`.node_commands`: ``fault``, ``clear``, ``reconfigure``, ``library`` against a

@@ -255,8 +255,10 @@ def build_parser():
 
     add_solve_parser(sub)
     from . import bench, beyond, demo, export, node_bench, node_commands, player_commands
+    from . import notice_bench
     bench_sub = bench.register(sub)
     beyond.register(bench_sub)
+    notice_bench.register(bench_sub)          # bench notice
     node_commands.register(sub, parser)      # fault, clear, reconfigure, library; --namespace
     demo.register(sub)                       # demo
     node_bench.register(bench_sub)           # bench latency, stream, product

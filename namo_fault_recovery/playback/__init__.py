@@ -5,6 +5,8 @@ Playing the gesture library on the robot, free of ROS.
   speed-limited trajectory that holds every locked joint at its lock angle;
 - :mod:`.monitor`: tracking of the commands on the measured joint states: a stuck
   joint is a fault, the last point reached within tolerance is the end of the motion;
+- :mod:`.deviation`: noticing a structure change: the tracked fingertip, at its capture
+  stamp, off both the designed path and the model's fingertip of the measured joints;
 - :mod:`.book`: library versions and lock angles known between plays;
 - :mod:`.export`: the library as a play_motion2 motions file;
 - :mod:`.plot`: the figure of one play (commanded and measured angles).

@@ -28,6 +28,11 @@ The gesture player and the simulated robot:
 
 - :mod:`.player_node`: ``gesture_player``, which plays the library on the arm controllers
   and reports a joint that stays off its command;
-- :mod:`.sim_node`: ``namo_sim``, Namo in MuJoCo behind two joint trajectory controllers
-  (the physics and the controller rules are in ``sim/``, free of ROS).
+- :mod:`.structure_watch`: the player's watch for a structure change (the tracked
+  fingertip off the designed path), on ``/diagnostics`` and ``/structure_change``;
+- :mod:`.sim_node`: ``namo_sim``, Namo in MuJoCo behind two joint trajectory controllers,
+  with a structure the planner does not know and a fingertip tracker (the physics, the
+  controller rules, the changes and the tracker are in ``sim/``, free of ROS);
+- :mod:`.fingertip_topics`: the fingertip tracker's topics, both ends (names, QoS,
+  ``PointStamped`` in metres to and from mm).
 """

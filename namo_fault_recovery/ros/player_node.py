@@ -36,6 +36,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from .messages import duration_msg, stamp_key, status_values, trajectory_angles
 from .spin import run_node
+from .structure_watch import StructureWatch
 from ..model.robot import load_robot
 from ..playback.book import GestureTrack, parse_lock_angle, PlayerBook
 from ..playback.monitor import MonitorThresholds, Outcome, Playback
@@ -113,6 +114,7 @@ class GesturePlayer(Node):
                                                        f'{c}/joint_trajectory', 10)
                               for c in self._groups}
         self.create_timer(TICK, self._tick, callback_group=inputs)
+        self._structure = StructureWatch(self, self._robot, inputs)   # structure_watch.py
         self.get_logger().info(f'controllers: {", ".join(self._groups)}; waiting for '
                                f'/gesture_library')
 
@@ -237,6 +239,7 @@ class GesturePlayer(Node):
                       time.monotonic(), future)
         for controller, joints in self._groups.items():
             self._command_pubs[controller].publish(self._trajectory(plan, joints))
+        self._structure.start(gesture, plan)
         return await future
 
     def _plan(self, track):
@@ -266,6 +269,7 @@ class GesturePlayer(Node):
     def _finish(self, outcome):
         gesture, playback, start, future = self._play
         self._play = None
+        self._structure.stop()
         if outcome.faults and self._waits['report_faults']:
             now = time.monotonic()
             for joint, angle in outcome.faults:

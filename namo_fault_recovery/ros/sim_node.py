@@ -18,6 +18,15 @@ What it offers, so that a gesture player can be tried without the robot:
 - Self-contacts (arm-arm, arm-torso) as MuJoCo finds them, on ``~/contacts``
   (diagnostic_msgs/DiagnosticArray, ``contact_report_rate``): the contacts of now and
   the running counts since start or the last ``~/reset_contacts`` (std_srvs/Trigger).
+- A robot that differs from the planner's (:mod:`..sim.structure_change`): its own URDF
+  (``sim_urdf_file``), edited by ``structure_changes`` (``'KIND:JOINT:AMOUNT'``) and
+  ``hidden_tool_<side>_mm``.  Nothing of it leaves the simulator except its own log and
+  its ``namo_sim: hidden structure`` status on ``/diagnostics``.
+- A fingertip tracker (:mod:`..sim.tracker`, ``msg_docs/fingertip_tracker.md``): each
+  hand's measured fingertip on ``<tracker_topic>/<side>`` (geometry_msgs/PointStamped,
+  base frame, metres, stamped at capture, delivered after ``tracker_latency_sec``).  The
+  noise-free truth goes out only with ``publish_ground_truth`` (``~/ground_truth/<side>``,
+  for benchmarks).
 
 The physics runs in its own thread on the steady clock (``timestep``, real time), not
 in the executor, so no callback waits for it and it never waits for a callback.
@@ -29,6 +38,7 @@ import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PointStamped
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.node import Node
@@ -36,14 +46,20 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
+from .fingertip_topics import GROUND_TRUTH_TOPIC, point_message, topic, TRACKER_QOS
+from .fingertip_topics import TRACKER_TOPIC
 from .spin import run_node
 from ..model.gestures import load_library
 from ..model.robot import load_robot
+from ..model.urdf import urdf_string
 from ..sim.physics import designed_allowances, NamoSim
+from ..sim.structure_change import apply_changes, hidden_changes
+from ..sim.tracker import FingertipTracker, TrackerSettings, TrueFingertips
 from ..sim.trajectory import ActiveTrajectory, Command, Point, Rejected, validate
 
 NODE_NAME = 'namo_sim'
 _MAX_LAG = 1.0      # s behind real time before the physics lets time go
+STATUS_PERIOD = 1.0     # s between the simulator's /diagnostics status
 
 
 def sim_command():
@@ -86,7 +102,49 @@ PARAMETERS = {
                           'still runs', _T.PARAMETER_BOOL),
     'allow_nonzero_velocity_at_trajectory_end': (
         False, 'accept a non-zero velocity at the last point', _T.PARAMETER_BOOL),
+    # The simulated robot's own structure, hidden from the planner.
+    'sim_urdf_file': ('', "the simulator's own URDF (empty: the planner's, generated from "
+                      'robot_file)', _T.PARAMETER_STRING),
+    'profile_file': ('', 'recovery profile naming the fingertip links of that URDF (empty: '
+                     'the packaged Namo profile)', _T.PARAMETER_STRING),
+    'structure_changes': ([''], "hidden changes 'KIND:JOINT:AMOUNT', KIND tool (mm), bend "
+                          '(deg), encoder_offset (deg) or link_length (mm)',
+                          _T.PARAMETER_STRING_ARRAY),
+    'hidden_tool_right_mm': (0.0, 'a tool nobody measured in the right hand (mm)',
+                             _T.PARAMETER_DOUBLE),
+    'hidden_tool_left_mm': (0.0, 'a tool nobody measured in the left hand (mm)',
+                            _T.PARAMETER_DOUBLE),
+    # The fingertip tracker (msg_docs/fingertip_tracker.md).
+    'tracker_topic': (TRACKER_TOPIC, 'prefix of the tracker topics <prefix>/<side> '
+                      '(empty: no tracker)', _T.PARAMETER_STRING),
+    'tracker_rate_hz': (30.0, 'tracker captures per second and hand', _T.PARAMETER_DOUBLE),
+    'tracker_sigma_mm': (1.0, 'tracker noise per axis (mm)', _T.PARAMETER_DOUBLE),
+    'tracker_latency_sec': (0.05, 'capture to delivery (s)', _T.PARAMETER_DOUBLE),
+    'tracker_dropout': (0.0, 'probability that a capture of a hand is lost',
+                        _T.PARAMETER_DOUBLE),
+    'tracker_seed': (0, 'seed of the tracker noise (-1: a fresh one)', _T.PARAMETER_INTEGER),
+    'publish_ground_truth': (False, 'also publish the noise-free fingertips on '
+                             '~/ground_truth/<side>, at capture (for benchmarks only)',
+                             _T.PARAMETER_BOOL),
 }
+
+
+def create_tracker(node, sides):
+    """Return the tracker of ``node``'s parameters and its publishers {side: (measured, truth)}."""
+    p = node.p
+    seed = p['tracker_seed']
+    tracker = FingertipTracker(TrackerSettings(
+        p['tracker_sigma_mm'], p['tracker_latency_sec'], p['tracker_rate_hz'],
+        p['tracker_dropout'], None if seed < 0 else seed))
+    pubs = {}
+    if p['tracker_topic']:
+        for side in sides:
+            truth = (node.create_publisher(PointStamped, f'{GROUND_TRUTH_TOPIC}/{side}',
+                                           TRACKER_QOS)
+                     if p['publish_ground_truth'] else None)
+            pubs[side] = (node.create_publisher(PointStamped, topic(p['tracker_topic'], side),
+                                                TRACKER_QOS), truth)
+    return tracker, pubs
 
 
 def _describe(text, kind, read_only=True):
@@ -105,10 +163,12 @@ class SimNode(Node):
         for name in ('timestep', 'kp', 'joint_state_rate', 'contact_report_rate'):
             if not self.p[name] > 0:
                 raise ValueError(f'parameter {name} must be > 0, got {self.p[name]}')
+        self.changes, urdf = self._hidden_structure()
         self.sim = NamoSim(self.robot, timestep=self.p['timestep'], kp=self.p['kp'],
                            kv=self.p['kv'], gravity=self.p['gravity'],
                            allowances=designed_allowances(self.robot, library),
-                           tolerance=self.p['contact_tolerance_mm'] * 1e-3)
+                           tolerance=self.p['contact_tolerance_mm'] * 1e-3, urdf=urdf)
+        self.tracker, self.tracker_pubs = create_tracker(self, self.truth.chains)
         self.desired = self._initial_state()
         self.lock = threading.Lock()
         self.controllers = self._create_controllers()
@@ -117,6 +177,8 @@ class SimNode(Node):
         self.create_subscription(JointState, '~/stick', self._on_stick, 10)
         self.create_subscription(JointState, '~/release', self._on_release, 10)
         self.create_service(Trigger, '~/reset_contacts', self._on_reset)
+        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_timer(STATUS_PERIOD, self._publish_structure)
         self.rejections = 0
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._physics, name='physics',
@@ -124,7 +186,7 @@ class SimNode(Node):
         self._thread.start()
         self.get_logger().info(
             f'simulating {self.robot.name}: controllers {", ".join(self.controllers)}; '
-            f'stuck {self._stuck_text()}')
+            f'stuck {self._stuck_text()}; hidden from the planner: {self._hidden_text()}')
 
     # --- start-up ---
 
@@ -135,6 +197,19 @@ class SimNode(Node):
             self.declare_parameter(name, default, _describe(text, kind))
             values[name] = self.get_parameter(name).value
         return values
+
+    def _hidden_structure(self):
+        """Return (changes, URDF text) of the simulated robot; the truth of its fingertips."""
+        base = self.p['sim_urdf_file'] or urdf_string(self.robot)
+        profile = self.p['profile_file'] or None
+        self.truth = TrueFingertips(apply_changes(base, []), profile)
+        tools = {side: float(self.p[f'hidden_tool_{side}_mm']) for side in ('right', 'left')}
+        changes = hidden_changes(self.p['structure_changes'], tools,
+                                 self.truth.fingertip_joints, 'namo_sim parameters')
+        urdf = apply_changes(base, changes, self.p['sim_urdf_file']
+                             or "structure_changes (namo_sim's copy of the planner's URDF)")
+        self.truth = TrueFingertips(urdf, profile)
+        return changes, urdf
 
     def _initial_state(self):
         """Set the start angles and the stuck joints; return the (q, qd) first desired."""
@@ -168,6 +243,9 @@ class SimNode(Node):
 
     def _now(self):
         return self.get_clock().now().nanoseconds * 1e-9
+
+    def _hidden_text(self):
+        return '; '.join(c.describe() for c in self.changes) or 'nothing'
 
     def _stuck_text(self):
         return ', '.join(f'{n} at {math.degrees(a):.2f} deg'
@@ -276,21 +354,23 @@ class SimNode(Node):
         next_time = time.monotonic()
         with self.lock:
             anchor = self._now() - self.sim.time
+            self.tracker.next_capture = anchor + self.sim.time
         while not self._stop.is_set():
             with self.lock:
                 now = anchor + self.sim.time
                 self._control(now)
                 self.sim.step(1)
                 state = report = None
-                if step % state_every == 0:
+                if step % state_every == 0 or self.tracker.due(now + dt):
                     state = (self.sim.positions(), self.sim.velocities(), now + dt)
                 if step % report_every == 0:
                     report = self._contact_status()
             try:
-                if state is not None:
+                if state is not None and step % state_every == 0:
                     self._publish_state(*state)
                 if report is not None:
                     self.contact_pub.publish(report)
+                self._track(now + dt, state)
             except Exception:  # noqa: B902 - the context is shutting down
                 if self._stop.is_set() or not self.context.ok():
                     return     # SIGTERM shut ROS down before main() stopped this thread
@@ -305,6 +385,23 @@ class SimNode(Node):
                 next_time -= delay
                 self.get_logger().warning(
                     f'physics {-delay:.2f} s behind real time: skipped that time')
+
+    def _track(self, now, state):
+        """Capture the true fingertips when due (``state`` is of ``now``); publish arrivals."""
+        if not self.tracker_pubs:
+            return
+        if state is not None and self.tracker.due(now):
+            self.tracker.capture(now, self.truth(dict(zip(self.sim.joint_names, state[0]))))
+        for m in self.tracker.deliver(now):
+            measured, truth = self.tracker_pubs[m.side]
+            measured.publish(point_message(m.point_mm, m.capture, self.truth.frame))
+            if truth is not None:     # ground truth: stamped at capture, sent at delivery
+                truth.publish(point_message(m.truth_mm, m.capture, self.truth.frame))
+
+    def _publish_structure(self):
+        msg = structure_status(self.p, self.changes, self.tracker, self.robot.name)
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.diag_pub.publish(msg)
 
     def _publish_state(self, q, qd, stamp):
         msg = JointState(name=list(self.sim.joint_names), position=q.tolist(),
@@ -340,6 +437,24 @@ class SimNode(Node):
         """Stop the physics thread."""
         self._stop.set()
         self._thread.join(timeout=2.0)
+
+
+def structure_status(p, changes, tracker, hardware_id):
+    """Return the ``namo_sim: hidden structure`` status: what the planner is not told."""
+    t = tracker.settings
+    values = {'hidden_changes': ' '.join(f'{c.kind}:{c.joint}:{c.amount:g}' for c in changes),
+              'urdf': p['sim_urdf_file'] or "the planner's",
+              'tracker_topic': p['tracker_topic'],
+              'tracker': f'{t.rate_hz:g} Hz, sigma {t.sigma_mm:g} mm, latency '
+                         f'{t.latency_s:g} s, dropout {t.dropout:g}',
+              'tracker_captures': tracker.captured, 'tracker_dropped': tracker.dropped,
+              'ground_truth_published': str(p['publish_ground_truth']).lower()}
+    hidden = '; '.join(c.describe() for c in changes) or 'nothing'
+    status = DiagnosticStatus(
+        level=DiagnosticStatus.OK, name=f'{NODE_NAME}: hidden structure',
+        message=f'hidden from the planner: {hidden}', hardware_id=hardware_id,
+        values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+    return DiagnosticArray(status=[status])
 
 
 def main(args=None):

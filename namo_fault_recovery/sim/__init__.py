@@ -5,6 +5,8 @@ The simulated Namo, free of ROS (``ros/sim_node.py`` puts it on ROS as ``namo_si
   joints, self-contacts with the designed hand contact of two-handed gestures;
 - :mod:`.structure_change`: changes the planner does not know (a tool, a bent link, an
   encoder offset, a link length), applied to the simulator's own copy of the URDF;
+- :mod:`.tracker`: a fingertip tracker as a camera gives it (noise, latency, rate,
+  dropouts; stamped at capture) and the true fingertips of the changed copy;
 - :mod:`.trajectory`: a joint trajectory controller's rules (validation, sampling), as
   ros2_control's JointTrajectoryController applies them.
 """

@@ -156,3 +156,22 @@ def apply_changes(urdf: str | os.PathLike, changes, source: str | None = None) -
         joint.origin = edited_origin(origin, axis, change, source)
     text = model.write_xml_string()
     return text.decode('utf-8') if isinstance(text, bytes) else str(text)
+
+
+def hidden_changes(specs, tools: dict, fingertip_joints: dict,
+                   source: str = '<parameter>') -> list:
+    """
+    Return the changes of the simulator's parameters: ``specs`` then one tool per hand.
+
+    ``specs`` are ``KIND:JOINT:AMOUNT`` strings (empty ones skipped, as a ROS string
+    array cannot be empty); ``tools`` maps a side to a tool length in mm (0: none),
+    applied at that side's fingertip joint (``fingertip_joints``).
+    """
+    changes = [parse_change(s, source, 'structure_changes') for s in specs if s]
+    for side, length in tools.items():
+        key = f'hidden_tool_{side}_mm'
+        if not (math.isfinite(length) and length >= 0):
+            raise ConfigError(source, key, f'{length!r}; expected a tool length >= 0 mm')
+        if length > 0:
+            changes.append(StructureChange('tool', fingertip_joints[side], float(length)))
+    return changes
