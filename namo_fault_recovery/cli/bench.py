@@ -13,6 +13,9 @@ import sys
 from .common import gesture_and_keyframe, parse_faults, Parser, UsageError
 
 EXIT_USAGE = 2
+# ``bench explore``'s runs (benchmarks.explore.RUNS, named here so that the parser does not
+# import the simulator; a test checks that they agree).
+EXPLORE_RUNS = ('sa', 'ours', 'every', 'ik_true')
 
 
 def _usage(message):
@@ -324,7 +327,7 @@ def cmd_bench_explore(args, out):
                           every_seeds=args.every_seeds, sigmas=sigmas,
                           motions=tuple(args.motions), labels=labels,
                           robot_kind=args.robot, sa_robot=args.sa_robot,
-                          progress=not args.quiet)
+                          progress=not args.quiet, runs=tuple(args.runs))
     return 0
 
 
@@ -342,6 +345,8 @@ def _add_explore(bench_sub):
                    choices=['circle', 'bye'], help='motions (default circle bye)')
     p.add_argument('--cases', nargs='+', default=None, metavar='TEXT',
                    help='only the cases whose name contains one of these (default all)')
+    p.add_argument('--runs', nargs='+', default=list(EXPLORE_RUNS), choices=EXPLORE_RUNS,
+                   help='which runs (default all: sa ours every ik_true)')
     p.add_argument('--robot', default='physics', choices=['physics', 'kinematic'],
                    help='trial robot of ours / every point (default physics: the simulator)')
     p.add_argument('--sa-robot', default='kinematic', choices=['physics', 'kinematic'],

@@ -21,6 +21,7 @@ corrected model, with a per-point bias and a per-point secant (Broyden) Jacobian
 """
 
 from dataclasses import dataclass
+from functools import lru_cache
 import math
 
 import numpy as np
@@ -90,14 +91,15 @@ def corrected_tip(chain, groups, params, q):
     return tip
 
 
+@lru_cache(maxsize=16)
 def chain_links(chain):
-    """Return the chain's link names, base first."""
-    return list(chain.link_frames(np.zeros((1, chain.n_joints))).keys())
+    """Return the chain's link names, base first (a chain's links never change)."""
+    return tuple(chain.link_frames(np.zeros((1, chain.n_joints))).keys())
 
 
 def candidate_groups(chain):
     """Return every correction group the selection may use on ``chain``."""
-    links = chain_links(chain)[1:-1]            # a bend of the base or the tip moves nothing
+    links = list(chain_links(chain))[1:-1]            # a bend of the base or the tip moves nothing
     return (['tip_offset'] + [f'offset:{j}' for j in chain.joint_names]
             + [f'bend:{link}' for link in links])
 
