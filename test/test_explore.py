@@ -6,7 +6,8 @@ import math
 from namo_fault_recovery.benchmarks import explore as bench
 from namo_fault_recovery.cli.bench import EXPLORE_RUNS
 from namo_fault_recovery.explore.annealing import AnnealingSchedule
-from namo_fault_recovery.explore.motion import explore_motion, locked, motion_layouts
+from namo_fault_recovery.explore.motion import (explore_motion, locked, motion_layouts,
+                                                MotionSpec)
 from namo_fault_recovery.explore.safety import capsule_clearance
 from namo_fault_recovery.explore.trial import (KinematicTrialRobot, SafetyCheck,
                                                TrialSession, UnsafeTrial)
@@ -48,9 +49,9 @@ def explore(truth, method='secant', options=None, locks=None, **kw):
     """Explore the circle's four points on ``truth``; return (result, session, true error)."""
     ses = session(truth, locks, **kw)
     lock_names = {ROBOT.arms['right'].joint_names[j]: a for j, a in (locks or {}).items()}
-    res = explore_motion(ses, 'circle', NOMINAL, DESIGN, PICKS, locks or {},
-                         motion_layouts(ROBOT, CIRCLE, 'right', lock_names), method,
-                         options=options)
+    spec = MotionSpec('circle', NOMINAL, DESIGN, PICKS, locks or {},
+                      motion_layouts(ROBOT, CIRCLE, 'right', lock_names))
+    res = explore_motion(ses, spec, method, options=options)
     target = NOMINAL.batch_forward(DESIGN).tip
     err = np.linalg.norm(truth.batch_forward(res.q).tip - target, axis=1)
     return res, ses, err
@@ -116,9 +117,9 @@ def test_a_stop_request_ends_exploration_within_one_trial(method):
     ses = session(truth, should_stop=stop)
     state['ses'] = ses
     lock = {}
-    res = explore_motion(ses, 'circle', NOMINAL, DESIGN, PICKS, lock,
-                         motion_layouts(ROBOT, CIRCLE, 'right', lock), method,
-                         options=AnnealingSchedule(trials_per_stage=40)
+    spec = MotionSpec('circle', NOMINAL, DESIGN, PICKS, lock,
+                      motion_layouts(ROBOT, CIRCLE, 'right', lock))
+    res = explore_motion(ses, spec, method, options=AnnealingSchedule(trials_per_stage=40)
                          if method == 'annealing' else None)
     assert res.status == 'stopped' and ses.trials == 6 == res.trials
     assert 'stopped' in res.notes[0]
@@ -131,11 +132,10 @@ def test_bench_explore_smoke(tmp_path):
         def write(self, text):
             out.append(text)
 
-    summary = bench.bench_explore(Sink(), str(tmp_path), seeds=1, every_seeds=1,
-                                  sigmas=(1.0,), motions=('bye',), labels=['tool 50 mm'],
-                                  robot_kind='kinematic',
-                                  schedule=AnnealingSchedule(trials_per_stage=20),
-                                  progress=False)
+    run = bench.ExploreRun(seeds=1, every_seeds=1, sigmas=(1.0,), motions=('bye',),
+                           labels=('tool 50 mm',), robot_kind='kinematic',
+                           schedule=AnnealingSchedule(trials_per_stage=20))
+    summary = bench.bench_explore(Sink(), str(tmp_path), run, progress=False)
     assert {r['run'] for r in summary} == set(bench.RUNS) == set(EXPLORE_RUNS)
     ours = next(r for r in summary if r['run'] == 'ours')
     sa = next(r for r in summary if r['run'] == 'sa')

@@ -25,7 +25,7 @@ time the simulator measured; the table labels which robot each row used.  Errors
 against the noise-free truth at the final commanded poses.
 """
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 import json
 import os
 
@@ -35,7 +35,7 @@ from . import common
 from .motion import ELBOW, WAVE_DISTORTION_MM
 from ..explore.annealing import AnnealingSchedule
 from ..explore.corrections import solve_poses
-from ..explore.motion import explore_motion, locked, motion_layouts
+from ..explore.motion import explore_motion, locked, motion_layouts, MotionSpec
 from ..explore.safety import capsule_clearance
 from ..explore.secant import SecantOptions
 from ..explore.trial import KinematicTrialRobot, SafetyCheck, Trial, TrialSession
@@ -80,13 +80,15 @@ class PhysicsTrialRobot:
     reached, plus Gaussian noise.  Robot seconds: simulated time plus ``latency``.
     """
 
+    still = np.radians(0.3)     # rad/s: every joint slower than this has settled
+    max_settle = 1.5            # s
+
     def __init__(self, robot, urdf, truth, locks, sigma_mm, seed, start, side=SIDE,
-                 latency=LATENCY, still=np.radians(0.3), max_settle=1.5):
+                 latency=LATENCY):
         self.sim = NamoSim(robot, urdf=urdf)
         self.cols = np.array([self.sim.index(n) for n in robot.arms[side].joint_names])
         self.truth, self.sigma, self.latency = truth, float(sigma_mm), float(latency)
         self.rng = np.random.default_rng(seed)
-        self.still, self.max_settle = float(still), float(max_settle)
         arm = robot.arms[side]
         self.joint_names, self.lower, self.upper = arm.joint_names, arm.lower, arm.upper
         self.velocity = np.asarray(robot.velocity_limits, dtype=float)
@@ -164,7 +166,7 @@ def _session(robot, case, kind, sigma, seed):
     else:
         bot = KinematicTrialRobot(case.truth, nominal.lower, nominal.upper,
                                   robot.velocity_limits, case.lock_idx, sigma, seed,
-                                  settle=KINEMATIC_SETTLE, latency=LATENCY, start=start)
+                                  timing=(KINEMATIC_SETTLE, LATENCY), start=start)
     safety = SafetyCheck(nominal.lower, nominal.upper, np.asarray(robot.velocity_limits),
                          case.clearance, 5.0)
     return TrialSession(bot, safety)
@@ -218,9 +220,9 @@ def run_one(robot, case, run, sigma, seed, robot_kind, schedule):
     picks = tuple(range(len(case.design))) if run == 'every' else case.picks
     session = _session(robot, case, robot_kind, sigma, seed)
     method, options = ('annealing', schedule) if run == 'sa' else ('secant', SecantOptions())
-    res = explore_motion(session, case.motion, case.nominal, case.design, picks,
-                         case.lock_idx, case.layouts, method, sigma, options, seed,
-                         robot.arms[SIDE].joint_names)
+    spec = MotionSpec(case.motion, case.nominal, case.design, picks, case.lock_idx,
+                      case.layouts, robot.arms[SIDE].joint_names)
+    res = explore_motion(session, spec, method, sigma, options, seed)
     return _figures(case, run, robot_kind, res.q, res.stage, res)
 
 
@@ -344,9 +346,22 @@ def _progress(enabled, text):
         sys.stderr.write(text + '\n')
 
 
-def bench_explore(out, out_dir, seeds=10, every_seeds=3, sigmas=(1.0, 4.0), motions=MOTIONS,
-                  labels=None, robot_kind='physics', sa_robot='kinematic', schedule=TUNED_SA,
-                  progress=True, runs=RUNS):
+@dataclass(frozen=True)
+class ExploreRun:
+    """What one ``bench explore`` runs: seeds, noise, motions, cases, robots, runs."""
+
+    seeds: int = 10
+    every_seeds: int = 3
+    sigmas: tuple = (1.0, 4.0)
+    motions: tuple = MOTIONS
+    labels: tuple | None = None      # case names (None: all)
+    robot_kind: str = 'physics'
+    sa_robot: str = 'kinematic'
+    schedule: AnnealingSchedule = TUNED_SA
+    runs: tuple = RUNS
+
+
+def bench_explore(out, out_dir, run=ExploreRun(), progress=True):
     """
     Run every case x run over the seeds; print the table and the targets; write JSON.
 
@@ -355,48 +370,66 @@ def bench_explore(out, out_dir, seeds=10, every_seeds=3, sigmas=(1.0, 4.0), moti
     some of :data:`RUNS` (the JSON of several partial runs can be merged with
     :func:`summarise`).
     """
+    seeds, every_seeds, sigmas = run.seeds, run.every_seeds, run.sigmas
+    robot_kind, sa_robot, schedule, runs = run.robot_kind, run.sa_robot, run.schedule, run.runs
     robot = load_robot()
     library = load_library(robot, config_path(DEMO_MOTION_FILE))
     rows = []
-    for case in _cases(robot, library, motions, labels):
-        for run in runs:
-            kind = sa_robot if run == 'sa' else robot_kind
-            n = 1 if run == 'ik_true' else (every_seeds if run == 'every' else seeds)
+    for case in _cases(robot, library, run.motions, run.labels):
+        for name in runs:
+            kind = sa_robot if name == 'sa' else robot_kind
+            n = 1 if name == 'ik_true' else (every_seeds if name == 'every' else seeds)
             for seed in range(n):
-                row = run_one(robot, case, run, sigmas[0], seed, kind, schedule)
+                row = run_one(robot, case, name, sigmas[0], seed, kind, schedule)
                 rows.append(dict(row, sigma_mm=sigmas[0], seed=seed))
-            _progress(progress, f'{case.motion} / {case.label} / {run}: done')
+            _progress(progress, f'{case.motion} / {case.label} / {name}: done')
         for sigma in (sigmas[1:] if 'ours' in runs else ()):
             for seed in range(seeds):
                 row = run_one(robot, case, 'ours', sigma, seed, robot_kind, schedule)
                 rows.append(dict(row, sigma_mm=sigma, seed=seed))
-    summary = summarise(rows)
-    out.write(f'# bench explore: {seeds} seeds (every: {every_seeds}), tracker sigma '
+    header = (f'# bench explore: {seeds} seeds (every: {every_seeds}), tracker sigma '
               f'{", ".join(f"{s:g}" for s in sigmas)} mm, latency {LATENCY * 1000:g} ms; '
-              f'trial robot {robot_kind} (SA: {sa_robot}); SA schedule: {schedule.describe()}; '
-              f'{common.format_machine(common.machine_info())}\n')
+              f'trial robot {robot_kind} (SA: {sa_robot}); SA schedule: '
+              f'{schedule.describe()}; {common.format_machine(common.machine_info())}\n')
+    return report(out, out_dir, rows, header, {'seeds': seeds, 'sigmas': list(sigmas),
+                                               'schedule': schedule.describe()})
+
+
+def report(out, out_dir, rows, header, meta=None):
+    """Print the table, the paper's figures and the targets of ``rows``; write the JSON."""
+    summary = summarise(rows)
+    sigmas = sorted({r['sigma_mm'] for r in rows})
+    out.write(header)
     print_table(out, summary)
     out.write('\nK: typical points; trials: commanded (mean over seeds); tr/pt: per typical '
               'point (mean; max: worst point, worst seed); robot s: move + settle + latency; '
               'err0: unadapted mean error; mean/p95/max: true fingertip error at every point '
               '(max: worst seed); typ/interp: at the typical / the Kriging-interpolated '
               'points; sim %: 1 - mean / err0; stage: DOF expansion stage (mean).\n')
-    out.write("\nThe paper (its own 3-DOF arm and circle; compare shapes, not values):\n")
+    out.write('\nThe paper (its own 3-DOF arm and circle; compare shapes, not values):\n')
     for label, text in PAPER.items():
         out.write(f'  {label:36s} {text}\n')
-    checks = targets(summary, sigmas[1] if len(sigmas) > 1 else None)
+    checks = targets(summary, max(sigmas) if len(sigmas) > 1 else None)
     out.write('\nTargets (issue 18):\n')
     for name, figure, met in checks:
         out.write(f'  {"met " if met else "MISS"} {name}: {figure}\n')
     os.makedirs(out_dir, exist_ok=True)
     path = os.path.join(out_dir, 'explore.json')
     with open(path, 'w', encoding='utf-8') as stream:
-        json.dump({'seeds': seeds, 'sigmas': list(sigmas), 'schedule': schedule.describe(),
-                   'rows': rows, 'summary': summary,
-                   'targets': [{'target': n, 'figure': f, 'met': m} for n, f, m in checks]},
+        json.dump(dict(meta or {}, rows=rows, summary=summary,
+                       targets=[{'target': n, 'figure': f, 'met': m} for n, f, m in checks]),
                   stream, indent=1)
     out.write(f'written: {path}\n')
     return summary
+
+
+def merge(out, out_dir, paths):
+    """Report the rows of several ``explore.json`` files (partial runs) as one run."""
+    rows = []
+    for path in paths:
+        with open(path, encoding='utf-8') as stream:
+            rows += json.load(stream)['rows']
+    return report(out, out_dir, rows, f'# bench explore --merge {" ".join(map(str, paths))}\n')
 
 
 def tune_sa(out, out_dir, seeds=2, grid=None, robot_kind='kinematic', progress=True):

@@ -319,15 +319,18 @@ def cmd_bench_explore(args, out):
         labels = [c for c in known if any(k in c for k in args.cases)]
         if not labels:
             raise _usage(f'--cases {args.cases}: matches none of {"; ".join(known)}')
+    if args.merge:
+        explore.merge(out, out_dir_of(args, 'explore'), args.merge)
+        return 0
     if args.tune_sa:
         explore.tune_sa(out, out_dir_of(args, 'explore'), seeds=args.seeds,
                         progress=not args.quiet)
         return 0
-    explore.bench_explore(out, out_dir_of(args, 'explore'), seeds=args.seeds,
-                          every_seeds=args.every_seeds, sigmas=sigmas,
-                          motions=tuple(args.motions), labels=labels,
-                          robot_kind=args.robot, sa_robot=args.sa_robot,
-                          progress=not args.quiet, runs=tuple(args.runs))
+    run = explore.ExploreRun(seeds=args.seeds, every_seeds=args.every_seeds, sigmas=sigmas,
+                             motions=tuple(args.motions), labels=labels,
+                             robot_kind=args.robot, sa_robot=args.sa_robot,
+                             runs=tuple(args.runs))
+    explore.bench_explore(out, out_dir_of(args, 'explore'), run, progress=not args.quiet)
     return 0
 
 
@@ -339,7 +342,7 @@ def _add_explore(bench_sub):
     p.add_argument('--every-seeds', type=int, default=3,
                    help='seeds of the explore-every-point upper bound (default 3)')
     p.add_argument('--sigma', type=float, nargs='+', default=[1.0, 4.0], metavar='MM',
-                   help="tracker noise: the first for every run, further ones (a head "
+                   help='tracker noise: the first for every run, further ones (a head '
                         'camera) for ours only (default 1 4)')
     p.add_argument('--motions', nargs='+', default=['circle', 'bye'],
                    choices=['circle', 'bye'], help='motions (default circle bye)')
@@ -352,8 +355,10 @@ def _add_explore(bench_sub):
     p.add_argument('--sa-robot', default='kinematic', choices=['physics', 'kinematic'],
                    help="trial robot of the paper's SA (default kinematic: its thousands of "
                         'trials would take minutes of physics per run)')
+    p.add_argument('--merge', nargs='+', default=None, metavar='JSON',
+                   help='report the rows of several explore.json files (partial runs) as one')
     p.add_argument('--tune-sa', action='store_true',
-                   help="try the SA schedule grid and print the pick (uses --seeds)")
+                   help='try the SA schedule grid and print the pick (uses --seeds)')
     _add_common(p)
     p.set_defaults(func=cmd_bench_explore)
 

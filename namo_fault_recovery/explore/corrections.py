@@ -61,7 +61,7 @@ class Correction:
                          for g, p in zip(self.groups, self.params))
 
     def tip(self, q):
-        """Return the corrected fingertip (N, 3) mm at joint readings ``q`` (N, n) rad."""
+        """Return where the corrected model puts the fingertip, in mm, at readings ``q`` rad."""
         return corrected_tip(self.chain, self.groups, self.params, q)
 
 
@@ -194,7 +194,8 @@ def solve_poses(tip_fn, q0, targets, free, lower, upper, anchor, stay=2.0, iters
                - (r + targets)[:, None]) / eps                       # (K, nf, 3)
         jtj = np.einsum('kia,kja->kij', jac, jac) + stay ** 2 * np.eye(nf)[None]
         grad = np.einsum('kia,ka->ki', jac, r) + stay ** 2 * (q - anchor)[:, free]
-        step = -np.linalg.solve(jtj + lam[:, None, None] * np.eye(nf)[None], grad[..., None])[..., 0]
+        damped = jtj + lam[:, None, None] * np.eye(nf)[None]
+        step = -np.linalg.solve(damped, grad[..., None])[..., 0]
         step *= np.minimum(1.0, max_step / np.maximum(np.abs(step).max(axis=1), 1e-12))[:, None]
         trial = q.copy()
         trial[:, free] += step

@@ -116,17 +116,33 @@ def spread(design, picks, solved, trend=None):
     return out, tuple(float(s) for s in np.sqrt(est.variance))
 
 
-def explore_motion(session: TrialSession, name, chain, design, picks, locks, layouts,
-                   method='secant', sigma_mm=1.0, options=None, seed=0, joint_names=()):
+@dataclass(frozen=True)
+class MotionSpec:
+    """One arm's motion to explore: its design, typical points, locks and layouts."""
+
+    name: str
+    chain: object               # the nominal KinematicChain (mm)
+    design: np.ndarray          # (T, n) rad
+    picks: tuple                # typical point indices
+    locks: dict                 # arm joint index -> lock angle (rad)
+    layouts: tuple              # see :func:`motion_layouts`
+    joint_names: tuple = ()
+
+
+def explore_motion(session: TrialSession, spec: MotionSpec, method: str = 'secant',
+                   sigma_mm: float = 1.0, options=None, seed: int = 0) -> 'ExploredMotion':
     """
     Explore one motion of one arm on ``session``'s robot; return its ExploredMotion.
 
     ``options`` is the explorer's (:class:`~.secant.SecantOptions` or
-    :class:`~.annealing.AnnealingSchedule`; None: the defaults).
+    :class:`~.annealing.AnnealingSchedule`; None: the defaults); ``sigma_mm`` the
+    tracker's declared noise.
     """
     if method not in METHODS:
         raise ValueError(f'explore method {method!r}; expected one of {", ".join(METHODS)}')
-    task = make_task(chain, design, picks, locks, layouts, sigma_mm)
+    name, chain, design, picks = spec.name, spec.chain, spec.design, spec.picks
+    locks, joint_names = spec.locks, spec.joint_names
+    task = make_task(chain, design, picks, locks, spec.layouts, sigma_mm)
     trials0, seconds0 = session.trials, session.seconds
     if method == 'secant':
         found = explore_secant(session, task, options or SecantOptions())

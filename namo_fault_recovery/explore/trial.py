@@ -147,19 +147,21 @@ class KinematicTrialRobot:
     A trial robot without physics: the arm reaches its command exactly (locks hold).
 
     ``truth(q)`` (N, n) -> (N, 3) mm is the changed robot's true fingertip; the tracker
-    adds Gaussian noise of ``sigma_mm`` (seeded) and ``latency`` s.  The robot time of a
-    trial is its move's duration, ``settle`` s and the latency.  For tests and quick
+    adds Gaussian noise of ``sigma_mm`` (seeded).  ``timing`` is (settle, latency) in s:
+    the robot time of a trial is its move's duration plus both.  For tests and quick
     runs: the benchmark's default trial robot is the simulator.
     """
 
+    joint_names = ()
+
     def __init__(self, truth, lower, upper, velocity, locks=None, sigma_mm=1.0, seed=0,
-                 settle=0.3, latency=0.05, start=None, joint_names=()):
+                 timing=(0.3, 0.05), start=None):
         self.truth = truth
         self.lower, self.upper = np.asarray(lower, float), np.asarray(upper, float)
         self.velocity = np.asarray(velocity, float)
-        self.joint_names = tuple(joint_names)
         self.locks = dict(locks or {})           # arm index -> angle (rad)
-        self.sigma, self.settle, self.latency = float(sigma_mm), float(settle), float(latency)
+        self.sigma = float(sigma_mm)
+        self.settle, self.latency = (float(t) for t in timing)
         self.rng = np.random.default_rng(seed)
         self.q = np.zeros(len(self.lower)) if start is None else np.array(start, float)
         self._hold()
