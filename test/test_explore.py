@@ -62,7 +62,8 @@ def test_ours_recovers_a_hidden_tool_with_few_trials():
     res, ses, err = explore(truth)
     assert res.origin == 'explored' and res.status == 'converged'
     assert max(res.trials_per_point) <= 5 and res.trials == ses.trials == sum(res.trials_per_point)
-    assert 'tip_offset' in res.correction
+    assert 'tip_offset' in res.correction and res.model.groups == ('tip_offset',)
+    assert abs(np.linalg.norm(res.model.params[0]) - 50.0) < 3.0      # the hidden tool, mm
     assert err[list(PICKS)].mean() < 1.5          # 50 mm before
     assert err.mean() < 3.0                       # Kriging between the four points
     assert res.measured_mean_mm < 4.0             # scored by what was measured

@@ -46,7 +46,8 @@ class ExploredMotion:
     measured_error_mm: tuple        # at each typical point's final pose, as measured
     stage: int                      # DOF expansion stage reached
     free_joints: tuple              # joint names free at that stage
-    correction: str = ''            # the structural correction ours found
+    correction: str = ''            # the structural correction ours found, described
+    model: object = None            # that correction (.corrections.Correction: groups, params)
     status: str = 'converged'
     origin: str = ORIGIN
     kriging_sigma_deg: tuple = ()
@@ -163,4 +164,5 @@ def explore_motion(session: TrialSession, spec: MotionSpec, method: str = 'secan
         trials=int(session.trials - trials0), robot_seconds=float(session.seconds - seconds0),
         measured_error_mm=tuple(float(e) for e in found.measured_error(task.targets)),
         stage=int(found.stage), free_joints=names, correction=found.correction,
+        model=found.model,
         status=found.status, kriging_sigma_deg=sigma, notes=list(found.notes))
