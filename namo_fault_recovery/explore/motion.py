@@ -7,7 +7,8 @@ at a motion's typical points (:func:`~namo_fault_recovery.recovery.vq.quantise`,
 corrections to every point by ordinary Kriging
 (:class:`~namo_fault_recovery.recovery.kriging.OrdinaryKriging`), as the paper does.
 The paper's correction is r = theta'' - theta; ours is taken relative to the corrected
-model's own inverse kinematics at every point (the fitted structure is the trend, and
+model's own inverse kinematics at every point, warm-started from the paper's Kriging so
+that it stays on the explored poses' branch (the fitted structure is the trend, and
 Kriging spreads what the measurements still said beyond it).  With every point as a
 typical point (``every_point``) nothing is interpolated: the paper's upper bound.
 
@@ -151,10 +152,14 @@ def explore_motion(session: TrialSession, spec: MotionSpec, method: str = 'secan
         found = explore_annealing(session, task, options or AnnealingSchedule(), seed)
     trend = None
     if found.model is not None:
+        # The corrected model's IK at every point, warm-started from (and drawn to) the
+        # paper's Kriging of the explored poses, so that it stays on their branch.
         design_all = np.asarray(design, dtype=float)
-        trend, _ = solve_poses(lambda q, idx: found.model.tip(q), locked(design_all, locks),
+        warm = np.clip(locked(spread(design_all, picks, found.q)[0], locks), chain.lower,
+                       chain.upper)
+        trend, _ = solve_poses(lambda q, idx: found.model.tip(q), warm,
                                chain.batch_forward(design_all).tip, np.asarray(found.free),
-                               chain.lower, chain.upper, locked(design_all, locks))
+                               chain.lower, chain.upper, warm)
     q, sigma = spread(design, picks, found.q, trend)
     q = np.clip(locked(q, locks), chain.lower, chain.upper)
     names = tuple(joint_names[j] for j in found.free) if joint_names else found.free

@@ -37,6 +37,7 @@ class SecantOptions:
     max_trials_per_point: int = 5
     tol_deg: float = 0.1            # a step smaller than this ends a point's exploration
     secant_gate: float = 3.0        # Broyden only beyond this many noise sigmas
+    secant_move: float = 3.0        # ... and for moves this many times larger than that
     shrink: float = 3.0             # James-Stein factor of the per-point bias
     max_groups: int = 2
 
@@ -79,9 +80,28 @@ def explore_secant(session: TrialSession, task: ExploreTask,
     except UnsafeTrial as why:
         out.status = 'refused'
         out.notes.append(str(why))
-    out.q, out.meas, out.trials = st.q, st.meas, st.trials
+    _keep_best(task, st)
+    out.q, out.trials = st.q, st.trials
     out.measured = st.meas
     return out
+
+
+def _keep_best(task, st):
+    """
+    End each point on its last pose, unless a trial of it measured clearly better.
+
+    Clearly: by more than the noise of two measurements (3 sigma sqrt 2); then that
+    trial's pose and measurement are the point's result (scored by what was measured).
+    """
+    margin = 3.0 * math.sqrt(2.0) * task.sigma_mm
+    for p in range(len(st.q)):
+        mine = [(float(np.linalg.norm(y - task.targets[p])), q, y)
+                for k, q, y in st.log if k == p]
+        if not mine:
+            continue
+        best = min(mine, key=lambda m: m[0])
+        if float(np.linalg.norm(st.meas[p] - task.targets[p])) > best[0] + margin:
+            st.q[p], st.meas[p] = best[1], best[2]
 
 
 def _local_model(task, st, correction, options):
@@ -116,7 +136,10 @@ def _broyden(task, st, k, trial, tip_fn, options):
         return
     predicted = tip_fn(trial.q[None], np.array([k]))[0] - tip_fn(q0[None], np.array([k]))[0]
     miss = (trial.tip - y0) - predicted
-    if np.linalg.norm(miss) > options.secant_gate * math.sqrt(2.0) * task.sigma_mm:
+    noise = options.secant_gate * math.sqrt(2.0) * task.sigma_mm
+    # A secant is information only where the move is large against the noise: a tiny
+    # step with a noisy difference would make a huge, wrong Jacobian correction.
+    if np.linalg.norm(miss) > noise and np.linalg.norm(predicted) > options.secant_move * noise:
         st.secant[k] += np.outer(miss, dq) / nrm
 
 
