@@ -35,7 +35,7 @@ LAYERS = (
     ('objective',),
     ('optimize',),
     ('recovery',),
-    ('sim', 'playback'),
+    ('sim', 'playback', 'explore'),
     ('runtime',),
     ('ros',),
     ('benchmarks',),

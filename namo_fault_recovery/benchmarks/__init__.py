@@ -12,6 +12,9 @@ returns a plain dict (written as JSON) and prints its figures:
 - :mod:`.speed`: whole-library time and quality of our default against the paper ABC;
 - :mod:`.deadline`: the worst deadline overrun, idle and with a CPU burner;
 - :mod:`.beyond`, :mod:`.motion`: the extensions beyond the paper, whole motions;
+- :mod:`.explore`: adaptation to a change the model does not know, by trials on the
+  simulated robot: the paper's SA, ours, every point, the IK floor
+  (``bench explore``);
 - :mod:`.lock_compare`: ``average`` against ``optimal`` lock angles, every single fault;
 - :mod:`.detection`: stuck-joint detection and recovery on the simulator's physics
   (``bench detection``);

@@ -13,6 +13,9 @@ import sys
 from .common import gesture_and_keyframe, parse_faults, Parser, UsageError
 
 EXIT_USAGE = 2
+# ``bench explore``'s runs (benchmarks.explore.RUNS, named here so that the parser does not
+# import the simulator; a test checks that they agree).
+EXPLORE_RUNS = ('sa', 'ours', 'every', 'ik_true')
 
 
 def _usage(message):
@@ -302,6 +305,64 @@ def _add_playability(bench_sub):
     p.set_defaults(func=cmd_bench_playability)
 
 
+def cmd_bench_explore(args, out):
+    """Adapt to unknown structure changes by trials on the (simulated) robot."""
+    from ..benchmarks import explore
+    _positive_int('--seeds', args.seeds)
+    _positive_int('--every-seeds', args.every_seeds, 0)
+    sigmas = tuple(args.sigma)
+    if any(not (math.isfinite(s) and s > 0) for s in sigmas):
+        raise _usage(f'--sigma: expected noise levels (mm) > 0, got {list(sigmas)}')
+    labels = None
+    if args.cases:
+        known = [c[0] for c in explore.CASES]
+        labels = [c for c in known if any(k in c for k in args.cases)]
+        if not labels:
+            raise _usage(f'--cases {args.cases}: matches none of {"; ".join(known)}')
+    if args.merge:
+        explore.merge(out, out_dir_of(args, 'explore'), args.merge)
+        return 0
+    if args.tune_sa:
+        explore.tune_sa(out, out_dir_of(args, 'explore'), seeds=args.seeds,
+                        progress=not args.quiet)
+        return 0
+    run = explore.ExploreRun(seeds=args.seeds, every_seeds=args.every_seeds, sigmas=sigmas,
+                             motions=tuple(args.motions), labels=labels,
+                             robot_kind=args.robot, sa_robot=args.sa_robot,
+                             runs=tuple(args.runs))
+    explore.bench_explore(out, out_dir_of(args, 'explore'), run, progress=not args.quiet)
+    return 0
+
+
+def _add_explore(bench_sub):
+    """Add ``bench explore``: exploration on the robot after an unknown change."""
+    p = bench_sub.add_parser('explore', help='adapt to a change the model does not know: '
+                                             "the paper's SA, ours, every point, the IK floor")
+    p.add_argument('--seeds', type=int, default=10, help='noise seeds (default 10)')
+    p.add_argument('--every-seeds', type=int, default=3,
+                   help='seeds of the explore-every-point upper bound (default 3)')
+    p.add_argument('--sigma', type=float, nargs='+', default=[1.0, 4.0], metavar='MM',
+                   help='tracker noise: the first for every run, further ones (a head '
+                        'camera) for ours only (default 1 4)')
+    p.add_argument('--motions', nargs='+', default=['circle', 'bye'],
+                   choices=['circle', 'bye'], help='motions (default circle bye)')
+    p.add_argument('--cases', nargs='+', default=None, metavar='TEXT',
+                   help='only the cases whose name contains one of these (default all)')
+    p.add_argument('--runs', nargs='+', default=list(EXPLORE_RUNS), choices=EXPLORE_RUNS,
+                   help='which runs (default all: sa ours every ik_true)')
+    p.add_argument('--robot', default='physics', choices=['physics', 'kinematic'],
+                   help='trial robot of ours / every point (default physics: the simulator)')
+    p.add_argument('--sa-robot', default='kinematic', choices=['physics', 'kinematic'],
+                   help="trial robot of the paper's SA (default kinematic: its thousands of "
+                        'trials would take minutes of physics per run)')
+    p.add_argument('--merge', nargs='+', default=None, metavar='JSON',
+                   help='report the rows of several explore.json files (partial runs) as one')
+    p.add_argument('--tune-sa', action='store_true',
+                   help='try the SA schedule grid and print the pick (uses --seeds)')
+    _add_common(p)
+    p.set_defaults(func=cmd_bench_explore)
+
+
 def _add_plot(subparsers):
     """Add ``plot``: one gesture before and after adaptation."""
     p = subparsers.add_parser('plot', help='draw a gesture before and after adaptation (PNG)')
@@ -336,7 +397,8 @@ def register(subparsers):
     bench_sub = bench.add_subparsers(dest='bench_command', metavar='BENCHMARK',
                                      parser_class=Parser)
     bench_sub.required = True
-    for add in (_add_paper, _add_optimum, _add_speed, _add_deadline, _add_playability):
+    for add in (_add_paper, _add_optimum, _add_speed, _add_deadline, _add_playability,
+                _add_explore):
         add(bench_sub)
     _add_plot(subparsers)
     return bench_sub

@@ -1,0 +1,147 @@
+"""Exploration on the robot: both explorers on a kinematic trial robot, the safety checks."""
+
+import json
+import math
+
+from namo_fault_recovery.benchmarks import explore as bench
+from namo_fault_recovery.cli.bench import EXPLORE_RUNS
+from namo_fault_recovery.explore.annealing import AnnealingSchedule
+from namo_fault_recovery.explore.motion import (explore_motion, locked, motion_layouts,
+                                                MotionSpec)
+from namo_fault_recovery.explore.safety import capsule_clearance
+from namo_fault_recovery.explore.trial import (KinematicTrialRobot, SafetyCheck,
+                                               TrialSession, UnsafeTrial)
+from namo_fault_recovery.model.gestures import load_library
+from namo_fault_recovery.model.robot import load_robot
+from namo_fault_recovery.model.robot_profile import load_profile
+from namo_fault_recovery.model.urdf import urdf_string
+from namo_fault_recovery.resources import config_path, DEMO_MOTION_FILE, NAMO_PROFILE_FILE
+from namo_fault_recovery.sim.structure_change import apply_changes, parse_change
+import numpy as np
+import pytest
+
+ROBOT = load_robot()
+PROFILE = config_path(NAMO_PROFILE_FILE)
+NOMINAL = load_profile(PROFILE).arms['right'].chain
+CIRCLE = load_library(ROBOT, config_path(DEMO_MOTION_FILE))['circle']
+DESIGN = CIRCLE.joint_matrix()[:, :7]
+PICKS = (0, 25, 50, 75)          # four typical points around the circle
+CLEARANCE = capsule_clearance(ROBOT, 'right', np.zeros(14))
+
+
+def true_chain(*changes):
+    """Return the right arm's chain of Namo after hidden ``changes``."""
+    text = apply_changes(urdf_string(ROBOT), [parse_change(c) for c in changes])
+    return load_profile(PROFILE, urdf=text).arms['right'].chain
+
+
+def session(truth, locks=None, sigma=1.0, seed=0, should_stop=lambda: False):
+    """Return a TrialSession on a kinematic trial robot whose true tip is ``truth``."""
+    bot = KinematicTrialRobot(lambda q: truth.batch_forward(q).tip, NOMINAL.lower,
+                              NOMINAL.upper, ROBOT.velocity_limits, locks, sigma, seed,
+                              start=locked(DESIGN[PICKS[0]], locks or {}))
+    safety = SafetyCheck(NOMINAL.lower, NOMINAL.upper, np.asarray(ROBOT.velocity_limits),
+                         CLEARANCE, 5.0)
+    return TrialSession(bot, safety, should_stop)
+
+
+def explore(truth, method='secant', options=None, locks=None, **kw):
+    """Explore the circle's four points on ``truth``; return (result, session, true error)."""
+    ses = session(truth, locks, **kw)
+    lock_names = {ROBOT.arms['right'].joint_names[j]: a for j, a in (locks or {}).items()}
+    spec = MotionSpec('circle', NOMINAL, DESIGN, PICKS, locks or {},
+                      motion_layouts(ROBOT, CIRCLE, 'right', lock_names))
+    res = explore_motion(ses, spec, method, options=options)
+    target = NOMINAL.batch_forward(DESIGN).tip
+    err = np.linalg.norm(truth.batch_forward(res.q).tip - target, axis=1)
+    return res, ses, err
+
+
+def test_ours_recovers_a_hidden_tool_with_few_trials():
+    truth = true_chain('tool:right_arm_fingertip_joint:50')
+    res, ses, err = explore(truth)
+    assert res.origin == 'explored' and res.status == 'converged'
+    assert max(res.trials_per_point) <= 5 and res.trials == ses.trials == sum(res.trials_per_point)
+    assert 'tip_offset' in res.correction and res.model.groups == ('tip_offset',)
+    assert abs(np.linalg.norm(res.model.params[0]) - 50.0) < 3.0      # the hidden tool, mm
+    assert err[list(PICKS)].mean() < 1.5          # 50 mm before
+    assert err.mean() < 3.0                       # Kriging between the four points
+    assert res.measured_mean_mm < 4.0             # scored by what was measured
+    assert res.robot_seconds > 0
+
+
+def test_ours_recovers_an_encoder_offset():
+    truth = true_chain('encoder_offset:right_arm_joint2:5')
+    res, _, err = explore(truth)
+    assert 'offset:right_arm_joint2' in res.correction
+    assert err[list(PICKS)].mean() < 1.0 and max(res.trials_per_point) <= 5
+
+
+def test_annealing_improves_on_the_unadapted_motion():
+    truth = true_chain('tool:right_arm_fingertip_joint:50')
+    schedule = AnnealingSchedule(trials_per_stage=40, temperature_mm=10.0, step_deg=3.0)
+    res, ses, err = explore(truth, 'annealing', schedule)
+    before = np.linalg.norm(truth.batch_forward(DESIGN[list(PICKS)]).tip
+                            - NOMINAL.batch_forward(DESIGN[list(PICKS)]).tip, axis=1)
+    assert err[list(PICKS)].mean() < 0.6 * before.mean()
+    assert ses.trials == res.trials >= 4 * 40      # every trial is counted
+
+
+def test_unsafe_trial_poses_are_refused_before_moving():
+    ses = session(NOMINAL)
+    here = ses.robot.current()
+    beyond = here.copy()
+    beyond[0] = NOMINAL.upper[0] + 0.1
+    with pytest.raises(UnsafeTrial, match='outside its limits'):
+        ses.trial(beyond)
+    rng = np.random.default_rng(3)
+    poses = rng.uniform(NOMINAL.lower, NOMINAL.upper, size=(4000, 7))
+    hit = poses[np.argmin(CLEARANCE(poses))]
+    assert CLEARANCE(hit[None])[0] < 0            # into the torso or the other arm
+    with pytest.raises(UnsafeTrial, match='self-collision'):
+        ses.trial(hit)
+    assert ses.trials == 0 and ses.refused == 2 and np.array_equal(ses.robot.current(), here)
+    fast = SafetyCheck(NOMINAL.lower, NOMINAL.upper, np.asarray(ROBOT.velocity_limits))
+    far = here + 0.5
+    assert 'deg/s' in fast.problem(here, far, 0.1)
+    assert fast.problem(here, far, 10.0) == ''
+
+
+@pytest.mark.parametrize('method', ['secant', 'annealing'])
+def test_a_stop_request_ends_exploration_within_one_trial(method):
+    truth = true_chain('tool:right_arm_fingertip_joint:50')
+    state = {'ses': None}
+
+    def stop():
+        return state['ses'] is not None and state['ses'].trials >= 6
+
+    ses = session(truth, should_stop=stop)
+    state['ses'] = ses
+    lock = {}
+    spec = MotionSpec('circle', NOMINAL, DESIGN, PICKS, lock,
+                      motion_layouts(ROBOT, CIRCLE, 'right', lock))
+    res = explore_motion(ses, spec, method, options=AnnealingSchedule(trials_per_stage=40)
+                         if method == 'annealing' else None)
+    assert res.status == 'stopped' and ses.trials == 6 == res.trials
+    assert 'stopped' in res.notes[0]
+
+
+def test_bench_explore_smoke(tmp_path):
+    out = []
+
+    class Sink:
+        def write(self, text):
+            out.append(text)
+
+    run = bench.ExploreRun(seeds=1, every_seeds=1, sigmas=(1.0,), motions=('bye',),
+                           labels=('tool 50 mm',), robot_kind='kinematic',
+                           schedule=AnnealingSchedule(trials_per_stage=20))
+    summary = bench.bench_explore(Sink(), str(tmp_path), run, progress=False)
+    assert {r['run'] for r in summary} == set(bench.RUNS) == set(EXPLORE_RUNS)
+    ours = next(r for r in summary if r['run'] == 'ours')
+    sa = next(r for r in summary if r['run'] == 'sa')
+    assert ours['mean_mm'] < ours['unadapted_mean_mm'] and sa['trials'] > ours['trials']
+    text = ''.join(out)
+    assert 'Targets (issue 18)' in text and 'bye' in text
+    data = json.loads((tmp_path / 'explore.json').read_text())
+    assert len(data['rows']) == 1 + 1 + 1 + 1 and math.isfinite(data['rows'][0]['mean_mm'])
