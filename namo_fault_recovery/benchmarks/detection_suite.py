@@ -46,6 +46,7 @@ from . import common
 from ..model.gestures import load_library
 from ..objective.score import ScoreWeights, SimilarityScore
 from ..playback.monitor import MonitorThresholds, Playback
+from ..playback.reference import blocked_gestures
 from ..playback.timing import plan_motion, PlayTiming
 from ..playback.tracking import fit_tracking
 from ..resources import config_path, DEFAULT_GESTURE_FILE, DEMO_MOTION_FILE
@@ -222,9 +223,10 @@ def run_library(robot, library, lateness, options, progress=None):
     return doc
 
 
-def summary(doc):
+def summary(doc, blocked=()):
     """Return the headline figures of one library-and-condition document."""
     normal = [r for runs in doc['normal'].values() for r in runs]
+    clear = [r for g, runs in doc['normal'].items() if g not in blocked for r in runs]
     stuck = [e for g in doc['stuck'].values() for v in g.values() for e in v]
     exercised = [e for e in stuck if e['departs_s'] is not None]
     latency = [e['latency_s'] for e in exercised if e['latency_s'] is not None]
@@ -232,6 +234,8 @@ def summary(doc):
     return {
         'normal_plays': len(normal),
         'false_alarm_plays': sum(bool(r['faults']) for r in normal),
+        'clear_plays': len(clear),
+        'false_alarm_plays_clear': sum(bool(r['faults']) for r in clear),
         'false_alarms_by_gesture': {g: sum(bool(r['faults']) for r in runs)
                                     for g, runs in doc['normal'].items()},
         'finished_within_goal_time': sum(r['ok'] for r in normal),
@@ -268,13 +272,13 @@ def _lateness_stats(values):
             'p99_ms': float(np.percentile(v, 99) * 1e3), 'max_ms': float(v.max() * 1e3)}
 
 
-def run_suite(robot, libraries, conditions, options, lateness_sec=20.0, domain_id=None,
-              progress=None):
+def run_suite(robot, libraries, conditions, options, lateness, progress=None):
     """
     Run every (condition, library); return the JSON-ready document with summaries.
 
     ``libraries`` maps a label to a GestureLibrary; ``conditions`` are ``idle`` and/or
-    ``busy``; each condition's lateness is measured first (``lateness_sec`` s over DDS).
+    ``busy``; ``lateness`` maps each condition to its measured reading lateness (s, in
+    arrival order; see :func:`measure_lateness`), kept in the document.
     """
     began = time.monotonic()
     doc = {'rate_hz': RATE, 'noise_deg': options.noise_deg, 'reps': options.reps,
@@ -282,20 +286,23 @@ def run_suite(robot, libraries, conditions, options, lateness_sec=20.0, domain_i
            'monitor': {k: getattr(options.monitor, k) for k in (
                'fault_threshold', 'fault_hold', 'tracking_lag', 'tracking_delay',
                'tracking_time_constant', 'goal_tolerance', 'goal_time')},
-           'calibration': {}, 'conditions': {}}
+           'calibration': {}, 'blocked': {}, 'conditions': {}}
     from ..sim.physics import designed_allowances, NamoSim
     for label, library in libraries.items():
+        doc['blocked'][label] = {g: {'keyframes': n, 'pair': c.pair, 'depth_mm': c.depth_mm}
+                                 for g, (n, c) in blocked_gestures(robot, library).items()}
         doc['calibration'][label] = calibrate(robot, library, NamoSim(
             robot, allowances=designed_allowances(robot, library)))
     for condition in conditions:
-        lateness = measure_lateness(condition, lateness_sec, domain_id) if lateness_sec else []
-        entry = doc['conditions'][condition] = {'lateness': _lateness_stats(lateness),
-                                                'libraries': {}}
+        entry = doc['conditions'][condition] = {
+            'lateness': _lateness_stats(lateness[condition]),
+            'lateness_s': list(lateness[condition]), 'libraries': {}}
         for label, library in libraries.items():
             if progress:
                 progress(f'--- {condition}, {label} library')
-            plays = run_library(robot, library, lateness, options, progress)
-            entry['libraries'][label] = dict(plays, summary=summary(plays))
+            plays = run_library(robot, library, lateness[condition], options, progress)
+            entry['libraries'][label] = dict(plays, summary=summary(plays,
+                                                                    doc['blocked'][label]))
     doc['wall_time_s'] = time.monotonic() - began
     return doc
 
@@ -321,6 +328,10 @@ def write_summary(out, doc):
                   f"worst error {fit['worst_error_deg']:.3f} deg"
                   + (f" (left out, self-contact: {', '.join(fit['left_out'])})"
                      if fit['left_out'] else '') + '\n')
+    for label, blocked in doc['blocked'].items():
+        for g, b in blocked.items():
+            out.write(f'library error ({label}): the reference {g} goes into the body in '
+                      f"{b['keyframes']} keyframes ({b['pair']}, {b['depth_mm']:.1f} mm)\n")
     for condition, entry in doc['conditions'].items():
         lt = entry['lateness']
         out.write(f'\n{condition}: reading lateness over DDS ' + (
@@ -333,7 +344,9 @@ def write_summary(out, doc):
                                if n)
             out.write(
                 f"  {label}: false alarms {s['false_alarm_plays']} / {s['normal_plays']} "
-                f"plays{' (' + alarms + ')' if alarms else ''}; finished within goal time "
+                f"plays{' (' + alarms + ')' if alarms else ''}, of which on clear "
+                f"references {s['false_alarm_plays_clear']} / {s['clear_plays']}; "
+                'finished within goal time '
                 f"{s['finished_within_goal_time']} / {s['normal_plays']}; plays with "
                 f"self-contact {s['contact_plays']}; score gap median {gap['median']:.4f}, "
                 f"max {gap['max']:.4f}\n"

@@ -155,7 +155,7 @@ def cmd_bench_detection_suite(args, out):
     import json
     from ..benchmarks import common, detection_suite as suite
     from ..model.robot import load_robot
-    _positive_int('--reps', args.reps)
+    _positive_int('--reps', args.reps, 0)
     _positive_int('--stuck-reps', args.stuck_reps, 0)
     if not (math.isfinite(args.noise_deg) and args.noise_deg >= 0):
         raise _usage(f'--noise-deg: expected a number >= 0, got {args.noise_deg}')
@@ -167,8 +167,8 @@ def cmd_bench_detection_suite(args, out):
                                  noise_deg=args.noise_deg,
                                  start_spread_deg=args.start_spread_deg, seed=args.seed,
                                  monitor=monitor_of(args))
-    doc = suite.run_suite(robot, libraries, args.condition, options,
-                          lateness_sec=args.lateness_sec, domain_id=args.domain_id,
+    lateness = _lateness_of(args, suite)
+    doc = suite.run_suite(robot, libraries, args.condition, options, lateness,
                           progress=None if args.quiet else (lambda s: sys.stderr.write(s + '\n')))
     out_dir = out_dir_of(args, 'detection_suite')
     common.write_json(out_dir / 'suite.json', doc)
@@ -178,6 +178,22 @@ def cmd_bench_detection_suite(args, out):
         suite.write_summary(out, doc)
     out.write(f'written: {out_dir / "suite.json"}\n')
     return 0
+
+
+def _lateness_of(args, suite):
+    """Return {condition: lateness}: measured now, or read from ``--lateness-from``."""
+    import json
+    if not args.lateness_from:
+        return {c: suite.measure_lateness(c, args.lateness_sec, args.domain_id)
+                if args.lateness_sec else [] for c in args.condition}
+    try:
+        doc = json.loads(Path(args.lateness_from).read_text())
+        return {c: [float(v) for v in doc['conditions'][c]['lateness_s']]
+                for c in args.condition}
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise _usage(f'--lateness-from {args.lateness_from}: expected a suite.json of '
+                     f'bench detection-suite with conditions {args.condition} '
+                     f'({type(exc).__name__}: {exc})') from None
 
 
 def add_detector_options(p):
@@ -325,7 +341,8 @@ def _add_detection_suite(bench_sub):
                    help='libraries (default: both)')
     p.add_argument('--condition', nargs='+', default=['idle', 'busy'],
                    choices=['idle', 'busy'], help='conditions (default: both)')
-    p.add_argument('--reps', type=int, default=100, help='normal plays per gesture')
+    p.add_argument('--reps', type=int, default=100,
+                   help='normal plays per gesture (default 100)')
     p.add_argument('--stuck-reps', type=int, default=1,
                    help='plays per stuck joint and gesture (default 1)')
     p.add_argument('--noise-deg', type=float, default=0.1,
@@ -335,6 +352,10 @@ def _add_detection_suite(bench_sub):
     p.add_argument('--lateness-sec', type=float, default=20.0,
                    help='seconds of reading lateness measured over DDS per condition '
                         '(default 20; 0: every reading on time)')
+    p.add_argument('--lateness-from', default=None, metavar='SUITE_JSON',
+                   help="replay the lateness measured by an earlier run's suite.json "
+                        '(e.g. one with --reps 0 --stuck-reps 0 run under a lock) '
+                        'instead of measuring it')
     p.add_argument('--domain-id', type=int, default=None,
                    help='ROS domain id of the lateness probe (default $ROS_DOMAIN_ID)')
     p.add_argument('--seed', type=int, default=0)

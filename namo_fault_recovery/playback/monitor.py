@@ -11,8 +11,8 @@ the distance from its measured angle to the range of that prediction over the la
 measurement (message latency, a busy executor), so that a late reading of a fast joint
 is no error.  A joint off by more than ``fault_threshold`` for ``fault_hold`` seconds is
 a fault when the other joints of its controller show that they track: at least one of
-them is predicted away from its start by more than ``fault_threshold`` and follows, and
-no fewer follow than are off (when a whole arm lags, the arm or its controller is at
+them is predicted, and was measured, away from its start by more than
+``fault_threshold`` and follows, and no fewer follow than are off (when a whole arm lags, the arm or its controller is at
 fault, not one actuator).  A joint that moves alone in a motion is judged alone.
 :class:`Playback` adds the end of a play: finished when every joint is within
 ``goal_tolerance`` of the last point after the motion's duration, failed on a fault or
@@ -33,7 +33,7 @@ from .tracking import TrackingModel
 FAULT_THRESHOLD_DEG = 2.0
 FAULT_HOLD = 0.1
 TRACKING_LAG = 0.05
-TRACKING_DELAY = 0.0
+TRACKING_DELAY = 0.005
 TRACKING_TIME_CONSTANT = 0.0
 
 
@@ -109,7 +109,9 @@ class StuckJointDetector:
         """Feed one measured pose at time ``t``; return the newly detected faults."""
         errors = self.errors(t, measured)
         off = errors > self.thresholds.fault_threshold
-        self._moved |= np.abs(self.model.at(t) - self._start) > self.thresholds.fault_threshold
+        limit = self.thresholds.fault_threshold
+        self._moved |= (np.abs(self.model.at(t) - self._start) > limit) & \
+            (np.abs(np.asarray(measured, dtype=float) - self._start) > limit)
         new = []
         for i, name in enumerate(self.joint_names):
             if not off[i]:
