@@ -203,8 +203,8 @@ def calibrate(robot, library, sim):
 def run_library(robot, library, lateness, options, progress=None):
     """Run the normal and the stuck plays of one library; return its document."""
     from ..sim.physics import designed_allowances, NamoSim
-    sim = NamoSim(robot, allowances=designed_allowances(robot, library),
-                  reading_noise=math.radians(options.noise_deg), seed=options.seed)
+    sim = NamoSim(robot, allowances=designed_allowances(robot, library))
+    sim.set_reading_noise(math.radians(options.noise_deg), options.seed)
     rng = np.random.default_rng(options.seed)
     doc = {'normal': {}, 'stuck': {}}
     for gesture in library:

@@ -110,8 +110,8 @@ class SimNode(Node):
         self.sim = NamoSim(self.robot, timestep=self.p['timestep'], kp=self.p['kp'],
                            kv=self.p['kv'], gravity=self.p['gravity'],
                            allowances=designed_allowances(self.robot, library),
-                           tolerance=self.p['contact_tolerance_mm'] * 1e-3,
-                           reading_noise=math.radians(self.p['joint_state_noise_deg']))
+                           tolerance=self.p['contact_tolerance_mm'] * 1e-3)
+        self.sim.set_reading_noise(math.radians(self.p['joint_state_noise_deg']))
         self.desired = self._initial_state()
         self.lock = threading.Lock()
         self.controllers = self._create_controllers()

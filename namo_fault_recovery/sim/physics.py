@@ -32,8 +32,9 @@ Choices, and why:
   when deeper than the designed depth plus the tolerance.
 - Readings: :meth:`NamoSim.positions` is the physics' exact state; :meth:`NamoSim.readings`
   is what an encoder reports, that state plus Gaussian noise of ``reading_noise`` rad
-  (standard deviation, independent per joint and reading; 0 by default here, the
-  ``namo_sim`` node and ``bench detection`` set their own), so that a detector is tried
+  (standard deviation, independent per joint and reading; 0 by default here,
+  :meth:`NamoSim.set_reading_noise` sets it: the ``namo_sim`` node and ``bench
+  detection-suite`` do), so that a detector is tried
   against readings that are not exact.
 """
 
@@ -121,13 +122,10 @@ class NamoSim:
 
     def __init__(self, robot, timestep=0.002, kp=300.0, kv=30.0, armature=0.05,
                  damping=0.5, gravity=True, allowances=None,
-                 tolerance=CONTACT_TOLERANCE, reading_noise=0.0, seed=None):
+                 tolerance=CONTACT_TOLERANCE):
         if timestep <= 0 or kp <= 0 or kv < 0:
             raise ValueError('timestep and kp must be > 0 and kv >= 0')
-        if not reading_noise >= 0:
-            raise ValueError(f'reading_noise must be >= 0 rad, got {reading_noise}')
-        self.reading_noise = float(reading_noise)
-        self._rng = np.random.default_rng(seed)
+        self.set_reading_noise(0.0)
         self.robot = robot
         self.joint_names = tuple(robot.joint_names)
         self.kp, self.kv = float(kp), float(kv)
@@ -198,6 +196,13 @@ class NamoSim:
     def positions(self):
         """Return the 14 joint angles (rad), in ``joint_names`` order."""
         return self.data.qpos[self._qadr].copy()
+
+    def set_reading_noise(self, std, seed=None):
+        """Set the readings' noise: ``std`` rad (>= 0), from a generator seeded ``seed``."""
+        if not std >= 0:
+            raise ValueError(f'reading noise must be >= 0 rad, got {std}')
+        self.reading_noise = float(std)
+        self._rng = np.random.default_rng(seed)
 
     def readings(self):
         """Return the 14 angles as the encoders read them: positions plus the noise."""
