@@ -36,7 +36,7 @@ fit_tracking`) on a noise-free healthy play of every gesture, and printed beside
 values in use: that is how the stored defaults were measured.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 import time
 
@@ -228,6 +228,8 @@ def summary(doc, blocked=()):
     normal = [r for runs in doc['normal'].values() for r in runs]
     clear = [r for g, runs in doc['normal'].items() if g not in blocked for r in runs]
     stuck = [e for g in doc['stuck'].values() for v in g.values() for e in v]
+    stuck_clear = [e for g, joints in doc['stuck'].items() if g not in blocked
+                   for v in joints.values() for e in v]
     exercised = [e for e in stuck if e['departs_s'] is not None]
     latency = [e['latency_s'] for e in exercised if e['latency_s'] is not None]
     gaps = [r['score_gap'] for r in normal]
@@ -248,6 +250,7 @@ def summary(doc, blocked=()):
         'detected': sum(e['detected'] for e in exercised),
         'missed': sum(not e['detected'] for e in exercised),
         'wrong_joint_reports': sum(len(e['wrong_joints']) for e in stuck),
+        'wrong_joint_reports_clear': sum(len(e['wrong_joints']) for e in stuck_clear),
         'latency_s': {'n': len(latency), 'median': common.percentile(latency, 50),
                       'p95': common.percentile(latency, 95),
                       'max': max(latency, default=math.nan),
@@ -293,6 +296,10 @@ def run_suite(robot, libraries, conditions, options, lateness, progress=None):
                                  for g, (n, c) in blocked_gestures(robot, library).items()}
         doc['calibration'][label] = calibrate(robot, library, NamoSim(
             robot, allowances=designed_allowances(robot, library)))
+    # Each library draws its own noise, start poses and lateness offsets (the two
+    # libraries share gestures: the same draws would only repeat the same plays).
+    seeds = {label: options.seed + 1000 * (list(LIBRARIES).index(label) if label in LIBRARIES
+                                           else len(LIBRARIES)) for label in libraries}
     for condition in conditions:
         entry = doc['conditions'][condition] = {
             'lateness': _lateness_stats(lateness[condition]),
@@ -300,7 +307,8 @@ def run_suite(robot, libraries, conditions, options, lateness, progress=None):
         for label, library in libraries.items():
             if progress:
                 progress(f'--- {condition}, {label} library')
-            plays = run_library(robot, library, lateness[condition], options, progress)
+            plays = run_library(robot, library, lateness[condition],
+                                replace(options, seed=seeds[label]), progress)
             entry['libraries'][label] = dict(plays, summary=summary(plays,
                                                                     doc['blocked'][label]))
     doc['wall_time_s'] = time.monotonic() - began
@@ -352,7 +360,8 @@ def write_summary(out, doc):
                 f"max {gap['max']:.4f}\n"
                 f"    stuck: {s['exercised_runs']} runs whose command leaves the joint by "
                 f"{DEPARTURE_DEG:g} deg (of {s['stuck_runs']}): detected {s['detected']}, "
-                f"missed {s['missed']}, wrong joint {s['wrong_joint_reports']}; latency "
+                f"missed {s['missed']}, wrong joint {s['wrong_joint_reports']} (on clear "
+                f"references {s['wrong_joint_reports_clear']}); latency "
                 f"median {lat['median']:.3f} s, p95 {lat['p95']:.3f} s, max {lat['max']:.3f}"
                 f" s; within {TARGET_LATENCY_S:g} s: {lat['within_target']} / {lat['n']}\n")
     out.write(f"wall time {doc['wall_time_s']:.1f} s\n")
