@@ -12,8 +12,9 @@ measurement (message latency, a busy executor), so that a late reading of a fast
 is no error.  A joint off by more than ``fault_threshold`` for ``fault_hold`` seconds is
 a fault when the other joints of its controller show that they track: at least one of
 them is predicted, and was measured, away from its start by more than
-``fault_threshold`` and follows, and no fewer follow than are off (when a whole arm lags, the arm or its controller is at
-fault, not one actuator).  A joint that moves alone in a motion is judged alone.
+``fault_threshold`` and follows, and no fewer follow than are off (when a whole arm
+lags, the arm or its controller is at fault, not one actuator).  A joint that moves
+alone in a motion is judged alone.
 :class:`Playback` adds the end of a play: finished when every joint is within
 ``goal_tolerance`` of the last point after the motion's duration, failed on a fault or
 when ``goal_time`` has passed with a joint still off its goal.
