@@ -157,3 +157,19 @@ def test_a_reference_into_the_torso_is_a_library_error_found_at_load():
     rest = dataclasses.replace(salute, keyframes=(dataclasses.replace(
         salute.keyframes[0], right=np.zeros(7), left=np.zeros(7)),))
     assert body_contacts(ROBOT, rest) == []
+
+
+def test_a_joint_moving_alone_among_small_corrections_is_caught():
+    """From wai's end with left joint 1 jumped to 10 deg, the others correct 2-4 deg."""
+    g = LIBRARY['wai']
+    start = g.keyframes[-1].positions().copy()
+    j = NAMES.index('left_arm_joint1')
+    start[j] = math.radians(10.0)
+    start[NAMES.index('left_arm_joint2')] += math.radians(3.0)
+    frames = np.array([kf.positions() for kf in g.keyframes])
+    p = plan_motion(NAMES, start, [kf.time_from_start for kf in g.keyframes], frames, LIMITS)
+    t, q = readings(p, noise_deg=0.05)
+    q[:, j] = math.radians(10.0)
+    monitor = MonitorThresholds(tracking_delay=DELAY, tracking_time_constant=TAU)
+    when, outcome = first_outcome(Playback(p, GROUPS, monitor), t, q)
+    assert outcome is not None and [f for f, _ in outcome.faults] == ['left_arm_joint1']

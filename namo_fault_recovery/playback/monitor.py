@@ -11,8 +11,9 @@ the distance from its measured angle to the range of that prediction over the la
 measurement (message latency, a busy executor), so that a late reading of a fast joint
 is no error.  A joint off by more than ``fault_threshold`` for ``fault_hold`` seconds is
 a fault when the other joints of its controller show that they track: at least one of
-them is predicted, and was measured, away from its start by more than
-``fault_threshold`` and follows, and no fewer follow than are off (when a whole arm
+them (among those the motion moves by more than twice ``fault_threshold``) is
+predicted, and was measured, away from its start by more than ``fault_threshold`` and
+follows, and no fewer follow than are off (when a whole arm
 lags, the arm or its controller is at fault, not one actuator).  A joint that moves
 alone in a motion is judged alone.
 :class:`Playback` adds the end of a play: finished when every joint is within
@@ -36,6 +37,7 @@ FAULT_HOLD = 0.1
 TRACKING_LAG = 0.05
 TRACKING_DELAY = 0.005
 TRACKING_TIME_CONSTANT = 0.0
+WITNESS_FACTOR = 2.0      # a joint moved by this many thresholds can show its arm tracks
 
 
 @dataclass(frozen=True)
@@ -83,7 +85,9 @@ class StuckJointDetector:
                 self._group_of[i] = [m for m in members if m != i]
         whole = np.atleast_2d(command(np.linspace(0.0, duration, 200)))
         self._start = whole[0]
-        self._movers = np.ptp(whole, axis=0) > thresholds.fault_threshold
+        # A witness that its controller tracks must move clearly beyond the threshold:
+        # one that barely crosses it (a few degrees of a correction) may never show it.
+        self._movers = np.ptp(whole, axis=0) > WITNESS_FACTOR * thresholds.fault_threshold
         self._moved = np.zeros(len(self.joint_names), dtype=bool)
         self.model = TrackingModel(command, thresholds.tracking_delay,
                                    thresholds.tracking_time_constant, thresholds.tracking_lag)
