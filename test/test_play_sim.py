@@ -103,7 +103,9 @@ def _stick_and_recover(arms, joint, angle, locked):
         commanded = arms.commanded(before, j)
         assert commanded.size > 10 and np.all(commanded == a), (j, commanded)
         assert abs(a - angle) <= HELD_TOL or j != joint
-    q = arms.settled()      # the final pose, once the arm came to rest
+    # the final pose, once the arm came to rest: namo_sim's readings carry 0.02 deg of
+    # noise (joint_state_noise_deg), two readings of a still arm differ by up to ~0.1 deg
+    q = arms.settled(tol=math.radians(0.2))
     executed = float(WAI(q[:7], q[7:])[0])
     library = arms.wait(lambda: arms.library_score('wai'), TIMEOUT, 'the diagnostics')
     assert executed == pytest.approx(library, abs=SCORE_TOL), (executed, library)

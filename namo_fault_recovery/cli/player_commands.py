@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 
+from .bench import add_detector_options, monitor_of
 from .common import UsageError
 from ..runtime.private_node import node_command, player_command, read_log, start_logged
 from ..runtime.private_node import stop_process
@@ -68,9 +69,7 @@ def register(subparsers, bench_subparsers):
     p.add_argument('--recover', action='append', metavar='G',
                    help='gestures whose detected faults are recovered and replayed '
                         '(repeatable; default: wai)')
-    p.add_argument('--threshold-deg', type=float, default=5.0)
-    p.add_argument('--hold-sec', type=float, default=0.3)
-    p.add_argument('--lag-sec', type=float, default=0.25)
+    add_detector_options(p)
     p.add_argument('--seed', type=int, default=0)
     p.add_argument('--json', action='store_true', help='print one JSON document')
     p.set_defaults(func=bench_detection)
@@ -81,7 +80,6 @@ def bench_detection(args, out):
     from ..benchmarks import detection
     from ..model.gestures import load_library
     from ..model.robot import load_robot
-    from ..playback.monitor import MonitorThresholds
     robot = load_robot(args.robot_file)
     library = load_library(robot, args.gesture_file)
     for name in (args.gesture or []) + (args.recover or []):
@@ -91,8 +89,7 @@ def bench_detection(args, out):
     for joint in args.joint or []:
         if joint not in robot.joint_names:
             raise UsageError(f'--joint: unknown joint {joint!r}')
-    monitor = MonitorThresholds(fault_threshold=math.radians(args.threshold_deg),
-                                fault_hold=args.hold_sec, tracking_lag=args.lag_sec)
+    monitor = monitor_of(args)
     doc = detection.run_on_sim(robot, library, gestures=args.gesture, joints=args.joint,
                                recover_gestures=args.recover or ('wai',), seed=args.seed,
                                monitor=monitor,

@@ -5,6 +5,10 @@ Playing the gesture library on the robot, free of ROS.
   speed-limited trajectory that holds every locked joint at its lock angle;
 - :mod:`.monitor`: tracking of the commands on the measured joint states: a stuck
   joint is a fault, the last point reached within tolerance is the end of the motion;
+- :mod:`.tracking`: the model of a controller's tracking the monitor compares with
+  (delay and first-order lag), and its fit to healthy plays;
+- :mod:`.reference`: reference gestures that the robot's own body blocks (a library
+  error, found when the library is loaded);
 - :mod:`.book`: library versions and lock angles known between plays;
 - :mod:`.export`: the library as a play_motion2 motions file;
 - :mod:`.plot`: the figure of one play (commanded and measured angles).

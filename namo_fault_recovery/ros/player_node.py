@@ -24,6 +24,7 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
@@ -37,6 +38,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from .messages import duration_msg, stamp_key, status_values, trajectory_angles
 from .spin import run_node
 from ..model.robot import load_robot
+from ..playback import monitor as detector
 from ..playback.book import GestureTrack, parse_lock_angle, PlayerBook
 from ..playback.monitor import MonitorThresholds, Outcome, Playback
 from ..playback.timing import plan_motion, PlayTiming
@@ -44,6 +46,26 @@ from ..playback.timing import plan_motion, PlayTiming
 NODE_NAME = 'gesture_player'
 RECOVERY_PREFIX = 'recovery_node: '
 TICK = 0.05
+
+
+# The stuck-joint detector's parameters: name -> (default, description).
+DETECTOR_PARAMETERS = {
+    'fault_threshold_deg': (detector.FAULT_THRESHOLD_DEG, 'deg off the band of its '
+                            'predicted angle that make a joint off'),
+    'fault_hold_sec': (detector.FAULT_HOLD, 's a joint stays off before it is stuck'),
+    'tracking_lag_sec': (detector.TRACKING_LAG, 's of predicted angles in the band (a '
+                         'reading may be this late)'),
+    'tracking_delay_sec': (detector.TRACKING_DELAY, "s: the controllers' tracking delay, "
+                           'measured (bench detection-suite fits it)'),
+    'tracking_time_constant_sec': (detector.TRACKING_TIME_CONSTANT, "s: the controllers' "
+                                   'first-order tracking lag, measured'),
+}
+
+
+def _detector(node, name):
+    default, text = DETECTOR_PARAMETERS[name]
+    return node.declare_parameter(name, float(default), ParameterDescriptor(
+        description=text, type=ParameterType.PARAMETER_DOUBLE, read_only=True)).value
 
 
 def _declare(node):
@@ -67,9 +89,11 @@ def _declare(node):
         approach_min_duration=node.declare_parameter('approach_min_duration', 0.0).value,
         sample_period=node.declare_parameter('sample_period', 0.05).value)
     monitor = MonitorThresholds(
-        fault_threshold=math.radians(node.declare_parameter('fault_threshold_deg', 5.0).value),
-        fault_hold=node.declare_parameter('fault_hold_sec', 0.3).value,
-        tracking_lag=node.declare_parameter('tracking_lag_sec', 0.25).value,
+        fault_threshold=math.radians(_detector(node, 'fault_threshold_deg')),
+        fault_hold=_detector(node, 'fault_hold_sec'),
+        tracking_lag=_detector(node, 'tracking_lag_sec'),
+        tracking_delay=_detector(node, 'tracking_delay_sec'),
+        tracking_time_constant=_detector(node, 'tracking_time_constant_sec'),
         goal_tolerance=math.radians(node.declare_parameter('goal_tolerance_deg', 2.0).value),
         goal_time=node.declare_parameter('goal_time_sec', 2.0).value)
     waits = {'library': node.declare_parameter('library_wait_sec', 10.0).value,

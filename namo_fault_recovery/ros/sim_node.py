@@ -39,7 +39,7 @@ from trajectory_msgs.msg import JointTrajectory
 from .spin import run_node
 from ..model.gestures import load_library
 from ..model.robot import load_robot
-from ..sim.physics import designed_allowances, NamoSim
+from ..sim.physics import designed_allowances, NamoSim, READING_NOISE_DEG
 from ..sim.trajectory import ActiveTrajectory, Command, Point, Rejected, validate
 
 NODE_NAME = 'namo_sim'
@@ -72,6 +72,9 @@ PARAMETERS = {
                 _T.PARAMETER_BOOL),
     'joint_state_rate': (100.0, '/joint_states rate (Hz)', _T.PARAMETER_DOUBLE),
     'contact_report_rate': (10.0, '~/contacts rate (Hz)', _T.PARAMETER_DOUBLE),
+    'joint_state_noise_deg': (READING_NOISE_DEG, 'standard deviation (deg) of the '
+                              'Gaussian noise added to each /joint_states position, as an '
+                              'encoder reads (0: exact)', _T.PARAMETER_DOUBLE),
     'contact_tolerance_mm': (1.0, 'penetration (mm) below which a contact '
                              'is not counted', _T.PARAMETER_DOUBLE),
     'initial_positions': ([0.0] * 14, 'start angles (rad) of the 14 joints, '
@@ -109,6 +112,7 @@ class SimNode(Node):
                            kv=self.p['kv'], gravity=self.p['gravity'],
                            allowances=designed_allowances(self.robot, library),
                            tolerance=self.p['contact_tolerance_mm'] * 1e-3)
+        self.sim.set_reading_noise(math.radians(self.p['joint_state_noise_deg']))
         self.desired = self._initial_state()
         self.lock = threading.Lock()
         self.controllers = self._create_controllers()
@@ -283,7 +287,7 @@ class SimNode(Node):
                 self.sim.step(1)
                 state = report = None
                 if step % state_every == 0:
-                    state = (self.sim.positions(), self.sim.velocities(), now + dt)
+                    state = (self.sim.readings(), self.sim.velocities(), now + dt)
                 if step % report_every == 0:
                     report = self._contact_status()
             try:
