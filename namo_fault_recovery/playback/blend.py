@@ -11,14 +11,16 @@ the reconfigured gesture is another trajectory of the same gesture.  Three piece
   phase (the same fraction of the same segment between keyframes), so the new gesture
   goes on from where the old one was, not from its beginning;
 - :func:`blend`: from the measured pose and velocity onto a target trajectory at a
-  given instant.  The command is the target plus a correction that decays from the
-  measured offset to zero (a quintic: zero correction, speed and acceleration at its
-  end, so the command joins the target smoothly), over the shortest duration, found by
-  search, for which the command stays within every joint's velocity limit and
-  acceleration limit (or the target's own acceleration, where the target itself is
-  harder).  A minimum-jerk correction takes 1.2 times a bang-bang one under an
-  acceleration limit: time-optimal-ish, and smooth.  Held joints stay exactly where
-  they are held throughout.
+  given instant.  The command is the target plus a correction that takes each joint
+  from its measured offset and speed difference to zero, at rest: per joint the
+  time-optimal one of a double integrator (full acceleration, a coast at the speed
+  cap if reached, full deceleration), with the acceleration and speed the target
+  leaves to spare under the joint's limits, so that the command stays within every
+  joint's velocity limit and acceleration limit (or the target's own acceleration,
+  where the target itself is harder), checked on the command itself.  A joint where it
+  does not gets less, a few times; failing that, one minimum-jerk (quintic) correction
+  for all joints of the shortest duration that fits, found by search.  Held joints
+  stay exactly where they are held throughout.
 
 All three return a :class:`~.timing.PlannedMotion` that starts now, sampled so that a
 controller interpolating cubic Hermite splines between its points reproduces it.
@@ -35,8 +37,10 @@ from .timing import MIN_SEGMENT, sampled_motion
 BLEND_STEP = 0.02         # s between the knots of a blend (the quintic, sampled)
 MIN_BLEND = 0.04          # s: the shortest blend
 MAX_BLEND = 10.0          # s: the longest blend searched
-_GROWTH = 1.15            # the search grows the duration by this factor per try
+_GROWTH = 1.15            # the quintic search grows the duration by this factor per try
 _BISECTIONS = 6
+_BANG_TRIES = 8           # bang-bang tries, each with less acceleration where it misfits
+_BANG_SHRINK = 0.8
 _LIMIT_MARGIN = 1.0 + 1e-6
 _AT_REST = 1e-9
 
@@ -97,36 +101,98 @@ def phase_time(source, target, t):
     return float(np.interp(np.interp(t, a, np.arange(len(a))), np.arange(len(b)), b))
 
 
-def _quintic(e0, ed0, duration, tau):
-    """Return (e, e', e'') at ``tau`` (n,) of the correction from (e0, ed0) to rest at zero."""
-    s = np.clip(np.asarray(tau, dtype=float) / duration, 0.0, 1.0)[:, None]
-    g = 1 - 10 * s**3 + 15 * s**4 - 6 * s**5
-    g1 = (-30 * s**2 + 60 * s**3 - 30 * s**4) / duration
-    g2 = (-60 * s + 180 * s**2 - 120 * s**3) / duration**2
-    h = (s - 6 * s**3 + 8 * s**4 - 3 * s**5) * duration
-    h1 = 1 - 18 * s**2 + 32 * s**3 - 15 * s**4
-    h2 = (-36 * s + 96 * s**2 - 60 * s**3) / duration
-    return e0 * g + ed0 * h, e0 * g1 + ed0 * h1, e0 * g2 + ed0 * h2
+class _Trapezoid:
+    """
+    Per joint, the minimum-time correction from (e0, ed0) to rest at zero.
+
+    Under an acceleration ``accel`` and a speed ``cap`` (per joint): full acceleration
+    towards the target, a coast at the cap if it is reached, full deceleration, at rest
+    at zero at ``t_end`` (a joint with nothing to correct has ``t_end`` 0): the double
+    integrator's time-optimal solution.  Each piece is a quadratic, so the command (the
+    target's cubic plus it) is a cubic between knots that include the switches, which a
+    cubic Hermite controller reproduces exactly.
+    """
+
+    def __init__(self, e0, ed0, accel, cap):
+        a, cap = np.asarray(accel, dtype=float), np.asarray(cap, dtype=float)
+        sigma = e0 + ed0 * np.abs(ed0) / (2 * a)
+        self.sign = np.where(sigma >= 0, 1.0, -1.0)     # solved as if towards -inf
+        x, v = self.sign * e0, self.sign * ed0
+        peak = np.sqrt(np.maximum(v * v / 2 + a * x, 0.0))     # without a cap
+        cap = np.maximum(np.minimum(peak, cap), np.maximum(-v, 0.0))
+        t1 = np.maximum((v + cap) / a, 0.0)
+        x1 = x + v * t1 - a * t1 ** 2 / 2
+        coast = np.maximum(x1 - cap ** 2 / (2 * a), 0.0) / np.maximum(cap, 1e-12)
+        self.breaks = np.stack([t1, t1 + coast, t1 + coast + cap / a])   # (3, J)
+        self.accel, self.x, self.v = a, x, v
+        self.t_end = self.breaks[2]
+        self.duration = float(np.max(self.t_end))
+        self.switches = self.breaks.ravel()
+
+    def __call__(self, tau):
+        """Return (e, e', e'') (n, J) at times ``tau`` (n,)."""
+        tau = np.asarray(tau, dtype=float)[:, None]
+        a = self.accel
+        x, v = self.x * np.ones_like(tau), self.v * np.ones_like(tau)
+        e2 = np.zeros_like(x)
+        start = np.zeros_like(self.x)
+        for end, u in zip(self.breaks, (-a, 0.0 * a, a)):     # the three phases in turn
+            d = np.clip(tau - start, 0.0, end - start)
+            inside = (tau >= start) & (tau < end)
+            x, v = x + v * d + u * d ** 2 / 2, v + u * d
+            e2 = np.where(inside, u, e2)
+            start = end
+        done = tau >= self.t_end
+        return tuple(np.where(done, 0.0, self.sign * y) for y in (x, v, e2))
 
 
-def _knots(target, t0, duration):
-    """Knots of a blend of ``duration``: a BLEND_STEP grid plus the target's own knots."""
+class _Quintic:
+    """
+    One minimum-jerk correction of ``duration`` for every joint.
+
+    Zero correction, speed and acceleration at its end: the fallback when no
+    time-optimal one fits the limits.
+    """
+
+    def __init__(self, e0, ed0, duration):
+        self.e0, self.ed0, self.duration = e0, ed0, float(duration)
+        self.switches = np.array([])
+
+    def __call__(self, tau):
+        """Return (e, e', e'') (n, J) at times ``tau`` (n,)."""
+        T = self.duration
+        s = np.clip(np.asarray(tau, dtype=float) / T, 0.0, 1.0)[:, None]
+        g = 1 - 10 * s**3 + 15 * s**4 - 6 * s**5
+        g1 = (-30 * s**2 + 60 * s**3 - 30 * s**4) / T
+        g2 = (-60 * s + 180 * s**2 - 120 * s**3) / T**2
+        h = (s - 6 * s**3 + 8 * s**4 - 3 * s**5) * T
+        h1 = 1 - 18 * s**2 + 32 * s**3 - 15 * s**4
+        h2 = (-36 * s + 96 * s**2 - 60 * s**3) / T
+        e0, ed0 = self.e0, self.ed0
+        return e0 * g + ed0 * h, e0 * g1 + ed0 * h1, e0 * g2 + ed0 * h2
+
+
+def _knots(target, t0, correction):
+    """Knots of a blend: a BLEND_STEP grid, the target's own knots and the switches."""
+    duration = correction.duration
     n = max(2, int(math.ceil(duration / BLEND_STEP)) + 1)
-    inner = target.waypoint_times - t0
+    inner = np.concatenate([target.waypoint_times - t0, correction.switches])
     inner = inner[(inner > 1e-6) & (inner < duration - 1e-6)]
     return np.union1d(np.linspace(0.0, duration, n), inner)
 
 
-def _within_limits(target, t0, e0, ed0, duration, limits):
-    """Return True if the blend of ``duration`` stays within the limits (checked densely)."""
-    knots = _knots(target, t0, duration)
+def _excess(target, t0, correction, limits):
+    """Return per joint whether the blend leaves the limits anywhere (checked densely)."""
+    knots = _knots(target, t0, correction)
     tau = np.union1d(knots, (knots[:-1] + knots[1:]) / 2)
-    e, e1, e2 = _quintic(e0, ed0, duration, tau)
+    tau = np.union1d(tau, np.maximum(knots - 1e-7, 0.0))    # both sides of each knot
+    _, e1, e2 = correction(tau)
     speed = np.abs(target.velocity_at(t0 + tau) + e1)
-    own = np.abs(target.acceleration_at(t0 + tau))
+    own = target.acceleration_at(t0 + tau)
     accel = np.abs(own + e2)
-    return bool(np.all(speed <= limits.velocity * _LIMIT_MARGIN)
-                and np.all(accel <= np.maximum(limits.acceleration, own) * _LIMIT_MARGIN))
+    return (np.any(speed > limits.velocity * _LIMIT_MARGIN, axis=0)
+            | np.any(accel > np.maximum(limits.acceleration, np.abs(own)) * _LIMIT_MARGIN,
+                     axis=0))
 
 
 def blend(target, t0, q0, v0, limits, holds=None, sample_period=0.05):
@@ -146,9 +212,10 @@ def blend(target, t0, q0, v0, limits, holds=None, sample_period=0.05):
     e0, ed0 = _hold(e0, ed0, names, dict.fromkeys(holds or {}, 0.0))
     if np.all(np.abs(e0) < _AT_REST) and np.all(np.abs(ed0) < _AT_REST):
         return resume(target, t0, holds, sample_period), 0.0
-    duration, fits = _search(target, t0, e0, ed0, limits)
-    knots = _knots(target, t0, duration)
-    e, e1, _ = _quintic(e0, ed0, duration, knots)
+    correction, fits = _correction(target, t0, e0, ed0, limits)
+    duration = correction.duration
+    knots = _knots(target, t0, correction)
+    e, e1, _ = correction(knots)
     q, v = _hold(target.command_at(t0 + knots) + e, target.velocity_at(t0 + knots) + e1,
                  names, holds)
     later = target.waypoint_times[target.waypoint_times > t0 + duration + 1e-6]
@@ -163,24 +230,37 @@ def blend(target, t0, q0, v0, limits, holds=None, sample_period=0.05):
     return motion, duration if fits else -duration
 
 
-def _search(target, t0, e0, ed0, limits):
+def _correction(target, t0, e0, ed0, limits):
     """
-    Return (duration, fits): the shortest duration found within the limits, else MAX_BLEND.
+    Return (correction, fits): the fastest correction found within the limits.
 
-    Grows the duration from MIN_BLEND until the blend fits, then bisects between the
-    last misfit and it.
+    First the bang-bang one at each joint's acceleration limit; a joint whose blend
+    leaves a limit (its speed, or the target's own acceleration adding up) gets a
+    smaller acceleration, a few times.  If none fits, the quintic one of the shortest
+    duration that fits (growing it from MIN_BLEND, then bisecting); MAX_BLEND and
+    ``fits`` False if none does.
     """
+    ahead = np.linspace(t0, target.duration, 50)    # what the target leaves to spare
+    accel = np.maximum(limits.acceleration - np.max(np.abs(target.acceleration_at(ahead)),
+                                                    axis=0), 0.05 * limits.acceleration)
+    cap = np.maximum(limits.velocity - np.max(np.abs(target.velocity_at(ahead)), axis=0),
+                     0.05 * limits.velocity)
+    for _ in range(_BANG_TRIES):
+        correction = _Trapezoid(e0, ed0, accel, cap)
+        bad = _excess(target, t0, correction, limits)
+        if not np.any(bad):
+            return correction, True
+        accel = np.where(bad, accel * _BANG_SHRINK, accel)
+        cap = np.where(bad, cap * _BANG_SHRINK, cap)
+
+    def fits(duration):
+        return not np.any(_excess(target, t0, _Quintic(e0, ed0, duration), limits))
     low = high = MIN_BLEND
-    while not _within_limits(target, t0, e0, ed0, high, limits):
+    while not fits(high):
         if high >= MAX_BLEND:
-            return MAX_BLEND, False
+            return _Quintic(e0, ed0, MAX_BLEND), False
         low, high = high, min(MAX_BLEND, high * _GROWTH)
-    if high == low:
-        return high, True
-    for _ in range(_BISECTIONS):
+    for _ in range(_BISECTIONS if high > low else 0):
         middle = 0.5 * (low + high)
-        if _within_limits(target, t0, e0, ed0, middle, limits):
-            high = middle
-        else:
-            low = middle
-    return high, True
+        low, high = (low, middle) if fits(middle) else (middle, high)
+    return _Quintic(e0, ed0, high), True

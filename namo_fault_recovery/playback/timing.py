@@ -93,7 +93,7 @@ class PlannedMotion:
         """Return the commanded acceleration at time(s) ``t`` (rad/s^2; 0 outside, locked)."""
         t = np.asarray(t, dtype=float)
         qdd = self._spline.derivative(2)(np.clip(t, 0.0, self.duration))
-        qdd[(t < 0.0) | (t > self.duration)] = 0.0      # held before and after
+        qdd[(t < 0.0) | (t >= self.duration)] = 0.0     # held before and after
         for j, _ in self._lock_columns():
             qdd[..., j] = 0.0
         return qdd
