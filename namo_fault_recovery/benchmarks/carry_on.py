@@ -190,6 +190,7 @@ class Bench:
                'detection_after_stick_s': (run['detected_s'] - stuck
                                            if run['detected_s'] is not None else None),
                'switch_to_back_s': back - switch if back is not None and switch else None,
+               'stuck_to_end_s': t - stuck if fig_ok(outcome) else math.inf,
                'held_elsewhere': run['held_elsewhere'], 'wrong_joints': run['wrong_joints'],
                'contact_events': self.sim.contact_events, 'elapsed_s': t}
         if run['adapted'] is not None:
@@ -199,6 +200,11 @@ class Bench:
             fig.update(planned_score=planned, executed_score=executed,
                        score_gap=abs(executed - planned))
         return fig
+
+
+def fig_ok(outcome):
+    """Return True if a play ended, and ended well."""
+    return outcome is not None and outcome.ok
 
 
 def _arrays(gesture):
@@ -235,8 +241,9 @@ def summary(doc):
     done = [e for e in cases if e['exercised']]
     back = [e['stuck_to_back_s'] for e in done]
 
-    def stats(key):
-        values = [e[key] for e in done if e.get(key) is not None]
+    def stats(key, detected=False):
+        values = [e[key] for e in done if e.get(key) is not None
+                  and (not detected or e.get('detected_s') is not None)]
         if not values:
             return None
         return {'n': len(values), 'median': percentile(values, 50),
@@ -249,8 +256,11 @@ def summary(doc):
         'stuck_to_back_s': {'n': len(back),
                             'median': _rank(back, 50), 'p95': _rank(back, 95),
                             'max': float(np.max(back)) if back else None},
+        'stuck_to_back_detected_s': stats('stuck_to_back_s', detected=True),
+        'detected': sum(e.get('detected_s') is not None for e in done),
         'detection_after_stick_s': stats('detection_after_stick_s'),
         'engine_s': stats('engine_s'), 'blend_s': stats('blend_s'),
+        'stuck_to_end_s': stats('stuck_to_end_s'),
         'switch_to_back_s': stats('switch_to_back_s'),
         'held_elsewhere': sum(e.get('held_elsewhere', 0) for e in done),
         'wrong_joint_reports': sum(len(e.get('wrong_joints', ())) for e in done),
@@ -299,10 +309,13 @@ def write_summary(out, doc):
                   f'{doc["goal_tolerance_deg"]:g} deg): median {b["median"]:.2f} s, p95 '
                   f'{b["p95"]:.2f} s, max {b["max"]:.2f} s (target p95 <= {TARGET_P95:g} s:'
                   f' {verdict})\n')
-    for key, label in (('detection_after_stick_s', 'detection after the stick'),
+    out.write(f'detected {s["detected"]} of {s["exercised"]}\n')
+    for key, label in (('stuck_to_back_detected_s', 'stuck -> back, the detected cases'),
+                       ('detection_after_stick_s', 'detection after the stick'),
                        ('engine_s', 'reconfiguration (engine wall time)'),
                        ('blend_s', 'blend duration'),
-                       ('switch_to_back_s', 'switch -> back on the trajectory')):
+                       ('switch_to_back_s', 'switch -> back on the trajectory'),
+                       ('stuck_to_end_s', 'stuck -> the end of the (carried-on) play')):
         v = s[key]
         if v:
             out.write(f"  {label}: median {v['median']:.2f} s, p95 {v['p95']:.2f} s, max "

@@ -218,7 +218,7 @@ class GesturePlayer(Node):
 
     def _on_fault(self, msg):
         """Hold a joint reported by anyone mid-play where it is, and carry on."""
-        if self._play is None:
+        if self._play is None or self._waits['carry_on'] <= 0:
             return
         faults = []
         for i, joint in enumerate(msg.name):
