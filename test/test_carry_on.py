@@ -248,3 +248,21 @@ def test_a_fault_reported_by_someone_else_is_held_where_it_is():
     assert faults == []              # not the player's own detection: nothing to report
     for when, motion in arm.sent[1:]:
         assert np.all(motion.positions[:, NAMES.index('right_arm_joint3')] == where)
+
+
+def test_carry_on_benchmark_case_on_the_physics():
+    """One case of ``bench carry-on``: the elbow stuck mid-wai, carried on, held, back."""
+    pytest.importorskip('mujoco', reason='the simulator physics needs mujoco')
+    from namo_fault_recovery.benchmarks import carry_on
+    from namo_fault_recovery.sim.physics import designed_allowances, NamoSim
+    sim = NamoSim(ROBOT, allowances=designed_allowances(ROBOT, LIBRARY))
+    bench = carry_on.Bench(ROBOT, LIBRARY, sim, carry_on.Reconfigurer(ROBOT, LIBRARY, 0.3))
+    entry = bench.case('wai', ELBOW)
+    assert entry['exercised'] and entry['ok'], entry['reason']
+    assert 'carried on' in entry['reason']
+    assert entry['detected_s'] < entry['switch_s'] < entry['back_s']
+    assert entry['held_elsewhere'] == 0 and entry['wrong_joints'] == []
+    assert entry['score_gap'] < 1.0
+    assert sim.stuck and abs(sim.positions()[NAMES.index(ELBOW)] - sim.stuck[ELBOW]) < 1e-3
+    # a joint the gesture does not move (salute: the left arm) is not a case
+    assert not bench.case('salute', 'left_arm_joint1')['exercised']
