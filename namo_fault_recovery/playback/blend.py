@@ -212,6 +212,10 @@ def blend(target, t0, q0, v0, limits, holds=None, sample_period=0.05):
     e0, ed0 = _hold(e0, ed0, names, dict.fromkeys(holds or {}, 0.0))
     if np.all(np.abs(e0) < _AT_REST) and np.all(np.abs(ed0) < _AT_REST):
         return resume(target, t0, holds, sample_period), 0.0
+    # A joint measured faster than its limit (a controller's overshoot at the limit)
+    # cannot start slower: its limit is where it starts, and the correction slows it.
+    limits = BlendLimits(np.maximum(limits.velocity, np.abs(np.asarray(v0, dtype=float))),
+                         limits.acceleration)
     correction, fits = _correction(target, t0, e0, ed0, limits)
     duration = correction.duration
     knots = _knots(target, t0, correction)

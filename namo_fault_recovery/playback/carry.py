@@ -61,8 +61,11 @@ class CarryOn:
         Play ``plan`` (a PlannedMotion from the play's start pose; time 0 = the start).
 
         ``groups`` and ``thresholds`` are the :class:`~.monitor.Playback`'s;
-        ``planner(times, frames, start, locks)`` returns the PlannedMotion of keyframes
-        ``frames`` (in the plan's joint order) from pose ``start`` with ``locks``;
+        ``planner(times, frames, start, holds)`` returns the PlannedMotion of keyframes
+        ``frames`` (in the plan's joint order) from pose ``start``, the held joints
+        ``holds`` at their angles and any other lock the caller knows of now (its
+        knowledge when the library arrives, not when the play began: a fault cleared
+        meanwhile is no lock);
         ``limits`` is the :class:`~.blend.BlendLimits`; ``wait`` the longest wait for
         the reconfigured library (s; 0: a fault ends the play).
         """
@@ -175,7 +178,7 @@ class CarryOn:
         times, frames, label = self.candidate
         self.candidate = None
         start = self.base.waypoints[0].copy()
-        target = self.planner(times, frames, start, dict(self.base.locks, **self.holds))
+        target = self.planner(times, frames, start, dict(self.holds))
         t_target = phase_time(self.base, target, self.phase(t))
         if velocity is None:
             velocity = self.motion.velocity_at(t - self.segment_start)

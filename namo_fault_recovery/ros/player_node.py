@@ -304,7 +304,7 @@ class GesturePlayer(Node):
             return Outcome(False, f'nobody subscribes to {idle[0]}/joint_trajectory; is the '
                                   f'controller running?')
         future = Future()
-        session = CarryOn(plan, list(self._groups.values()), self._monitor, self._plan_frames,
+        session = CarryOn(plan, list(self._groups.values()), self._monitor, self._replan,
                           BlendLimits(self._limits[0],
                                       np.full(len(self._joints), self._waits['acceleration'])),
                           self._waits['carry_on'], self._timing.sample_period)
@@ -317,6 +317,11 @@ class GesturePlayer(Node):
         start = [self._measured[j] for j in self._joints]
         return self._plan_frames(track.times, track.positions[:, columns], start,
                                  self._book.locks(dict(self._measured)))
+
+    def _replan(self, times, frames, start, holds):
+        """Time a reconfigured gesture: the play's holds and the locks known now."""
+        return self._plan_frames(times, frames, start,
+                                 dict(self._book.locks(dict(self._measured)), **holds))
 
     def _plan_frames(self, times, frames, start, locks):
         """Time keyframes (in the played joints' order) from ``start`` with ``locks``."""
