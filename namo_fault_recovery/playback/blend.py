@@ -86,6 +86,22 @@ def resume(plan, t, holds=None, sample_period=0.05):
                           dict(plan.locks, **(holds or {})))
 
 
+def stop(plan, t, limits, holds=None, sample_period=0.05):
+    """
+    Return a motion that stops ``plan`` at its time ``t`` (time 0 = now), ``holds`` held.
+
+    From the command at ``t`` (position and speed), each joint decelerates at its
+    acceleration limit to rest (the time-optimal stop), then stays there.
+    """
+    t = float(np.clip(t, 0.0, plan.duration))
+    q, v = _hold(plan.command_at(t), plan.velocity_at(t), plan.joint_names, holds)
+    rest = q + v * np.abs(v) / (2 * limits.acceleration)
+    still = sampled_motion(plan.joint_names, CubicHermiteSpline(
+        [0.0, MIN_SEGMENT], np.vstack([rest, rest]), np.zeros((2, len(q))), axis=0),
+        [0.0, MIN_SEGMENT], sample_period, plan.stretch, dict(plan.locks, **(holds or {})))
+    return blend(still, 0.0, q, v, limits, holds, sample_period)[0]
+
+
 def phase_time(source, target, t):
     """
     Return the time of ``target`` at the phase of time ``t`` in ``source``.

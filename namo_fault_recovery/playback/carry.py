@@ -7,8 +7,11 @@ a fault arrives mid-play (its own :class:`~.monitor.Playback` detects a stuck jo
 anyone reports one):
 
 1. **hold**: the stuck joint is commanded where it is (its measured angle) from now
-   on, at every point; the other joints go on with the motion they were playing
-   (:func:`~.blend.resume`), so the arm does not freeze while the library is redone;
+   on, at every point; the other joints stop, as fast as the acceleration limits allow
+   (:func:`~.blend.stop`), and the gesture's phase waits where it was: the old motion
+   with a joint missing was never checked for self-contact (a two-handed gesture may
+   bring the arms together elsewhere), and the new gesture then goes on from that
+   phase, so the guest sees all of it;
 2. **wait** (at most ``wait`` seconds) for a library version that arrived after the
    fault and whose gesture holds every stuck joint still (the reconfigured one:
    ``recovery_node`` answers within its 1 s deadline, a contingency-table hit within
@@ -34,7 +37,7 @@ import math
 
 import numpy as np
 
-from .blend import blend, phase_time, resume
+from .blend import blend, phase_time, stop
 from .monitor import Outcome, Playback
 
 
@@ -96,6 +99,8 @@ class CarryOn:
 
     def phase(self, t):
         """Return the time on the gesture's timeline (``self.base``) at play time ``t``."""
+        if self.waiting:
+            return self.base_time         # stopped: the gesture waits where it was
         return self.base_time + (t - self.segment_start)
 
     def fault(self, t, faults):
@@ -166,7 +171,7 @@ class CarryOn:
         self.holds.update(new)
         tau = t - self.segment_start
         self.base_time, self.segment_start = self.phase(t), t
-        self.motion = resume(self.motion, tau, self.holds, self.sample_period)
+        self.motion = stop(self.motion, tau, self.limits, self.holds, self.sample_period)
         self.playback = Playback(self.motion, self.groups, self.thresholds)
         self.waiting_since, self.candidate = t, None
         self.target = self.back_at = None
