@@ -5,11 +5,11 @@ Playing the gesture library on the robot, free of ROS.
   speed-limited trajectory that holds every locked joint at its lock angle;
 - :mod:`.monitor`: tracking of the commands on the measured joint states: a stuck
   joint is a fault, the last point reached within tolerance is the end of the motion;
-- :mod:`.blend`: the rest of a motion from one of its instants, the same phase in a
-  reconfigured plan, and a blend from the measured state onto a trajectory within the
-  velocity and acceleration limits;
-- :mod:`.carry`: one play that carries on through a stuck joint: hold it, wait for
-  the reconfigured library, blend onto it at the current phase, go on;
+- :mod:`.blend`: the rest of a motion from one of its instants, a time-optimal stop,
+  the same phase in a reconfigured plan, and a blend from the measured state onto a
+  trajectory within the velocity and acceleration limits;
+- :mod:`.carry`: one play that carries on through a stuck joint: hold it and stop,
+  wait for the reconfigured library, blend onto it at that phase, go on;
 - :mod:`.book`: library versions and lock angles known between plays;
 - :mod:`.export`: the library as a play_motion2 motions file;
 - :mod:`.plot`: the figure of one play (commanded and measured angles).

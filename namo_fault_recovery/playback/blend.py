@@ -2,11 +2,12 @@
 From where the arm is onto another trajectory, mid-motion (no ROS).
 
 When a joint sticks mid-play the arm is somewhere on the old trajectory, moving, and
-the reconfigured gesture is another trajectory of the same gesture.  Three pieces:
+the reconfigured gesture is another trajectory of the same gesture.  The pieces:
 
 - :func:`resume`: the rest of a planned motion from one of its instants (time 0 =
-  now), some joints held where they are: what the arm does while the reconfigured
-  library is on its way;
+  now), some joints held where they are; :func:`stop`: the time-optimal stop of a
+  motion at one of its instants (what the arm does while the reconfigured library is
+  on its way);
 - :func:`phase_time`: the instant of another plan of the same gesture at the same
   phase (the same fraction of the same segment between keyframes), so the new gesture
   goes on from where the old one was, not from its beginning;
@@ -22,7 +23,7 @@ the reconfigured gesture is another trajectory of the same gesture.  Three piece
   for all joints of the shortest duration that fits, found by search.  Held joints
   stay exactly where they are held throughout.
 
-All three return a :class:`~.timing.PlannedMotion` that starts now, sampled so that a
+They return a :class:`~.timing.PlannedMotion` that starts now, sampled so that a
 controller interpolating cubic Hermite splines between its points reproduces it.
 """
 

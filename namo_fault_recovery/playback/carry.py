@@ -18,7 +18,7 @@ anyone reports one):
    milliseconds);
 3. **blend**: the reconfigured gesture is planned on the gesture's own timeline
    (``planner``, from the play's start pose, the stuck joints at their angles), its
-   instant at the current phase found (:func:`~.blend.phase_time`), and the arm
+   instant at the phase where the arm stopped found (:func:`~.blend.phase_time`), and the arm
    blended from its measured pose and velocity onto it within the velocity and
    acceleration limits (:func:`~.blend.blend`);
 4. **go on** to the end of the reconfigured gesture, watched as any play (a second

@@ -13,7 +13,7 @@ and from the player's own fault reports) is commanded at its lock angle at every
 A joint that stays off its command while the others track is reported on
 ``/actuator_fault`` with its measured angle (:mod:`..playback.monitor`), and the play
 carries on (:mod:`..playback.carry`): the stuck joint is commanded where it is from
-then on, the others go on with the motion; ``recovery_node`` reconfigures the library,
+then on, the others stop; ``recovery_node`` reconfigures the library,
 and the first version that holds the joint there (waited for at most
 ``carry_on_wait_sec``) is blended onto at the current phase, from the measured pose and
 velocity, within the speed limits and ``acceleration_limit_deg``; the play ends with the
