@@ -9,6 +9,11 @@ Playing the gesture library on the robot, free of ROS.
   (delay and first-order lag), and its fit to healthy plays;
 - :mod:`.reference`: reference gestures that the robot's own body blocks (a library
   error, found when the library is loaded);
+- :mod:`.blend`: the rest of a motion from one of its instants, a time-optimal stop,
+  the same phase in a reconfigured plan, and a blend from the measured state onto a
+  trajectory within the velocity and acceleration limits;
+- :mod:`.carry`: one play that carries on through a stuck joint: hold it and stop,
+  wait for the reconfigured library, blend onto it at that phase, go on;
 - :mod:`.book`: library versions and lock angles known between plays;
 - :mod:`.export`: the library as a play_motion2 motions file;
 - :mod:`.plot`: the figure of one play (commanded and measured angles).
