@@ -141,24 +141,6 @@ def test_thresholds_refuse_negative_model_numbers():
         TrackingModel(lambda t: t, delay=-1.0)
 
 
-def test_a_reference_into_the_torso_is_a_library_error_found_at_load():
-    import dataclasses
-    from namo_fault_recovery.playback.reference import blocked_gestures, body_contacts
-    assert blocked_gestures(ROBOT, LIBRARY) == {}     # wai's pressed palms are designed
-    salute = LIBRARY['salute']
-    right = np.zeros(7)
-    right[1] = math.radians(40.0)                     # the upper arm swung into the torso
-    frames = (salute.keyframes[0], dataclasses.replace(salute.keyframes[0], right=right))
-    blocked = dataclasses.replace(salute, keyframes=frames)
-    contacts = body_contacts(ROBOT, blocked)
-    assert {c.keyframe for c in contacts} == {1}
-    assert 'right_upper_arm-torso' in {c.pair for c in contacts}
-    assert max(c.depth_mm for c in contacts) > 100.0
-    rest = dataclasses.replace(salute, keyframes=(dataclasses.replace(
-        salute.keyframes[0], right=np.zeros(7), left=np.zeros(7)),))
-    assert body_contacts(ROBOT, rest) == []
-
-
 def test_a_joint_moving_alone_among_small_corrections_is_caught():
     """From wai's end with left joint 1 jumped to 10 deg, the others correct 2-4 deg."""
     g = LIBRARY['wai']

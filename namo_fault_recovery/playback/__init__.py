@@ -7,8 +7,6 @@ Playing the gesture library on the robot, free of ROS.
   joint is a fault, the last point reached within tolerance is the end of the motion;
 - :mod:`.tracking`: the model of a controller's tracking the monitor compares with
   (delay and first-order lag), and its fit to healthy plays;
-- :mod:`.reference`: reference gestures that the robot's own body blocks (a library
-  error, found when the library is loaded);
 - :mod:`.blend`: the rest of a motion from one of its instants, a time-optimal stop,
   the same phase in a reconfigured plan, and a blend from the measured state onto a
   trajectory within the velocity and acceleration limits;
