@@ -205,6 +205,33 @@ def test_detection_benchmark_on_the_physics():
     assert rec['replay_ok'] and rec['lock_commanded_elsewhere'] == 0
 
 
+def test_a_stuck_shoulder_is_reported_alone_when_the_torso_holds_its_neighbours():
+    """
+    Left joint 1 stuck at 10 deg from the end of a reconfigured wai: playing wai again.
+
+    The stuck shoulder brings the left forearm against the torso; the body holds the
+    healthy joints 2 and 3 a few degrees off (2 the wrong way, 3 short of its command).
+    Only the shoulder is a fault (found over DDS in test_play_sim.py: joints 1 and 2 were
+    both reported, or none, the play ending on the goal timeout).
+    """
+    pytest.importorskip('mujoco', reason='the simulator physics needs mujoco')
+    from namo_fault_recovery.benchmarks import detection_suite as suite
+    from namo_fault_recovery.sim.physics import designed_allowances, NamoSim
+    sim = NamoSim(ROBOT, allowances=designed_allowances(ROBOT, LIBRARY))
+    sim.set_positions(np.radians([51.8, -20.0, -71.1, 101.5, 2.2, -54.1, 25.3,
+                                  11.0, 3.3, -39.9, 90.1, -10.0, -45.0, 45.0]))
+    held = sim.stick('left_arm_joint1', math.radians(10.0))
+    outcome, plan_, trace = suite.play(sim, ROBOT, LIBRARY['wai'],
+                                       suite.Arrival([], np.random.default_rng(0)),
+                                       suite.SuiteOptions())
+    assert [f for f, _ in outcome.faults] == ['left_arm_joint1'], outcome
+    assert outcome.faults[0][1] == pytest.approx(held, abs=math.radians(0.5))
+    _, _, commanded, reading = trace[-1]
+    pushed = np.degrees(np.abs(reading - commanded))[[NAMES.index('left_arm_joint2'),
+                                                      NAMES.index('left_arm_joint3')]]
+    assert np.all(pushed > 2.0), pushed        # the neighbours were off as well
+
+
 def test_play_figure_draws_the_joints_that_moved(tmp_path):
     pytest.importorskip('matplotlib', reason='figures need matplotlib')
     from namo_fault_recovery.playback.plot import plot_play

@@ -12,10 +12,14 @@ measurement (message latency, a busy executor), so that a late reading of a fast
 is no error.  A joint off by more than ``fault_threshold`` for ``fault_hold`` seconds is
 a fault when the other joints of its controller show that they track: at least one of
 them (among those the motion moves by more than twice ``fault_threshold``) is
-predicted, and was measured, away from its start by more than ``fault_threshold`` and
-follows, and no fewer follow than are off (when a whole arm
-lags, the arm or its controller is at fault, not one actuator).  A joint that moves
-alone in a motion is judged alone.
+predicted, and was measured, away from its start by more than ``fault_threshold``, the
+same way (it follows, even if it is off now), and no fewer follow than are off without
+having followed (when a whole arm stays put, the arm or its controller is at fault, not
+one actuator).  A joint that moves alone in a motion is judged alone.  Of the joints of
+one controller found in the same reading, only the one furthest off is reported: a
+stuck shoulder can bring the forearm against the torso, and the body then holds the
+healthy joints it pushes a few degrees off as well; they are judged again, in the motion
+that follows the report.
 :class:`Playback` adds the end of a play: finished when every joint is within
 ``goal_tolerance`` of the last point after the motion's duration, failed on a fault or
 when ``goal_time`` has passed with a joint still off its goal.
@@ -115,9 +119,11 @@ class StuckJointDetector:
         errors = self.errors(t, measured)
         off = errors > self.thresholds.fault_threshold
         limit = self.thresholds.fault_threshold
-        self._moved |= (np.abs(self.model.at(t) - self._start) > limit) & \
-            (np.abs(np.asarray(measured, dtype=float) - self._start) > limit)
-        new = []
+        predicted = self.model.at(t) - self._start
+        went = np.asarray(measured, dtype=float) - self._start
+        self._moved |= (np.abs(predicted) > limit) & (np.abs(went) > limit) & \
+            (np.sign(predicted) == np.sign(went))
+        found = []
         for i, name in enumerate(self.joint_names):
             if not off[i]:
                 self._off_since.pop(i, None)
@@ -125,8 +131,15 @@ class StuckJointDetector:
             since = self._off_since.setdefault(i, t)
             if name in self.reported or t - since < self.thresholds.fault_hold - 1e-9:
                 continue
-            if not self._others_track(i, off):
-                continue
+            if self._others_track(i, off):
+                found.append(i)
+        new = []
+        for i in found:
+            rivals = [k for k in found if k in self._group_of.get(i, ())]
+            if any(errors[k] > errors[i] or (errors[k] == errors[i] and k < i)
+                   for k in rivals):
+                continue         # another joint of its controller is further off
+            name = self.joint_names[i]
             self.reported[name] = (t, float(measured[i]))
             new.append((name, float(measured[i])))
         return new
@@ -135,8 +148,8 @@ class StuckJointDetector:
         movers = [k for k in self._group_of.get(i, []) if self._movers[k]]
         if not movers:
             return True
-        following = sum(1 for k in movers if self._moved[k] and not off[k])
-        failing = sum(1 for k in movers if off[k])
+        following = sum(1 for k in movers if self._moved[k])
+        failing = sum(1 for k in movers if off[k] and not self._moved[k])
         return following >= 1 and following >= failing
 
 
