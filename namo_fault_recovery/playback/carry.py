@@ -8,7 +8,9 @@ anyone reports one):
 
 1. **hold**: the stuck joint is commanded where it is (its measured angle) from now
    on, at every point; the other joints stop, as fast as the acceleration limits allow
-   (:func:`~.blend.stop`), and the gesture's phase waits where it was: the old motion
+   (:func:`~.blend.stop`), and the gesture's phase waits where it was (the stopped arm
+   is not judged: the body may hold a healthy joint off the stop, as the torso does
+   the forearm of a stuck shoulder; the blend starts from where it is): the old motion
    with a joint missing was never checked for self-contact (a two-handed gesture may
    bring the arms together elsewhere), and the new gesture then goes on from that
    phase, so the guest sees all of it;
@@ -86,6 +88,7 @@ class CarryOn:
         self.events = []                        # (play time, kind, text)
         self.back_at = None                     # play time back on the reconfigured path
         self.blend_duration = None
+        self._blend_unsent = False              # a blend waits for :meth:`sent`
 
     @property
     def waiting(self):
@@ -102,6 +105,19 @@ class CarryOn:
         if self.waiting:
             return self.base_time         # stopped: the gesture waits where it was
         return self.base_time + (t - self.segment_start)
+
+    def sent(self, t):
+        """
+        Take the play time ``t`` at which the current motion was sent.
+
+        A blend starts then, not at the reading it was planned on: the arm waited,
+        stopped, while it was planned (planning can take tens of ms), and a controller
+        joining the blend that far in would jump.  A stop keeps its time (it goes on
+        from the motion the controller was playing meanwhile).
+        """
+        if self._blend_unsent and t > self.segment_start:
+            self.segment_start = t
+        self._blend_unsent = False
 
     def fault(self, t, faults):
         """
@@ -144,13 +160,16 @@ class CarryOn:
         if self.candidate is not None:
             return self._switch(t, q, velocity)
         self._watch_return(t, q)
+        if self.waiting:
+            # Stopped, waiting: no judging.  The body may hold healthy joints off the
+            # stop (a stuck shoulder presses the forearm on the torso); the blend starts
+            # from where they are, and the arm is watched again from there.
+            return Step(outcome=self.expire(t))
         outcome = self.playback.update(t - self.segment_start, q)
         if outcome is not None and outcome.faults and self.wait > 0:
             new = [(j, a) for j, a in outcome.faults if j not in self.holds]
             if new:
                 return self._hold(t, new, report=True)
-        if self.waiting:
-            return Step(outcome=self.expire(t))
         if outcome is None:
             return Step()
         return Step(faults=outcome.faults if self.wait <= 0 else (),
@@ -193,6 +212,7 @@ class CarryOn:
         self.motion, self.target = motion, target
         self.playback = Playback(motion, self.groups, self.thresholds)
         self.waiting_since = None
+        self._blend_unsent = True
         self.blend_duration = abs(duration)
         note = '' if duration >= 0 else ' (beyond the limits: no shorter blend fits)'
         self.events.append((t, 'switch', f'reconfigured {label or "gesture"} at phase '

@@ -15,7 +15,9 @@ them (among those the motion moves by more than twice ``fault_threshold``) is
 predicted, and was measured, away from its start by more than ``fault_threshold``, the
 same way (it follows, even if it is off now), and no fewer follow than are off without
 having followed (when a whole arm stays put, the arm or its controller is at fault, not
-one actuator).  A joint that moves alone in a motion is judged alone.  Of the joints of
+one actuator); its time off counts from the first reading that shows one of them
+following (a controller that takes a motion on late leaves them all behind until
+then).  A joint that moves alone in a motion is judged alone.  Of the joints of
 one controller found in the same reading, only the one furthest off is reported: a
 stuck shoulder can bring the forearm against the torso, and the body then holds the
 healthy joints it pushes a few degrees off as well; they are judged again, in the motion
@@ -93,6 +95,7 @@ class StuckJointDetector:
         # one that barely crosses it (a few degrees of a correction) may never show it.
         self._movers = np.ptp(whole, axis=0) > WITNESS_FACTOR * thresholds.fault_threshold
         self._moved = np.zeros(len(self.joint_names), dtype=bool)
+        self._moved_at = np.full(len(self.joint_names), math.inf)   # when first _moved
         self.model = TrackingModel(command, thresholds.tracking_delay,
                                    thresholds.tracking_time_constant, thresholds.tracking_lag)
         self._started = False
@@ -123,12 +126,16 @@ class StuckJointDetector:
         went = np.asarray(measured, dtype=float) - self._start
         self._moved |= (np.abs(predicted) > limit) & (np.abs(went) > limit) & \
             (np.sign(predicted) == np.sign(went))
+        self._moved_at[self._moved & np.isinf(self._moved_at)] = t
         found = []
         for i, name in enumerate(self.joint_names):
             if not off[i]:
                 self._off_since.pop(i, None)
                 continue
-            since = self._off_since.setdefault(i, t)
+            # Off counts from when its controller is seen playing the motion: one that
+            # took it on late (a busy controller joins a stamped motion mid-way, then
+            # catches up) leaves every joint behind until then.
+            since = max(self._off_since.setdefault(i, t), self._taken_on(i))
             if name in self.reported or t - since < self.thresholds.fault_hold - 1e-9:
                 continue
             if self._others_track(i, off):
@@ -143,6 +150,11 @@ class StuckJointDetector:
             self.reported[name] = (t, float(measured[i]))
             new.append((name, float(measured[i])))
         return new
+
+    def _taken_on(self, i):
+        """Return when another joint of ``i``'s controller first followed (0: none moves)."""
+        movers = [k for k in self._group_of.get(i, []) if self._movers[k]]
+        return min((self._moved_at[k] for k in movers), default=0.0)
 
     def _others_track(self, i, off):
         movers = [k for k in self._group_of.get(i, []) if self._movers[k]]

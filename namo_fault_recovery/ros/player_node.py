@@ -35,6 +35,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.duration import Duration
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -238,7 +239,23 @@ class GesturePlayer(Node):
         q = [self._measured[j] for j in self._joints]
         v = [self._speeds[j] for j in self._joints] if all(
             j in self._speeds for j in self._joints) else None
-        self._apply(self._play[1].update(now - self._play[2], q, v))
+        taken = now - self._age(msg.header.stamp)      # when the arm was there
+        self._apply(self._play[1].update(taken - self._play[2], q, v))
+
+    def _age(self, stamp):
+        """
+        Return how old (s) a reading stamped ``stamp`` is; 0 for a zero or foreign stamp.
+
+        A reading that waited in a queue (a busy executor handles a burst at once) is
+        judged where the arm was when it was read, not when it was handled: the band
+        of the detector is no longer stretched by the player's own delays.  A stamp
+        that is not this machine's clock (zero, in the future, older than
+        ``joint_states_timeout_sec``) is taken as fresh.
+        """
+        if not stamp.sec and not stamp.nanosec:
+            return 0.0
+        age = self.get_clock().now().nanoseconds * 1e-9 - (stamp.sec + stamp.nanosec * 1e-9)
+        return age if 0.0 <= age <= self._waits['joint_states'] else 0.0
 
     def _on_fault(self, msg):
         """Hold a joint reported by anyone mid-play where it is, and carry on."""
@@ -354,9 +371,23 @@ class GesturePlayer(Node):
                            lower=lower, upper=upper, timing=self._timing)
 
     def _send(self, plan):
-        """Command ``plan`` from now: one message per controller."""
+        """
+        Command ``plan`` on the play's timeline: one message per controller.
+
+        Its time 0 is the play time where the play put it (``segment_start``: the
+        reading that caused it), stamped on the ROS clock: a controller that receives
+        it late joins it where the play is (as ros2_control's controller does with a
+        past stamp), instead of starting it late; the detector's prediction and the
+        controller then run on the same timeline whatever the transport's delay.
+        """
+        session, start = self._play[1], self._play[2]
+        session.sent(time.monotonic() - start)
+        ago = time.monotonic() - start - session.segment_start
+        stamp = self.get_clock().now() - Duration(nanoseconds=int(max(ago, 0.0) * 1e9))
         for controller, joints in self._groups.items():
-            self._command_pubs[controller].publish(self._trajectory(plan, joints))
+            msg = self._trajectory(plan, joints)
+            msg.header.stamp = stamp.to_msg()
+            self._command_pubs[controller].publish(msg)
 
     def _apply(self, step):
         """Carry out a Step of the play: report faults, send a motion, end the play."""
@@ -373,7 +404,7 @@ class GesturePlayer(Node):
     @staticmethod
     def _trajectory(plan, joints):
         positions, velocities = plan.columns(joints)
-        msg = JointTrajectory(joint_names=list(joints))   # zero stamp: start now
+        msg = JointTrajectory(joint_names=list(joints))
         for t, q, v in zip(plan.times, positions, velocities):
             if t <= 0.0:
                 continue       # the controller starts from where the arm is
