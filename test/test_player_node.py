@@ -47,9 +47,12 @@ def test_play_detect_report_then_play_locked(player):
     assert response.success, response.message + node.describe()
     sent = arms.commands[before:]
     assert sorted(c for c, _ in sent) == sorted(CONTROLLERS)
+    # both stamped with the play's start on the ROS clock: a late controller joins there
+    stamps = {m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, m in sent}
+    assert len(stamps) == 1 and abs(stamps.pop() - arms.node.get_clock().now().nanoseconds
+                                    * 1e-9) < 30.0
     for controller, msg in sent:
         assert list(msg.joint_names) == CONTROLLERS[controller]
-        assert msg.header.stamp.sec == 0 and msg.header.stamp.nanosec == 0
         assert all(len(p.velocities) == len(p.positions) for p in msg.points)
     final = np.concatenate([LIBRARY['wai'].keyframes[-1].right,
                             LIBRARY['wai'].keyframes[-1].left])

@@ -13,11 +13,14 @@ command and measurement loop, watched by the player's own monitor
   a 100 Hz ``/joint_states`` stream from another process received over DDS by a
   subscriber like the player's, with the machine as it is (``idle``) or with a
   busy-looping process pinned to the other core (``busy``).  The measured sequence is
-  replayed, from a random place per play, in order (a burst stays a burst): the
-  detector is fed ``(receipt time, reading)`` as the node is, and the sim starts the
-  trajectory as late after the player's clock starts as one reading's lateness (the
-  goal's own delivery).  What it does not model: a controller slowed by the load (the
-  physics stays in lock-step) and message loss.
+  replayed, from a random place per play, in order (a burst stays a burst).  As the
+  ``gesture_player`` node does, the detector judges each reading at its stamp (where
+  the arm was when it was read), when it arrives: a late reading delays the decision,
+  not the prediction.  The motion is stamped with the play's start; the simulated
+  controller takes it on as late as one reading's lateness (the goal's own delivery),
+  holding the arm until then, and then joins it where the play is, as a trajectory
+  controller does with a past stamp.  What it does not model: a controller slowed by
+  the load (the physics stays in lock-step) and message loss.
 
 Per condition and library:
 
@@ -87,8 +90,8 @@ class Arrival:
         return float(value)
 
     def receipt(self, t):
-        """Return the player's time at which the reading taken at sim time ``t`` arrives."""
-        self.last = max(self.last, t + self.goal_delay + self._next())
+        """Return the player's time at which the reading taken at play time ``t`` arrives."""
+        self.last = max(self.last, t + self._next())
         return self.last
 
 
@@ -102,7 +105,8 @@ def play(sim, robot, gesture, arrival, options, limit=30.0):
     """
     Play ``gesture`` on ``sim`` from where it is; return (outcome, plan, trace).
 
-    The trace is (sim time, player time, commanded, reading) at every control tick.
+    The trace is (play time, receipt time, commanded, reading) at every control tick;
+    the sim's clock is the play's (the motion is stamped with the play's start).
     """
     names = robot.joint_names
     times = np.array([kf.time_from_start for kf in gesture.keyframes])
@@ -113,16 +117,21 @@ def play(sim, robot, gesture, arrival, options, limit=30.0):
     playback = Playback(plan, [names[:7], names[7:]], options.monitor)
     steps = max(1, int(round(1.0 / (RATE * sim.timestep))))
     trace, t, outcome = [], 0.0, None
+    held = plan.positions[0]
     while outcome is None and t < limit:
         tc = min(t, plan.duration)
         q_cmd = plan.command_at(tc)
-        sim.set_targets(q_cmd, plan.velocity_at(tc) if t < plan.duration else np.zeros(14))
+        if t < arrival.goal_delay:          # not received yet: the arm holds
+            sim.set_targets(held, np.zeros(14))
+        else:
+            sim.set_targets(q_cmd, plan.velocity_at(tc) if t < plan.duration
+                            else np.zeros(14))
         sim.step(steps)
         t += steps * sim.timestep
         reading = sim.readings()
         at = arrival.receipt(t)
         trace.append((t, at, q_cmd, reading))
-        outcome = playback.update(at, reading)
+        outcome = playback.update(t, reading)
     if outcome is None:
         outcome = playback.abort(f'no outcome within {limit:g} s')
     return outcome, plan, trace
@@ -148,7 +157,7 @@ def normal_play(sim, robot, gesture, arrival, options, rng):
     _start(sim, rng, options.start_spread_deg)
     outcome, plan, trace = play(sim, robot, gesture, arrival, options)
     gap = abs(_score(robot, gesture, sim.positions()) - _score(robot, gesture, plan.final))
-    late = [at - t - arrival.goal_delay for t, at, _, _ in trace]
+    late = [at - t for t, at, _, _ in trace]
     return {'ok': outcome.ok, 'faults': [f for f, _ in outcome.faults],
             'reason': outcome.reason, 'duration_s': plan.duration,
             'score_gap': gap, 'contact_events': sim.contact_events,
@@ -165,9 +174,8 @@ def stuck_play(sim, robot, gesture, joint, arrival, options, rng):
     away = np.abs(plan.command_at(grid)[:, j] - held) > math.radians(DEPARTURE_DEG)
     departs = float(grid[np.argmax(away)]) if away.any() else None
     detected = [f for f, _ in outcome.faults if f == joint]
-    # The detection happens when the player handles the reading: on the sim's clock,
-    # the player's time minus the goal's delivery delay.
-    found = trace[-1][1] - arrival.goal_delay if detected else None
+    # The detection happens when the player handles the reading: when it arrives.
+    found = trace[-1][1] if detected else None
     return {'excursion_deg': math.degrees(float(np.ptp(plan.positions[:, j]))),
             'departs_s': departs, 'detected': bool(detected),
             'wrong_joints': [f for f, _ in outcome.faults if f != joint],

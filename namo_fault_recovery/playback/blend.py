@@ -42,6 +42,7 @@ _GROWTH = 1.15            # the quintic search grows the duration by this factor
 _BISECTIONS = 6
 _BANG_TRIES = 8           # bang-bang tries, each with less acceleration where it misfits
 _BANG_SHRINK = 0.8
+_HORIZON_TRIES = 4        # the spare-speed horizon grown to the correction this often
 _LIMIT_MARGIN = 1.0 + 1e-6
 _AT_REST = 1e-9
 
@@ -251,6 +252,16 @@ def blend(target, t0, q0, v0, limits, holds=None, sample_period=0.05):
     return motion, duration if fits else -duration
 
 
+def _spare(target, t0, limits, horizon):
+    """Return (acceleration, speed) per joint the target leaves to spare over ``horizon``."""
+    ahead = np.linspace(t0, min(target.duration, t0 + horizon), 50)
+    accel = np.maximum(limits.acceleration - np.max(np.abs(target.acceleration_at(ahead)),
+                                                    axis=0), 0.05 * limits.acceleration)
+    cap = np.maximum(limits.velocity - np.max(np.abs(target.velocity_at(ahead)), axis=0),
+                     0.05 * limits.velocity)
+    return accel, cap
+
+
 def _correction(target, t0, e0, ed0, limits):
     """
     Return (correction, fits): the fastest correction found within the limits.
@@ -261,11 +272,16 @@ def _correction(target, t0, e0, ed0, limits):
     duration that fits (growing it from MIN_BLEND, then bisecting); MAX_BLEND and
     ``fits`` False if none does.
     """
-    ahead = np.linspace(t0, target.duration, 50)    # what the target leaves to spare
-    accel = np.maximum(limits.acceleration - np.max(np.abs(target.acceleration_at(ahead)),
-                                                    axis=0), 0.05 * limits.acceleration)
-    cap = np.maximum(limits.velocity - np.max(np.abs(target.velocity_at(ahead)), axis=0),
-                     0.05 * limits.velocity)
+    # What the target leaves to spare while the correction runs (not over the rest of
+    # the gesture: a wave near the speed limit later would leave a crawl now): found
+    # over a horizon grown to the correction's own duration.
+    horizon = MIN_BLEND
+    for _ in range(_HORIZON_TRIES):
+        accel, cap = _spare(target, t0, limits, horizon)
+        correction = _Trapezoid(e0, ed0, accel, cap)
+        if correction.duration <= horizon:
+            break
+        horizon = correction.duration * 1.25
     for _ in range(_BANG_TRIES):
         correction = _Trapezoid(e0, ed0, accel, cap)
         bad = _excess(target, t0, correction, limits)
