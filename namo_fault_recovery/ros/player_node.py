@@ -6,7 +6,8 @@ offers one ``std_srvs/Trigger`` service per gesture, ``~/play/<gesture>``, answe
 the motion has finished or failed (with the reason) from an ``async`` callback, so no
 executor thread waits.  A play sends each controller (parameter ``controllers``) one
 ``trajectory_msgs/JointTrajectory`` on ``<controller>/joint_trajectory``: its joints
-only, zero stamp (start now), positions and velocities of a smooth speed-limited
+only, stamped with the motion's time 0 on the play's timeline (a late controller joins
+it where the play is), positions and velocities of a smooth speed-limited
 trajectory that approaches from the measured ``/joint_states``
 (:mod:`..playback.timing`).  A locked joint (from ``recovery_node``'s ``/diagnostics``
 and from the player's own fault reports) is commanded at its lock angle at every point.
@@ -126,6 +127,21 @@ def _declare(node):
     return robot, groups, timing, monitor, waits
 
 
+def reading_age(now, stamp, timeout):
+    """
+    Return how old (s) a reading stamped ``stamp`` is at ROS time ``now``.
+
+    A reading that waited in a queue (a busy executor handles a burst at once) is
+    judged where the arm was when it was read, not when it was handled: the band of the
+    detector is not stretched by the player's own delays.  A stamp that is not this
+    machine's clock (zero, in the future, older than ``timeout``) gives 0: fresh.
+    """
+    if not stamp.sec and not stamp.nanosec:
+        return 0.0
+    age = now - (stamp.sec + stamp.nanosec * 1e-9)
+    return age if 0.0 <= age <= timeout else 0.0
+
+
 def _joint_limits(robot, joints):
     """Return (velocity limits, lower, upper) of ``joints`` (rad/s, rad), in that order."""
     arms = {j: (side, i) for side in ('right', 'left')
@@ -239,23 +255,9 @@ class GesturePlayer(Node):
         q = [self._measured[j] for j in self._joints]
         v = [self._speeds[j] for j in self._joints] if all(
             j in self._speeds for j in self._joints) else None
-        taken = now - self._age(msg.header.stamp)      # when the arm was there
+        taken = now - reading_age(self.get_clock().now().nanoseconds * 1e-9,
+                                  msg.header.stamp, self._waits['joint_states'])
         self._apply(self._play[1].update(taken - self._play[2], q, v))
-
-    def _age(self, stamp):
-        """
-        Return how old (s) a reading stamped ``stamp`` is; 0 for a zero or foreign stamp.
-
-        A reading that waited in a queue (a busy executor handles a burst at once) is
-        judged where the arm was when it was read, not when it was handled: the band
-        of the detector is no longer stretched by the player's own delays.  A stamp
-        that is not this machine's clock (zero, in the future, older than
-        ``joint_states_timeout_sec``) is taken as fresh.
-        """
-        if not stamp.sec and not stamp.nanosec:
-            return 0.0
-        age = self.get_clock().now().nanoseconds * 1e-9 - (stamp.sec + stamp.nanosec * 1e-9)
-        return age if 0.0 <= age <= self._waits['joint_states'] else 0.0
 
     def _on_fault(self, msg):
         """Hold a joint reported by anyone mid-play where it is, and carry on."""
