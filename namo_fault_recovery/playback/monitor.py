@@ -90,7 +90,7 @@ class StuckJointDetector:
             for i in members:
                 self._group_of[i] = [m for m in members if m != i]
         whole = np.atleast_2d(command(np.linspace(0.0, duration, 200)))
-        self._start = whole[0]
+        self._start = whole[0]       # replaced by the first reading (the model's start)
         # A witness that its controller tracks must move clearly beyond the threshold:
         # one that barely crosses it (a few degrees of a correction) may never show it.
         self._movers = np.ptp(whole, axis=0) > WITNESS_FACTOR * thresholds.fault_threshold
@@ -112,6 +112,7 @@ class StuckJointDetector:
         q = np.asarray(measured, dtype=float)
         if not self._started:
             self.model.reset(t, q)
+            self._start = q.copy()    # moves are measured from where the arm was read
             self._started = True
         self.model.advance(t)
         low, high = self.model.band()
