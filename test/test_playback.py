@@ -232,6 +232,33 @@ def test_a_stuck_shoulder_is_reported_alone_when_the_torso_holds_its_neighbours(
     assert np.all(pushed > 2.0), pushed        # the neighbours were off as well
 
 
+def test_joints_the_command_presses_into_the_torso_are_not_judged():
+    """A command into the body holds the arm off it: the body, not an actuator."""
+    from namo_fault_recovery.model.self_contact import pressed_joints
+    # the left forearm 8.8 mm into the torso (a blend path over DDS, test_play_sim.py),
+    # then the same arm 0.25 mm (within the 1 mm tolerance)
+    poses = np.radians([[0.0] * 7 + [10.17, 4.69, -41.67, 92.5, -12.82, -40.74, 43.31],
+                        [0.0] * 7 + [10.04, 1.87, -41.01, 91.7, -12.65, -41.05, 43.45]])
+    pressed = pressed_joints(ROBOT, NAMES, poses)
+    assert pressed[0, 7:].all() and not pressed[0, :7].any()
+    assert not pressed[1].any()
+    assert pressed_joints(ROBOT, NAMES[7:], poses[:, 7:])[0].all()      # the left arm alone
+    assert not pressed_joints(ROBOT, NAMES[7:13], poses[:, 7:13]).any()   # not all of it
+    p = plan('bye')
+    t, q = simulate(p, stuck={'right_arm_joint4': 0.0}, extra=3.0)
+    right = np.array([n.startswith('right') for n in NAMES])
+
+    def first(playback):
+        return next((o for o in (playback.update(ti, qi) for ti, qi in zip(t, q))
+                     if o is not None), None)
+    judged = first(Playback(p, GROUPS, MonitorThresholds(tracking_delay=0.08)))
+    assert [f for f, _ in judged.faults] == ['right_arm_joint4']
+    excused = first(Playback(p, GROUPS, MonitorThresholds(tracking_delay=0.08),
+                             lambda poses: np.tile(right, (len(poses), 1))))
+    assert excused is not None and not excused.faults, excused      # the goal timeout
+    assert excused.reason.startswith('timeout'), excused
+
+
 def test_play_figure_draws_the_joints_that_moved(tmp_path):
     pytest.importorskip('matplotlib', reason='figures need matplotlib')
     from namo_fault_recovery.playback.plot import plot_play

@@ -25,6 +25,7 @@ milliseconds), and ``recovery_node``'s own handling around the engine.
 """
 
 import contextlib
+import functools
 import math
 import time
 
@@ -32,6 +33,7 @@ import numpy as np
 
 from .common import percentile
 from .deadline import CpuBurner
+from ..model.self_contact import pressed_joints
 from ..objective.score import ScoreWeights, SimilarityScore
 from ..playback.blend import BlendLimits
 from ..playback.carry import CarryOn
@@ -106,7 +108,8 @@ class Bench:
     def session(self, plan):
         """Return the player's CarryOn for ``plan``."""
         return CarryOn(plan, [self.names[:7], self.names[7:]], self.monitor, self.plan,
-                       self.limits, self.wait, self.timing.sample_period)
+                       self.limits, self.wait, self.timing.sample_period,
+                       functools.partial(pressed_joints, self.robot, self.names))
 
     def case(self, name, joint):
         """Play ``name`` from rest, stick ``joint`` mid-motion; return the case's figures."""

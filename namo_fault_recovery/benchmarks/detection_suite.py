@@ -40,6 +40,7 @@ values in use: that is how the stored defaults were measured.
 """
 
 from dataclasses import dataclass, field, replace
+import functools
 import math
 import time
 
@@ -47,7 +48,7 @@ import numpy as np
 
 from . import common
 from ..model.gestures import load_library
-from ..model.self_contact import reference_contact
+from ..model.self_contact import pressed_joints, reference_contact
 from ..objective.score import ScoreWeights, SimilarityScore
 from ..playback.monitor import MonitorThresholds, Playback
 from ..playback.timing import plan_motion, PlayTiming
@@ -114,7 +115,8 @@ def play(sim, robot, gesture, arrival, options, limit=30.0):
     limits, lower, upper = _limits(robot)
     plan = plan_motion(names, sim.readings(), times, frames, limits, lower=lower,
                        upper=upper, timing=options.timing)
-    playback = Playback(plan, [names[:7], names[7:]], options.monitor)
+    playback = Playback(plan, [names[:7], names[7:]], options.monitor,
+                        functools.partial(pressed_joints, robot, names))
     steps = max(1, int(round(1.0 / (RATE * sim.timestep))))
     trace, t, outcome = [], 0.0, None
     held = plan.positions[0]

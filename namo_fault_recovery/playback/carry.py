@@ -61,7 +61,8 @@ def holds_still(frames, columns):
 class CarryOn:
     """Play one motion and carry on through stuck joints (see the module docstring)."""
 
-    def __init__(self, plan, groups, thresholds, planner, limits, wait, sample_period=0.05):
+    def __init__(self, plan, groups, thresholds, planner, limits, wait, sample_period=0.05,
+                 pressed=None):
         """
         Play ``plan`` (a PlannedMotion from the play's start pose; time 0 = the start).
 
@@ -72,15 +73,17 @@ class CarryOn:
         knowledge when the library arrives, not when the play began: a fault cleared
         meanwhile is no lock);
         ``limits`` is the :class:`~.blend.BlendLimits`; ``wait`` the longest wait for
-        the reconfigured library (s; 0: a fault ends the play).
+        the reconfigured library (s; 0: a fault ends the play); ``pressed`` the
+        :class:`~.monitor.StuckJointDetector`'s (joints a command drives into the body).
         """
+        self.pressed = pressed
         self.groups, self.thresholds = groups, thresholds
         self.planner, self.limits = planner, limits
         self.wait, self.sample_period = float(wait), sample_period
         self.base, self.base_time = plan, 0.0   # the gesture's timeline, at segment start
         self.segment_start = 0.0                # play time of the current motion's t = 0
         self.motion = plan                      # what the controllers play now
-        self.playback = Playback(plan, groups, thresholds)
+        self.playback = Playback(plan, groups, thresholds, pressed)
         self.holds = {}                         # joint -> held angle (rad)
         self.waiting_since = None               # play time of the fault being waited on
         self.candidate = None                   # (times, frames, label) to switch to
@@ -191,7 +194,7 @@ class CarryOn:
         tau = t - self.segment_start
         self.base_time, self.segment_start = self.phase(t), t
         self.motion = stop(self.motion, tau, self.limits, self.holds, self.sample_period)
-        self.playback = Playback(self.motion, self.groups, self.thresholds)
+        self.playback = Playback(self.motion, self.groups, self.thresholds, self.pressed)
         self.waiting_since, self.candidate = t, None
         self.target = self.back_at = None
         for joint, angle in new:
@@ -210,7 +213,7 @@ class CarryOn:
                                  self.sample_period)
         self.base, self.base_time, self.segment_start = target, t_target, t
         self.motion, self.target = motion, target
-        self.playback = Playback(motion, self.groups, self.thresholds)
+        self.playback = Playback(motion, self.groups, self.thresholds, self.pressed)
         self.waiting_since = None
         self._blend_unsent = True
         self.blend_duration = abs(duration)

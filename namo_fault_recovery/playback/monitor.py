@@ -43,6 +43,7 @@ FAULT_HOLD = 0.1
 TRACKING_LAG = 0.05
 TRACKING_DELAY = 0.005
 TRACKING_TIME_CONSTANT = 0.0
+PRESSED_STEP = 0.02       # s: the grid on which a command's body contact is checked
 WITNESS_FACTOR = 2.0      # a joint moved by this many thresholds can show its arm tracks
 
 
@@ -72,9 +73,14 @@ class StuckJointDetector:
     """Detect joints that do not follow their command, from measured samples."""
 
     def __init__(self, joint_names, groups, command, duration,
-                 thresholds=MonitorThresholds()):
+                 thresholds=MonitorThresholds(), pressed=None):
         """
         Watch ``joint_names`` (the columns of the measured samples).
+
+        ``pressed(poses)``, if given, returns (n, J) bool for commanded poses (n, J):
+        the joints whose arm the command itself drives into the body (e.g.
+        :func:`..model.self_contact.pressed_joints`); while it does, the body, not an
+        actuator, holds them, and they are not judged.
 
         ``groups`` lists the joint names of each controller; ``command(t)`` returns the
         commanded pose (J,) at time ``t`` or (n, J) at times (n,), for a motion of
@@ -98,6 +104,10 @@ class StuckJointDetector:
         self._moved_at = np.full(len(self.joint_names), math.inf)   # when first _moved
         self.model = TrackingModel(command, thresholds.tracking_delay,
                                    thresholds.tracking_time_constant, thresholds.tracking_lag)
+        self._pressed = None
+        if pressed is not None:
+            self._grid = np.arange(0.0, duration + PRESSED_STEP, PRESSED_STEP)
+            self._pressed = np.asarray(pressed(np.atleast_2d(command(self._grid))), bool)
         self._started = False
         self._off_since = {}
         self.reported = {}      # joint name -> (time, measured angle)
@@ -129,8 +139,9 @@ class StuckJointDetector:
             (np.sign(predicted) == np.sign(went))
         self._moved_at[self._moved & np.isinf(self._moved_at)] = t
         found = []
+        excused = self._pressed_now(t)
         for i, name in enumerate(self.joint_names):
-            if not off[i]:
+            if not off[i] or excused[i]:
                 self._off_since.pop(i, None)
                 continue
             # Off counts from when its controller is seen playing the motion: one that
@@ -151,6 +162,16 @@ class StuckJointDetector:
             self.reported[name] = (t, float(measured[i]))
             new.append((name, float(measured[i])))
         return new
+
+    def _pressed_now(self, t):
+        """Return (J,) bool: joints the command pressed into the body over the last hold."""
+        if self._pressed is None:
+            return np.zeros(len(self.joint_names), dtype=bool)
+        span = self.thresholds.fault_hold + self.thresholds.tracking_lag
+        near = (self._grid >= t - span - PRESSED_STEP) & (self._grid <= t + PRESSED_STEP)
+        if not near.any():
+            return self._pressed[-1] if t > self._grid[-1] else self._pressed[0]
+        return self._pressed[near].any(axis=0)
 
     def _taken_on(self, i):
         """Return when another joint of ``i``'s controller first followed (0: none moves)."""
@@ -178,12 +199,12 @@ class Outcome:
 class Playback:
     """One play of a planned motion: feed measured poses, get an Outcome once it ends."""
 
-    def __init__(self, plan, groups, thresholds=MonitorThresholds()):
+    def __init__(self, plan, groups, thresholds=MonitorThresholds(), pressed=None):
         """Watch ``plan`` (a PlannedMotion) whose joints are split into ``groups``."""
         self.plan = plan
         self.thresholds = thresholds
         self.detector = StuckJointDetector(plan.joint_names, groups, plan.command_at,
-                                           plan.duration, thresholds)
+                                           plan.duration, thresholds, pressed)
         self.outcome = None
         self.faults = []
 

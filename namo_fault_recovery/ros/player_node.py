@@ -49,6 +49,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from .messages import duration_msg, stamp_key, status_values, trajectory_angles
 from .spin import run_node
 from ..model.robot import load_robot
+from ..model.self_contact import pressed_joints
 from ..playback import monitor as detector
 from ..playback.blend import BlendLimits
 from ..playback.book import GestureTrack, parse_lock_angle, PlayerBook
@@ -350,7 +351,8 @@ class GesturePlayer(Node):
         session = CarryOn(plan, list(self._groups.values()), self._monitor, self._replan,
                           BlendLimits(self._limits[0],
                                       np.full(len(self._joints), self._waits['acceleration'])),
-                          self._waits['carry_on'], self._timing.sample_period)
+                          self._waits['carry_on'], self._timing.sample_period,
+                          functools.partial(pressed_joints, self._robot, self._joints))
         self._play = (gesture, session, time.monotonic(), future)
         self._send(plan)
         return await future
