@@ -63,6 +63,10 @@ TICK = 0.05
 # s: a library version that arrived this long before a fault reached the player may be
 # its answer (someone else's report can reach recovery_node first).
 EARLY_ANSWER = 0.25
+# s: a /joint_states stamp this far ahead of the ROS clock, or older than the horizon, is
+# not this machine's clock (reading_age).
+STAMP_SKEW = 0.05
+STAMP_HORIZON = 10.0
 
 
 # The stuck-joint detector's parameters: name -> (default, description).
@@ -128,19 +132,21 @@ def _declare(node):
     return robot, groups, timing, monitor, waits
 
 
-def reading_age(now, stamp, timeout):
+def reading_age(now, stamp):
     """
     Return how old (s) a reading stamped ``stamp`` is at ROS time ``now``.
 
-    A reading that waited in a queue (a busy executor handles a burst at once) is
-    judged where the arm was when it was read, not when it was handled: the band of the
-    detector is not stretched by the player's own delays.  A stamp that is not this
-    machine's clock (zero, in the future, older than ``timeout``) gives 0: fresh.
+    A reading that waited in a queue (a busy executor handles a burst at once), or that
+    a simulator running behind real time stamped in the past, is judged where the arm
+    was when it was read, on the timeline the commands are stamped on: the detector's
+    band is not stretched by anyone's delays.  A stamp that is not this machine's clock
+    (zero, further than :data:`STAMP_SKEW` in the future, or older than
+    :data:`STAMP_HORIZON`) gives 0: the reading is taken as fresh.
     """
     if not stamp.sec and not stamp.nanosec:
         return 0.0
     age = now - (stamp.sec + stamp.nanosec * 1e-9)
-    return age if 0.0 <= age <= timeout else 0.0
+    return max(age, 0.0) if -STAMP_SKEW <= age <= STAMP_HORIZON else 0.0
 
 
 def _joint_limits(robot, joints):
@@ -257,7 +263,7 @@ class GesturePlayer(Node):
         v = [self._speeds[j] for j in self._joints] if all(
             j in self._speeds for j in self._joints) else None
         taken = now - reading_age(self.get_clock().now().nanoseconds * 1e-9,
-                                  msg.header.stamp, self._waits['joint_states'])
+                                  msg.header.stamp)
         self._apply(self._play[1].update(taken - self._play[2], q, v))
 
     def _on_fault(self, msg):
