@@ -7,6 +7,7 @@ and calls the play services.
 alone); with the simulator, :class:`Recorder` alone watches ``namo_sim``.
 """
 
+import re
 import threading
 import time
 
@@ -29,6 +30,7 @@ ROBOT = load_robot()
 LIBRARY = load_library(ROBOT, config_path(DEMO_MOTION_FILE))
 NAMES = list(ROBOT.joint_names)
 CONTROLLERS = {'right_arm_controller': NAMES[:7], 'left_arm_controller': NAMES[7:]}
+TIMEOUT_DIAGNOSTICS = 10.0      # s for the node's diagnostics of a version
 
 
 def _seconds(d):
@@ -153,11 +155,38 @@ class Recorder:
     def newest_library(self):
         """Return {gesture: positions (keyframes, 14) in NAMES order} of the newest stamp."""
         library = self.client.newest_library()
-        if library is None:
-            return None
+        return None if library is None else self._positions(library)
+
+    @staticmethod
+    def _positions(library):
         order = [library.joint_names.index(j) for j in NAMES]
         return {g.name: np.array([[q[i] for i in order] for q in g.positions])
                 for g in library.result.gestures}
+
+    def carried_on_with(self, message):
+        """
+        Return (library, {gesture: positions}) of the version a play's answer carried on with.
+
+        The answer names it (``reconfigured library <stamp>``); ``library`` is the
+        PublishedLibrary (its scores once the node's diagnostics describe it).
+        """
+        found = re.search(r'reconfigured library (\d+)', message)
+        assert found, f'the answer names no library it carried on with: {message}'
+        library = self.client.inbox.library(int(found.group(1)), TIMEOUT_DIAGNOSTICS)
+        return library, self._positions(library)
+
+    def commanded_after_first(self, since, joint):
+        """
+        Positions commanded to ``joint`` after the first message to its controller.
+
+        In a play that carried on, the first message per controller is the original
+        motion, sent before the fault was known; every later one was sent after it.
+        """
+        controller = next(c for c, joints in CONTROLLERS.items() if joint in joints)
+        with self.lock:
+            msgs = [m for c, m in self.commands[since:] if c == controller]
+        k = CONTROLLERS[controller].index(joint)
+        return len(msgs), np.array([p.positions[k] for m in msgs[1:] for p in m.points])
 
     def commanded(self, since, joint):
         """All positions commanded to ``joint`` by the messages received after ``since``."""

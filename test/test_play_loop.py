@@ -2,11 +2,12 @@
 The whole loop over DDS: the real ``recovery_node`` and ``gesture_player`` processes.
 
 The arms are ``player_harness.FakeArms`` (kinematic controllers in the test process).
-A joint is stuck; playing wai detects it, reports it on /actuator_fault, the node
-reconfigures the library, and wai is played again: the stuck joint is never commanded
-away from its angle and the executed key pose scores as the library says it does.
-Three scenarios in sequence: a right-arm joint, a left-arm joint, two faults one after
-the other.
+A joint is stuck; playing wai detects it and reports it on /actuator_fault, the node
+reconfigures the library, and the same play carries on with the reconfigured wai: once
+the fault is known the stuck joint is never commanded away from its angle, and the
+executed key pose scores as the version it carried on with says.  wai is played again
+on the new library, the joint held at its lock.  Three scenarios in sequence: a
+right-arm joint, a left-arm joint, two faults one after the other.
 """
 
 import math
@@ -15,7 +16,7 @@ from namo_fault_recovery.objective.score import ScoreWeights, SimilarityScore
 from namo_fault_recovery.runtime.private_node import player_command
 from node_harness import NodeProcess, ros_env, session_domain, TIMEOUT
 import numpy as np
-from player_harness import FakeArms, LIBRARY, ROBOT
+from player_harness import FakeArms, LIBRARY, NAMES, ROBOT
 import pytest
 
 pytestmark = pytest.mark.slow
@@ -42,16 +43,31 @@ def loop(tmp_path_factory):
             assert 'Traceback' not in proc.stderr + proc.stdout, proc.describe()
 
 
+def _score(q):
+    return float(WAI(q[:7], q[7:])[0])
+
+
 def _stick_and_recover(arms, joint, angle, locked):
-    """Stick ``joint`` at ``angle``; play wai twice; check detection, lock and score."""
+    """Stick ``joint`` at ``angle``; play wai (it carries on), then again; check both."""
     with arms.lock:
         arms.stuck[joint] = angle
-    faults = len(arms.faults)
+    faults, before = len(arms.faults), len(arms.commands)
     response = arms.play('wai')
-    assert not response.success and joint in response.message, response.message
+    assert response.success and 'carried on' in response.message, response.message
+    assert joint in response.message, response.message
     report = arms.wait(lambda: arms.faults[faults:], 5.0, '/actuator_fault')[-1]
     assert list(report.name) == [joint]
     assert report.position[0] == pytest.approx(angle, abs=math.radians(0.5))
+    # the original motion, then the hold and the blend: the joint where it is held
+    count, held = arms.commanded_after_first(before, joint)
+    assert count == 3 and held.size > 10 and np.all(held == report.position[0]), held
+    library, version = arms.carried_on_with(response.message)
+    assert version['wai'][-1][NAMES.index(joint)] == report.position[0]
+    executed = _score(arms.settled())
+    assert executed == pytest.approx(_score(version['wai'][-1]), abs=SCORE_TOL)
+    if library.described:
+        assert _score(version['wai'][-1]) == pytest.approx(library.result['wai'].score_after,
+                                                           rel=1e-4)
     locked = dict(locked, **{joint: report.position[0]})
 
     arms.wait_locked_library('wai', locked, TIMEOUT)
@@ -70,7 +86,7 @@ def _stick_and_recover(arms, joint, angle, locked):
     return locked
 
 
-def test_stuck_joints_detected_reported_and_played_around(loop):
+def test_stuck_joints_detected_reported_carried_on_and_played_around(loop):
     arms = loop
     # a right-arm joint
     _stick_and_recover(arms, 'right_arm_joint2', math.radians(-20.0), {})

@@ -119,21 +119,23 @@ def simulate(p, stuck=None, lag=0.08, rate=100.0, extra=1.0, noise=0.0, seed=0):
 
 @pytest.mark.parametrize('name', [g.name for g in LIBRARY])
 def test_normal_tracking_lag_is_no_false_alarm(name):
+    """A controller's lag, measured and given to the monitor, is no fault, with noise."""
     p = plan(name)
     for lag in (0.0, 0.08, 0.2):
-        playback = Playback(p, GROUPS)
+        playback = Playback(p, GROUPS, MonitorThresholds(tracking_delay=lag))
         t, q = simulate(p, lag=lag, noise=math.radians(0.3))
         outcomes = [playback.update(ti, qi) for ti, qi in zip(t, q)]
         assert playback.faults == [], (name, lag, playback.faults)
         assert outcomes[-1] is not None and outcomes[-1].ok, outcomes[-1]
 
 
-def test_pure_lag_over_5_deg_is_tolerated_with_the_window():
+def test_pure_lag_over_5_deg_is_tolerated_with_the_model():
     p = plan('bye')
     t, q = simulate(p, lag=0.2)
     lagging = np.abs(q - p.command_at(t)).max()
     assert lagging > math.radians(5.0)   # a plain error threshold would fire
-    detector = StuckJointDetector(NAMES, GROUPS, p.command_at, p.duration)
+    detector = StuckJointDetector(NAMES, GROUPS, p.command_at, p.duration,
+                                  MonitorThresholds(tracking_delay=0.2))
     assert not any(detector.update(ti, qi) for ti, qi in zip(t, q))
 
 
@@ -142,7 +144,7 @@ def test_stuck_joint_detected_with_its_held_angle():
     start = np.zeros(14)
     start[NAMES.index('right_arm_joint2')] = held     # stuck where it was measured
     p = plan('wai', start=start)
-    playback = Playback(p, GROUPS)
+    playback = Playback(p, GROUPS, MonitorThresholds(tracking_delay=0.08))
     t, q = simulate(p, stuck={'right_arm_joint2': held})
     for ti, qi in zip(t, q):
         outcome = playback.update(ti, qi)
@@ -151,10 +153,10 @@ def test_stuck_joint_detected_with_its_held_angle():
     assert outcome is not None and not outcome.ok
     assert outcome.faults == (('right_arm_joint2', pytest.approx(held)),)
     assert 'right_arm_joint2' in outcome.reason
-    # detection = first time off by 5 deg (beyond the lag window) + the 0.3 s hold
+    # within 0.3 s of the command leaving the held angle by 2 deg
     cmd = p.command_at(t)[:, NAMES.index('right_arm_joint2')]
-    first_off = t[np.argmax(np.abs(cmd - held) > math.radians(5.0))]
-    assert 0.3 < first_off + 0.3 <= ti <= first_off + 0.3 + 0.3
+    first_off = t[np.argmax(np.abs(cmd - held) > math.radians(2.0))]
+    assert first_off < ti <= first_off + 0.3
 
 
 def test_stuck_locked_joint_at_its_lock_is_no_fault():
@@ -195,11 +197,66 @@ def test_detection_benchmark_on_the_physics():
     assert s['false_alarms'] == 0 and s['normal_finished'] == 1
     stuck = doc['stuck']['wai']
     assert stuck['left_arm_joint4']['detected'] and not stuck['left_arm_joint4']['wrong_joints']
-    # wai moves right_arm_joint2 by 5 deg only: below the threshold, it cannot be seen
+    # wai moves right_arm_joint2 by 5 deg only: more than the 2 deg threshold, so seen
     assert stuck['right_arm_joint2']['excursion_deg'] == pytest.approx(5.0)
-    assert not stuck['right_arm_joint2']['detected']
+    assert stuck['right_arm_joint2']['detected']
+    assert not stuck['right_arm_joint2']['wrong_joints']
     rec = doc['recovery']['wai']['left_arm_joint4']
     assert rec['replay_ok'] and rec['lock_commanded_elsewhere'] == 0
+
+
+def test_a_stuck_shoulder_is_reported_alone_when_the_torso_holds_its_neighbours():
+    """
+    Left joint 1 stuck at 10 deg from the end of a reconfigured wai: playing wai again.
+
+    The stuck shoulder brings the left forearm against the torso; the body holds the
+    healthy joints 2 and 3 a few degrees off (2 the wrong way, 3 short of its command).
+    Only the shoulder is a fault (found over DDS in test_play_sim.py: joints 1 and 2 were
+    both reported, or none, the play ending on the goal timeout).
+    """
+    pytest.importorskip('mujoco', reason='the simulator physics needs mujoco')
+    from namo_fault_recovery.benchmarks import detection_suite as suite
+    from namo_fault_recovery.sim.physics import designed_allowances, NamoSim
+    sim = NamoSim(ROBOT, allowances=designed_allowances(ROBOT, LIBRARY))
+    sim.set_positions(np.radians([51.8, -20.0, -71.1, 101.5, 2.2, -54.1, 25.3,
+                                  11.0, 3.3, -39.9, 90.1, -10.0, -45.0, 45.0]))
+    held = sim.stick('left_arm_joint1', math.radians(10.0))
+    outcome, plan_, trace = suite.play(sim, ROBOT, LIBRARY['wai'],
+                                       suite.Arrival([], np.random.default_rng(0)),
+                                       suite.SuiteOptions())
+    assert [f for f, _ in outcome.faults] == ['left_arm_joint1'], outcome
+    assert outcome.faults[0][1] == pytest.approx(held, abs=math.radians(0.5))
+    _, _, commanded, reading = trace[-1]
+    pushed = np.degrees(np.abs(reading - commanded))[[NAMES.index('left_arm_joint2'),
+                                                      NAMES.index('left_arm_joint3')]]
+    assert np.all(pushed > 2.0), pushed        # the neighbours were off as well
+
+
+def test_joints_the_command_presses_into_the_torso_are_not_judged():
+    """A command into the body holds the arm off it: the body, not an actuator."""
+    from namo_fault_recovery.model.self_contact import pressed_joints
+    # the left forearm 8.8 mm into the torso (a blend path over DDS, test_play_sim.py),
+    # then the same arm 0.25 mm (within the 1 mm tolerance)
+    poses = np.radians([[0.0] * 7 + [10.17, 4.69, -41.67, 92.5, -12.82, -40.74, 43.31],
+                        [0.0] * 7 + [10.04, 1.87, -41.01, 91.7, -12.65, -41.05, 43.45]])
+    pressed = pressed_joints(ROBOT, NAMES, poses)
+    assert pressed[0, 7:].all() and not pressed[0, :7].any()
+    assert not pressed[1].any()
+    assert pressed_joints(ROBOT, NAMES[7:], poses[:, 7:])[0].all()      # the left arm alone
+    assert not pressed_joints(ROBOT, NAMES[7:13], poses[:, 7:13]).any()   # not all of it
+    p = plan('bye')
+    t, q = simulate(p, stuck={'right_arm_joint4': 0.0}, extra=3.0)
+    right = np.array([n.startswith('right') for n in NAMES])
+
+    def first(playback):
+        return next((o for o in (playback.update(ti, qi) for ti, qi in zip(t, q))
+                     if o is not None), None)
+    judged = first(Playback(p, GROUPS, MonitorThresholds(tracking_delay=0.08)))
+    assert [f for f, _ in judged.faults] == ['right_arm_joint4']
+    excused = first(Playback(p, GROUPS, MonitorThresholds(tracking_delay=0.08),
+                             lambda poses: np.tile(right, (len(poses), 1))))
+    assert excused is not None and not excused.faults, excused      # the goal timeout
+    assert excused.reason.startswith('timeout'), excused
 
 
 def test_play_figure_draws_the_joints_that_moved(tmp_path):

@@ -18,6 +18,10 @@ returns a plain dict (written as JSON) and prints its figures:
 - :mod:`.lock_compare`: ``average`` against ``optimal`` lock angles, every single fault;
 - :mod:`.detection`: stuck-joint detection and recovery on the simulator's physics
   (``bench detection``);
+- :mod:`.detection_suite`: the detector over every gesture of both libraries, idle and
+  busy: latency, false alarms, score gap, playability (``bench detection-suite``);
+- :mod:`.carry_on`: a joint stuck mid-gesture, the time until the arm is back on the
+  reconfigured trajectory, on the simulator's physics (``bench carry-on``);
 - :mod:`.product`: the served problem (packaged library, node settings): best-known
   optima, quality at the deadline, the contingency table, free of ROS;
 - :mod:`.product_node`: ``bench product`` whole: those parts, and the latency and

@@ -15,8 +15,8 @@ The commands parse their options and call the package: the benchmarks in
   running node;
 - :mod:`.demo`: ``demo``, a private node driven end to end;
 - :mod:`.export`: ``export --format play_motion2`` (from the running node or a solve);
-- :mod:`.player_commands`: ``play``, ``demo-play`` and ``bench detection``, around
-  ``gesture_player``;
+- :mod:`.player_commands`: ``play``, ``demo-play``, ``bench detection`` and ``bench
+  carry-on``, around ``gesture_player``;
 - :mod:`.urdf`: ``urdf``, Namo's URDF from the robot file;
 - :mod:`.retarget_command`: ``retarget``, a gesture library moved to another robot's
   profile;

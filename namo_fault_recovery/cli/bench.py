@@ -161,6 +161,79 @@ def cmd_bench_playability(args, out):
     return 0
 
 
+def monitor_of(args):
+    """Return the MonitorThresholds of a command's detector options (None: the defaults)."""
+    from ..playback.monitor import MonitorThresholds
+    values = {'fault_threshold': None if args.threshold_deg is None
+              else math.radians(args.threshold_deg),
+              'fault_hold': args.hold_sec, 'tracking_lag': args.lag_sec,
+              'tracking_delay': args.delay_sec, 'tracking_time_constant': args.tau_sec}
+    values = {k: v for k, v in values.items() if v is not None}
+    try:
+        return MonitorThresholds(**values)
+    except ValueError as exc:
+        raise _usage(str(exc)) from None
+
+
+def cmd_bench_detection_suite(args, out):
+    """Run the detector over both libraries, idle and busy; print the figures."""
+    import json
+    from ..benchmarks import common, detection_suite as suite
+    from ..model.robot import load_robot
+    _positive_int('--reps', args.reps, 0)
+    _positive_int('--stuck-reps', args.stuck_reps, 0)
+    if not (math.isfinite(args.noise_deg) and args.noise_deg >= 0):
+        raise _usage(f'--noise-deg: expected a number >= 0, got {args.noise_deg}')
+    if not (math.isfinite(args.lateness_sec) and args.lateness_sec >= 0):
+        raise _usage(f'--lateness-sec: expected seconds >= 0, got {args.lateness_sec}')
+    robot = load_robot(args.robot_file)
+    libraries = suite.load_libraries(robot, args.library, args.gesture_file)
+    options = suite.SuiteOptions(reps=args.reps, stuck_reps=args.stuck_reps,
+                                 noise_deg=args.noise_deg,
+                                 start_spread_deg=args.start_spread_deg, seed=args.seed,
+                                 monitor=monitor_of(args))
+    lateness = _lateness_of(args, suite)
+    doc = suite.run_suite(robot, libraries, args.condition, options, lateness,
+                          progress=None if args.quiet else (lambda s: sys.stderr.write(s + '\n')))
+    out_dir = out_dir_of(args, 'detection_suite')
+    common.write_json(out_dir / 'suite.json', doc)
+    if args.json:
+        out.write(json.dumps(common.plain(doc), indent=1) + '\n')
+    else:
+        suite.write_summary(out, doc)
+    out.write(f'written: {out_dir / "suite.json"}\n')
+    return 0
+
+
+def _lateness_of(args, suite):
+    """Return {condition: lateness}: measured now, or read from ``--lateness-from``."""
+    import json
+    if not args.lateness_from:
+        return {c: suite.measure_lateness(c, args.lateness_sec, args.domain_id)
+                if args.lateness_sec else [] for c in args.condition}
+    try:
+        doc = json.loads(Path(args.lateness_from).read_text())
+        return {c: [float(v) for v in doc['conditions'][c]['lateness_s']]
+                for c in args.condition}
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise _usage(f'--lateness-from {args.lateness_from}: expected a suite.json of '
+                     f'bench detection-suite with conditions {args.condition} '
+                     f'({type(exc).__name__}: {exc})') from None
+
+
+def add_detector_options(p):
+    """Add the detector's threshold options (default: the player's defaults)."""
+    p.add_argument('--threshold-deg', type=float, default=None,
+                   help='fault threshold off the predicted angle (deg)')
+    p.add_argument('--hold-sec', type=float, default=None, help='fault hold (s)')
+    p.add_argument('--lag-sec', type=float, default=None,
+                   help='band of the prediction a reading may lag behind (s)')
+    p.add_argument('--delay-sec', type=float, default=None,
+                   help="the tracking model's delay (s)")
+    p.add_argument('--tau-sec', type=float, default=None,
+                   help="the tracking model's first-order time constant (s)")
+
+
 def cmd_plot(args, out):
     """
     Draw one gesture before and after adaptation (matplotlib optional).
@@ -363,6 +436,40 @@ def _add_explore(bench_sub):
     p.set_defaults(func=cmd_bench_explore)
 
 
+def _add_detection_suite(bench_sub):
+    """Add ``bench detection-suite``: the detector over both libraries, idle and busy."""
+    from ..benchmarks.detection_suite import LIBRARIES
+    p = bench_sub.add_parser('detection-suite', help='stuck-joint detection: latency, false '
+                             'alarms, score gap and playability over both libraries, idle '
+                             'and busy (MuJoCo in lock-step, lateness measured over DDS)')
+    p.add_argument('--library', nargs='+', default=list(LIBRARIES), choices=list(LIBRARIES),
+                   help='libraries (default: both)')
+    p.add_argument('--condition', nargs='+', default=['idle', 'busy'],
+                   choices=['idle', 'busy'], help='conditions (default: both)')
+    p.add_argument('--reps', type=int, default=100,
+                   help='normal plays per gesture (default 100)')
+    p.add_argument('--stuck-reps', type=int, default=1,
+                   help='plays per stuck joint and gesture (default 1)')
+    p.add_argument('--noise-deg', type=float, default=0.1,
+                   help='reading noise, standard deviation in deg (default 0.1)')
+    p.add_argument('--start-spread-deg', type=float, default=1.0,
+                   help='uniform spread of the start pose around rest (deg, default 1)')
+    p.add_argument('--lateness-sec', type=float, default=20.0,
+                   help='seconds of reading lateness measured over DDS per condition '
+                        '(default 20; 0: every reading on time)')
+    p.add_argument('--lateness-from', default=None, metavar='SUITE_JSON',
+                   help="replay the lateness measured by an earlier run's suite.json "
+                        '(e.g. one with --reps 0 --stuck-reps 0 run under a lock) '
+                        'instead of measuring it')
+    p.add_argument('--domain-id', type=int, default=None,
+                   help='ROS domain id of the lateness probe (default $ROS_DOMAIN_ID)')
+    p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--json', action='store_true', help='print the whole JSON document')
+    add_detector_options(p)
+    _add_common(p)
+    p.set_defaults(func=cmd_bench_detection_suite)
+
+
 def _add_plot(subparsers):
     """Add ``plot``: one gesture before and after adaptation."""
     p = subparsers.add_parser('plot', help='draw a gesture before and after adaptation (PNG)')
@@ -398,7 +505,7 @@ def register(subparsers):
                                      parser_class=Parser)
     bench_sub.required = True
     for add in (_add_paper, _add_optimum, _add_speed, _add_deadline, _add_playability,
-                _add_explore):
+                _add_explore, _add_detection_suite):
         add(bench_sub)
     _add_plot(subparsers)
     return bench_sub

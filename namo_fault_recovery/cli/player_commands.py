@@ -4,8 +4,9 @@
 ``play`` and ``demo-play`` talk to the nodes through
 :class:`~namo_fault_recovery.ros.player_client.PlayerClient` and
 :class:`~namo_fault_recovery.ros.client.RecoveryClient`, imported only when they run,
-so the rest of the command line works without ROS; ``bench detection`` runs
-:mod:`namo_fault_recovery.benchmarks.detection`.
+so the rest of the command line works without ROS; ``bench detection`` and ``bench
+carry-on`` run :mod:`namo_fault_recovery.benchmarks.detection` and
+:mod:`namo_fault_recovery.benchmarks.carry_on`.
 """
 
 import json
@@ -17,6 +18,7 @@ import time
 
 import numpy as np
 
+from .bench import add_detector_options, monitor_of
 from .common import UsageError
 from ..runtime.private_node import node_command, player_command, read_log, start_logged
 from ..runtime.private_node import stop_process
@@ -41,14 +43,14 @@ def _common(parser, timeout):
 
 
 def register(subparsers, bench_subparsers):
-    """Add ``play`` and ``demo-play`` to the subcommands, ``detection`` to the benchmarks."""
+    """Add ``play`` and ``demo-play``, and the ``detection`` and ``carry-on`` benchmarks."""
     p = subparsers.add_parser('play', help='play a gesture on the running gesture_player')
     p.add_argument('gesture', help='gesture name, e.g. wai')
     _common(p, 60.0)
     p.set_defaults(func=cmd_play)
 
     p = subparsers.add_parser('demo-play', help='the whole loop with the simulator: stick a '
-                              'joint, play, detect, reconfigure, play again')
+                              'joint, play, detect, reconfigure, carry on, play again')
     p.add_argument('--gesture', default='wai', help='gesture to play (default wai)')
     p.add_argument('--stuck', action='append', metavar='JOINT:DEG',
                    help='joint stuck in the simulator (repeatable; default '
@@ -68,12 +70,27 @@ def register(subparsers, bench_subparsers):
     p.add_argument('--recover', action='append', metavar='G',
                    help='gestures whose detected faults are recovered and replayed '
                         '(repeatable; default: wai)')
-    p.add_argument('--threshold-deg', type=float, default=5.0)
-    p.add_argument('--hold-sec', type=float, default=0.3)
-    p.add_argument('--lag-sec', type=float, default=0.25)
+    add_detector_options(p)
     p.add_argument('--seed', type=int, default=0)
     p.add_argument('--json', action='store_true', help='print one JSON document')
     p.set_defaults(func=bench_detection)
+
+    p = bench_subparsers.add_parser(
+        'carry-on', help='a joint sticks mid-gesture: the time until the arm is back on the '
+                         'reconfigured trajectory (simulator, MuJoCo, in process)')
+    p.add_argument('--gesture', action='append', metavar='G',
+                   help='only this gesture (repeatable; default: all)')
+    p.add_argument('--joint', action='append', metavar='JOINT',
+                   help='only stick this joint (repeatable; default: all 14)')
+    p.add_argument('--busy', action='store_true',
+                   help='a second pass with a CPU burner on the other core')
+    p.add_argument('--acceleration-deg', type=float, default=600.0, metavar='DEG_S2',
+                   help="blend acceleration limit (the player's acceleration_limit_deg)")
+    p.add_argument('--deadline', type=float, default=1.0, metavar='SEC',
+                   help="the engine's deadline (recovery_node's deadline_sec)")
+    p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--json', action='store_true', help='print one JSON document')
+    p.set_defaults(func=bench_carry_on)
 
 
 def bench_detection(args, out):
@@ -81,7 +98,6 @@ def bench_detection(args, out):
     from ..benchmarks import detection
     from ..model.gestures import load_library
     from ..model.robot import load_robot
-    from ..playback.monitor import MonitorThresholds
     robot = load_robot(args.robot_file)
     library = load_library(robot, args.gesture_file)
     for name in (args.gesture or []) + (args.recover or []):
@@ -91,8 +107,7 @@ def bench_detection(args, out):
     for joint in args.joint or []:
         if joint not in robot.joint_names:
             raise UsageError(f'--joint: unknown joint {joint!r}')
-    monitor = MonitorThresholds(fault_threshold=math.radians(args.threshold_deg),
-                                fault_hold=args.hold_sec, tracking_lag=args.lag_sec)
+    monitor = monitor_of(args)
     doc = detection.run_on_sim(robot, library, gestures=args.gesture, joints=args.joint,
                                recover_gestures=args.recover or ('wai',), seed=args.seed,
                                monitor=monitor,
@@ -101,6 +116,37 @@ def bench_detection(args, out):
         out.write(json.dumps(doc, indent=2) + '\n')
     else:
         detection.write_summary(out, doc)
+    return 0
+
+
+def bench_carry_on(args, out):
+    """Run the carry-on benchmark on the simulator's physics; print the figures."""
+    from ..benchmarks import carry_on
+    from ..model.gestures import load_library
+    from ..model.robot import load_robot
+    robot = load_robot(args.robot_file)
+    library = load_library(robot, args.gesture_file)
+    for name in args.gesture or []:
+        if name not in library.names:
+            raise UsageError(f'--gesture: unknown gesture {name!r}; expected one of '
+                             f'{", ".join(library.names)}')
+    for joint in args.joint or []:
+        if joint not in robot.joint_names:
+            raise UsageError(f'--joint: unknown joint {joint!r}')
+    for option, value in (('--acceleration-deg', args.acceleration_deg),
+                          ('--deadline', args.deadline)):
+        if not (math.isfinite(value) and value > 0):
+            raise UsageError(f'{option}: expected a number > 0, got {value}')
+    progress = None if args.json else (lambda s: out.write(s + '\n'))
+    docs = [carry_on.run_on_sim(robot, library, args.gesture, args.joint, busy, args.deadline,
+                                args.seed, progress,
+                                acceleration=math.radians(args.acceleration_deg))
+            for busy in ((False, True) if args.busy else (False,))]
+    for doc in docs:
+        if not args.json:
+            carry_on.write_summary(out, doc)
+    if args.json:
+        out.write(json.dumps(docs if args.busy else docs[0], indent=2) + '\n')
     return 0
 
 
@@ -237,7 +283,7 @@ def _first_play(args, out, loop, stuck):
         f'{math.degrees(measured.get(j, float("nan"))):.1f} deg)'
         for j, a in stuck.items()) + '\n')
     ok1, since1 = _play_step(loop, gesture, timeout, '4. play:', out)
-    time.sleep(0.5)      # the hold after a failed play, and the arm coming to rest
+    time.sleep(0.5)      # the arm coming to rest
     trace1 = loop.player.play_trace(since1)
     with loop.player.lock:
         faults = list(loop.player.faults)

@@ -127,6 +127,36 @@ def penetrations(robot, q14):
     return np.maximum(radius_sums(robot.capsules)[None, :] - d, 0.0)
 
 
+def pressed_joints(robot, joint_names, q, tolerance_mm=TOLERANCE_MM):
+    """
+    Return (n, J) bool: the joints of an arm that poses ``q`` (n, J) press into the torso.
+
+    ``q`` is in ``joint_names`` order; an arm goes into the torso when one of its
+    segments is deeper than ``tolerance_mm``.  The torso is never designed contact.
+    Joints of an arm that ``joint_names`` do not cover whole are never pressed (the
+    pose of that arm is not known).
+    """
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    names = list(joint_names)
+    out = np.zeros(q.shape, dtype=bool)
+    q14 = np.zeros((len(q), 2 * len(robot.arms['right'].joint_names)))
+    whole = {}
+    for k, side in enumerate(('right', 'left')):
+        arm = list(robot.arms[side].joint_names)
+        whole[side] = all(j in names for j in arm)
+        if whole[side]:
+            q14[:, k * len(arm):(k + 1) * len(arm)] = q[:, [names.index(j) for j in arm]]
+    if not any(whole.values()):
+        return out
+    pen = penetrations(robot, q14)
+    for k, side in enumerate(('right', 'left')):
+        if whole[side]:
+            deep = pen[:, 3 * k:3 * k + 3].max(axis=1) > tolerance_mm   # PAIRS: arm-torso
+            for j in robot.arms[side].joint_names:
+                out[:, names.index(j)] = deep
+    return out
+
+
 class ReferenceContact(NamedTuple):
     """The deepest undesigned contact of one gesture's reference keyframes."""
 

@@ -4,9 +4,10 @@ What the gesture player knows between plays (no ROS): library versions and locks
 Library versions arrive one gesture at a time; a version is the set of gestures that
 share a header stamp, and the newest stamp is the current one.  Lock angles come from
 two sources: ``recovery_node``'s diagnostics (the failed joints and their lock angles)
-and the player's own fault reports, kept until the node's diagnostics list that joint
-(then the node's lock angle is authoritative; when it no longer lists it, the fault was
-cleared).
+and the faults the player held in a play (its own reports, and those others published
+mid-play, at the angle they were measured), kept until the node's diagnostics list that
+joint (then the node's lock angle is authoritative; when it no longer lists it, the
+fault was cleared).
 """
 
 from dataclasses import dataclass

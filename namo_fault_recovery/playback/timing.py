@@ -89,6 +89,15 @@ class PlannedMotion:
             qd[..., j] = 0.0
         return qd
 
+    def acceleration_at(self, t):
+        """Return the commanded acceleration at time(s) ``t`` (rad/s^2; 0 outside, locked)."""
+        t = np.asarray(t, dtype=float)
+        qdd = self._spline.derivative(2)(np.clip(t, 0.0, self.duration))
+        qdd[(t < 0.0) | (t >= self.duration)] = 0.0     # held before and after
+        for j, _ in self._lock_columns():
+            qdd[..., j] = 0.0
+        return qdd
+
     def _lock_columns(self):
         return [(self.joint_names.index(n), a) for n, a in self.locks.items()
                 if n in self.joint_names]
@@ -179,15 +188,34 @@ def plan_motion(joint_names, start, keyframe_times, keyframes, velocity_limits,
 
     nominal = times[-1]
     times, spline = _stretch(times, points, limits)
-    grid = np.arange(0.0, times[-1], timing.sample_period)[1:]
-    sample_t = np.union1d(grid, times)
+    return sampled_motion(names, spline, times, timing.sample_period,
+                          float(times[-1] / nominal), locks, points)
+
+
+def sampled_motion(joint_names, spline, knots, sample_period, stretch=1.0, locks=None,
+                   waypoints=None):
+    """
+    Return the PlannedMotion of a C1 piecewise-cubic ``spline`` with waypoints ``knots``.
+
+    The controllers get a point every ``sample_period`` and at every knot, so that one
+    interpolating cubic Hermite splines between the points reproduces ``spline`` exactly
+    (each piece of a cubic spline is the cubic of its two ends' values and slopes).
+    ``locks`` columns are commanded at their angle at every point, still.
+    ``waypoints`` are the poses at the knots (default: the spline's).
+    """
+    names = tuple(joint_names)
+    knots = np.asarray(knots, dtype=float)
+    locks = {j: float(a) for j, a in (locks or {}).items() if j in names}
+    grid = np.arange(knots[0], knots[-1], sample_period)[1:]
+    sample_t = np.union1d(grid, knots)
     sample_t = sample_t[np.concatenate([[True], np.diff(sample_t) > 1e-6])]
-    sample_t[-1] = times[-1]
+    sample_t[-1] = knots[-1]
     positions = spline(sample_t)
     velocities = spline.derivative()(sample_t)
     velocities[-1] = 0.0
     for joint, angle in locks.items():
         positions[:, names.index(joint)] = angle
         velocities[:, names.index(joint)] = 0.0
-    return PlannedMotion(names, sample_t, positions, velocities, times, points,
-                         float(times[-1] / nominal), dict(locks), spline)
+    waypoints = spline(knots) if waypoints is None else np.asarray(waypoints, dtype=float)
+    return PlannedMotion(names, sample_t, positions, velocities, knots, waypoints,
+                         float(stretch), locks, spline)

@@ -4,7 +4,9 @@ A ``/joint_states`` stream, as a robot's drivers publish it, for the node benchm
 :class:`JointStateStream` publishes from a thread of the caller's node (the stress
 tests); :class:`StreamProcess` runs :func:`stream_main` as a child process, so that the
 stream never shares the measuring client's interpreter (``bench stream``, ``bench
-latency --joint-states-hz``).
+latency --joint-states-hz``).  :func:`reading_lateness` receives such a stream as the
+gesture player does and measures how late each reading arrives (``bench
+detection-suite``).
 """
 
 import argparse
@@ -16,7 +18,7 @@ import sys
 import threading
 import time
 
-from .spun_node import SpunNode
+from .spun_node import SpunNode, wait_until
 
 
 def reference_pose(robot=None, library=None):
@@ -159,6 +161,48 @@ class StreamProcess:
             self.proc.kill()
             self.proc.wait()
         return self.report
+
+
+def reading_lateness(seconds, domain_id=None, rate=100.0):
+    """
+    Return how late (s) each reading of a ``rate`` Hz stream reaches a subscriber.
+
+    A :class:`StreamProcess` publishes, a :class:`SpunNode` in this process subscribes
+    as ``gesture_player`` does (best effort, depth 10, one executor thread).  Lateness
+    is the receipt time (ROS clock) minus the time the reading was due: the stream is
+    sent on absolute times, so reading ``k`` was due at ``first + k / rate``, where
+    ``first`` is the earliest that fits every stamp (a late sender counts as late).
+    In arrival order; the first second (discovery) is left out.
+    """
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+    received = []
+    lock = threading.Lock()
+    spun = SpunNode(f'namo_reading_lateness_{os.getpid()}', domain_id)
+
+    def on_state(msg):
+        now = spun.node.get_clock().now().nanoseconds * 1e-9
+        with lock:
+            received.append((msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9, now))
+    spun.node.create_subscription(JointState, '/joint_states', on_state, QoSProfile(
+        depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+    spun.start()
+    stream = StreamProcess(rate, domain_id)
+    try:
+        wait_until(lambda: len(received) > rate, 30.0, 0.05, lock)
+        time.sleep(seconds)
+    finally:
+        stream.close()
+        spun.close()
+    with lock:
+        pairs = received[int(rate):]
+    if not pairs:
+        return []
+    stamps = [s for s, _ in pairs]
+    period = 1.0 / rate
+    index = [round((s - stamps[0]) / period) for s in stamps]
+    first = min(s - k * period for s, k in zip(stamps, index))
+    return [r - (first + k * period) for (_, r), k in zip(pairs, index)]
 
 
 if __name__ == '__main__':

@@ -6,14 +6,24 @@ offers one ``std_srvs/Trigger`` service per gesture, ``~/play/<gesture>``, answe
 the motion has finished or failed (with the reason) from an ``async`` callback, so no
 executor thread waits.  A play sends each controller (parameter ``controllers``) one
 ``trajectory_msgs/JointTrajectory`` on ``<controller>/joint_trajectory``: its joints
-only, zero stamp (start now), positions and velocities of a smooth speed-limited
+only, stamped with the motion's time 0 on the play's timeline (a late controller joins
+it where the play is), positions and velocities of a smooth speed-limited
 trajectory that approaches from the measured ``/joint_states``
 (:mod:`..playback.timing`).  A locked joint (from ``recovery_node``'s ``/diagnostics``
 and from the player's own fault reports) is commanded at its lock angle at every point.
 A joint that stays off its command while the others track is reported on
-``/actuator_fault`` with its measured angle, and the play fails with that reason
-(:mod:`..playback.monitor`); ``recovery_node`` then reconfigures the library, and the
-next play waits (``library_wait_sec``) for that new version.
+``/actuator_fault`` with its measured angle (:mod:`..playback.monitor`), and the play
+carries on (:mod:`..playback.carry`): the stuck joint is commanded where it is from
+then on, the others stop; ``recovery_node`` reconfigures the library,
+and the first version that holds the joint there (waited for at most
+``carry_on_wait_sec``) is blended onto at the current phase, from the measured pose and
+velocity, within the speed limits and ``acceleration_limit_deg``; the play ends with the
+reconfigured gesture and its answer says it carried on.  A fault anyone else publishes
+on ``/actuator_fault`` mid-play is carried on through the same way (the joint held at
+its measured angle).  Without that library in time (or with ``carry_on_wait_sec`` 0)
+the play fails with the fault, and the next play waits (``library_wait_sec``) for the
+new version.  The callbacks never wait: the play's ``async`` service callback awaits a
+future that the joint-state, library, fault and timer callbacks complete.
 """
 
 import functools
@@ -24,7 +34,9 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.duration import Duration
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -38,13 +50,44 @@ from .messages import duration_msg, stamp_key, status_values, trajectory_angles
 from .spin import run_node
 from .structure_watch import StructureWatch
 from ..model.robot import load_robot
+from ..model.self_contact import pressed_joints
+from ..playback import monitor as detector
+from ..playback.blend import BlendLimits
 from ..playback.book import GestureTrack, parse_lock_angle, PlayerBook
-from ..playback.monitor import MonitorThresholds, Outcome, Playback
+from ..playback.carry import CarryOn
+from ..playback.monitor import MonitorThresholds, Outcome
 from ..playback.timing import plan_motion, PlayTiming
 
 NODE_NAME = 'gesture_player'
 RECOVERY_PREFIX = 'recovery_node: '
 TICK = 0.05
+# s: a library version that arrived this long before a fault reached the player may be
+# its answer (someone else's report can reach recovery_node first).
+EARLY_ANSWER = 0.25
+# s: a /joint_states stamp this far ahead of the ROS clock, or older than the horizon, is
+# not this machine's clock (reading_age).
+STAMP_SKEW = 0.05
+STAMP_HORIZON = 10.0
+
+
+# The stuck-joint detector's parameters: name -> (default, description).
+DETECTOR_PARAMETERS = {
+    'fault_threshold_deg': (detector.FAULT_THRESHOLD_DEG, 'deg off the band of its '
+                            'predicted angle that make a joint off'),
+    'fault_hold_sec': (detector.FAULT_HOLD, 's a joint stays off before it is stuck'),
+    'tracking_lag_sec': (detector.TRACKING_LAG, 's of predicted angles in the band (a '
+                         'reading may be this late)'),
+    'tracking_delay_sec': (detector.TRACKING_DELAY, "s: the controllers' tracking delay, "
+                           'measured (bench detection-suite fits it)'),
+    'tracking_time_constant_sec': (detector.TRACKING_TIME_CONSTANT, "s: the controllers' "
+                                   'first-order tracking lag, measured'),
+}
+
+
+def _detector(node, name):
+    default, text = DETECTOR_PARAMETERS[name]
+    return node.declare_parameter(name, float(default), ParameterDescriptor(
+        description=text, type=ParameterType.PARAMETER_DOUBLE, read_only=True)).value
 
 
 def _declare(node):
@@ -68,16 +111,53 @@ def _declare(node):
         approach_min_duration=node.declare_parameter('approach_min_duration', 0.0).value,
         sample_period=node.declare_parameter('sample_period', 0.05).value)
     monitor = MonitorThresholds(
-        fault_threshold=math.radians(node.declare_parameter('fault_threshold_deg', 5.0).value),
-        fault_hold=node.declare_parameter('fault_hold_sec', 0.3).value,
-        tracking_lag=node.declare_parameter('tracking_lag_sec', 0.25).value,
+        fault_threshold=math.radians(_detector(node, 'fault_threshold_deg')),
+        fault_hold=_detector(node, 'fault_hold_sec'),
+        tracking_lag=_detector(node, 'tracking_lag_sec'),
+        tracking_delay=_detector(node, 'tracking_delay_sec'),
+        tracking_time_constant=_detector(node, 'tracking_time_constant_sec'),
         goal_tolerance=math.radians(node.declare_parameter('goal_tolerance_deg', 2.0).value),
         goal_time=node.declare_parameter('goal_time_sec', 2.0).value)
     waits = {'library': node.declare_parameter('library_wait_sec', 10.0).value,
+             'carry_on': node.declare_parameter('carry_on_wait_sec', 3.0).value,
+             'acceleration': math.radians(
+                 node.declare_parameter('acceleration_limit_deg', 600.0).value),
              'joint_states': node.declare_parameter('joint_states_timeout_sec', 1.0).value,
              'first_states': node.declare_parameter('joint_states_wait_sec', 5.0).value,
              'report_faults': node.declare_parameter('report_faults', True).value}
+    if not waits['carry_on'] >= 0:
+        raise ValueError(f'carry_on_wait_sec must be >= 0, got {waits["carry_on"]}')
+    if not waits['acceleration'] > 0:
+        raise ValueError('acceleration_limit_deg must be > 0, got '
+                         f'{math.degrees(waits["acceleration"])}')
     return robot, groups, timing, monitor, waits
+
+
+def reading_age(now, stamp):
+    """
+    Return how old (s) a reading stamped ``stamp`` is at ROS time ``now``.
+
+    A reading that waited in a queue (a busy executor handles a burst at once), or that
+    a simulator running behind real time stamped in the past, is judged where the arm
+    was when it was read, on the timeline the commands are stamped on: the detector's
+    band is not stretched by anyone's delays.  A stamp that is not this machine's clock
+    (zero, further than :data:`STAMP_SKEW` in the future, or older than
+    :data:`STAMP_HORIZON`) gives 0: the reading is taken as fresh.
+    """
+    if not stamp.sec and not stamp.nanosec:
+        return 0.0
+    age = now - (stamp.sec + stamp.nanosec * 1e-9)
+    return max(age, 0.0) if -STAMP_SKEW <= age <= STAMP_HORIZON else 0.0
+
+
+def _joint_limits(robot, joints):
+    """Return (velocity limits, lower, upper) of ``joints`` (rad/s, rad), in that order."""
+    arms = {j: (side, i) for side in ('right', 'left')
+            for i, j in enumerate(robot.arms[side].joint_names)}
+    limits = [robot.velocity_limits[arms[j][1]] for j in joints]
+    lower = [robot.arms[arms[j][0]].lower[arms[j][1]] for j in joints]
+    upper = [robot.arms[arms[j][0]].upper[arms[j][1]] for j in joints]
+    return np.array(limits), np.array(lower), np.array(upper)
 
 
 class GesturePlayer(Node):
@@ -89,10 +169,12 @@ class GesturePlayer(Node):
         (self._robot, self._groups, self._timing, self._monitor,
          self._waits) = _declare(self)
         self._joints = [j for group in self._groups.values() for j in group]
+        self._limits = _joint_limits(self._robot, self._joints)
         self._book = PlayerBook()
         self._measured = {}           # joint -> angle
+        self._speeds = {}             # joint -> velocity, when /joint_states has them
         self._measured_at = None
-        self._play = None             # (gesture, Playback, start time, future)
+        self._play = None             # (gesture, CarryOn, start time, future)
         self._waiters = []            # (deadline, future): woken by inputs or the deadline
         self._waiter_lock = threading.Lock()
         self._play_services = {}
@@ -109,7 +191,10 @@ class GesturePlayer(Node):
                                  QoSProfile(depth=10,
                                             reliability=ReliabilityPolicy.BEST_EFFORT),
                                  callback_group=inputs)
-        self._fault_pub = self.create_publisher(JointState, '/actuator_fault', 100)
+        reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        self.create_subscription(JointState, '/actuator_fault', self._on_fault, reliable,
+                                 callback_group=inputs)
+        self._fault_pub = self.create_publisher(JointState, '/actuator_fault', reliable)
         self._command_pubs = {c: self.create_publisher(JointTrajectory,
                                                        f'{c}/joint_trajectory', 10)
                               for c in self._groups}
@@ -130,6 +215,7 @@ class GesturePlayer(Node):
         if not track.name or not len(times):
             return
         self._book.add_gesture(track, time.monotonic())
+        self._offer(track)
         if track.name not in self._play_services:
             self._play_services[track.name] = self.create_service(
                 Trigger, f'~/play/{track.name}',
@@ -137,6 +223,19 @@ class GesturePlayer(Node):
                 callback_group=self._service_group)
             self.get_logger().info(f'gesture {track.name!r}: ~/play/{track.name} offered')
         self._resolve_waiters(lambda deadline: True)
+
+    def _offer(self, track):
+        """Offer a waiting play its gesture's newest version, if it came after the fault."""
+        if self._play is None or self._play[0] != track.name or not self._play[1].waiting:
+            return
+        waited_from = self._play[2] + self._play[1].waiting_since - EARLY_ANSWER
+        if self._book.arrivals.get(track.stamp, 0.0) < waited_from:
+            return
+        try:
+            frames = track.positions[:, [track.joint_names.index(j) for j in self._joints]]
+        except ValueError:
+            return                    # not every played joint: not a version to play
+        self._play[1].offer(track.times, frames, f'library {track.stamp}')
 
     def _on_diagnostics(self, msg):
         statuses = {s.name[len(RECOVERY_PREFIX):]: s for s in msg.status
@@ -155,28 +254,50 @@ class GesturePlayer(Node):
         now = time.monotonic()
         for name, angle in zip(msg.name, msg.position):
             self._measured[name] = float(angle)
+        if len(msg.velocity) == len(msg.name):
+            self._speeds.update(zip(msg.name, map(float, msg.velocity)))
         self._measured_at = now
         if self._waiters:
             self._resolve_waiters(lambda deadline: True)
-        if self._play is None:
+        if self._play is None or any(j not in self._measured for j in self._joints):
             return
-        gesture, playback, start, future = self._play
-        if any(j not in self._measured for j in playback.plan.joint_names):
+        q = [self._measured[j] for j in self._joints]
+        v = [self._speeds[j] for j in self._joints] if all(
+            j in self._speeds for j in self._joints) else None
+        taken = now - reading_age(self.get_clock().now().nanoseconds * 1e-9,
+                                  msg.header.stamp)
+        self._apply(self._play[1].update(taken - self._play[2], q, v))
+
+    def _on_fault(self, msg):
+        """Hold a joint reported by anyone mid-play where it is, and carry on."""
+        if self._play is None or self._waits['carry_on'] <= 0:
             return
-        q = [self._measured[j] for j in playback.plan.joint_names]
-        outcome = playback.update(now - start, q)
-        if outcome is not None:
-            self._finish(outcome)
+        faults = []
+        for i, joint in enumerate(msg.name):
+            angle = self._measured.get(joint)       # where it is: the measured angle
+            if angle is None and i < len(msg.position) and math.isfinite(msg.position[i]):
+                angle = float(msg.position[i])
+            if joint in self._joints and angle is not None:
+                faults.append((joint, angle))
+        if faults:
+            now = time.monotonic()
+            for joint, angle in faults:
+                if joint not in self._play[1].holds:
+                    self._book.report(joint, angle, now)
+            self._apply(self._play[1].fault(now - self._play[2], faults))
 
     def _tick(self):
         now = time.monotonic()
         if self._play is not None:
-            playback, start = self._play[1], self._play[2]
+            session, start = self._play[1], self._play[2]
             stale = self._measured_at is None or now - self._measured_at > \
                 self._waits['joint_states']
-            if stale and now - start > playback.plan.duration + self._monitor.goal_time:
-                self._finish(playback.abort('no /joint_states: cannot tell whether the '
-                                            'motion finished'))
+            expired = session.expire(now - start)
+            if expired is not None:
+                self._finish(expired)
+            elif stale and now - start > session.end_time + self._monitor.goal_time:
+                self._finish(session.playback.abort('no /joint_states: cannot tell whether '
+                                                    'the motion finished'))
         self._resolve_waiters(lambda deadline: now >= deadline)
 
     def _wait(self, deadline):
@@ -235,29 +356,68 @@ class GesturePlayer(Node):
             return Outcome(False, f'nobody subscribes to {idle[0]}/joint_trajectory; is the '
                                   f'controller running?')
         future = Future()
-        self._play = (gesture, Playback(plan, list(self._groups.values()), self._monitor),
-                      time.monotonic(), future)
-        for controller, joints in self._groups.items():
-            self._command_pubs[controller].publish(self._trajectory(plan, joints))
+        session = CarryOn(plan, list(self._groups.values()), self._monitor, self._replan,
+                          BlendLimits(self._limits[0],
+                                      np.full(len(self._joints), self._waits['acceleration'])),
+                          self._waits['carry_on'], self._timing.sample_period,
+                          functools.partial(pressed_joints, self._robot, self._joints))
+        self._play = (gesture, session, time.monotonic(), future)
+        self._send(plan)
         self._structure.start(gesture, plan)
         return await future
 
     def _plan(self, track):
         columns = [track.joint_names.index(j) for j in self._joints]
-        arms = {j: (side, i) for side in ('right', 'left')
-                for i, j in enumerate(self._robot.arms[side].joint_names)}
-        limits = [self._robot.velocity_limits[arms[j][1]] for j in self._joints]
-        lower = [self._robot.arms[arms[j][0]].lower[arms[j][1]] for j in self._joints]
-        upper = [self._robot.arms[arms[j][0]].upper[arms[j][1]] for j in self._joints]
         start = [self._measured[j] for j in self._joints]
-        return plan_motion(self._joints, start, track.times, track.positions[:, columns],
-                           limits, locks=self._book.locks(dict(self._measured)),
+        return self._plan_frames(track.times, track.positions[:, columns], start,
+                                 self._book.locks(dict(self._measured)))
+
+    def _replan(self, times, frames, start, holds):
+        """Time a reconfigured gesture: the play's holds and the locks known now."""
+        return self._plan_frames(times, frames, start,
+                                 dict(self._book.locks(dict(self._measured)), **holds))
+
+    def _plan_frames(self, times, frames, start, locks):
+        """Time keyframes (in the played joints' order) from ``start`` with ``locks``."""
+        limits, lower, upper = self._limits
+        return plan_motion(self._joints, start, times, frames, limits, locks=locks,
                            lower=lower, upper=upper, timing=self._timing)
+
+    def _send(self, plan):
+        """
+        Command ``plan`` on the play's timeline: one message per controller.
+
+        Its time 0 is the play time where the play put it (``segment_start``: the
+        reading that caused it), stamped on the ROS clock: a controller that receives
+        it late joins it where the play is (as ros2_control's controller does with a
+        past stamp), instead of starting it late; the detector's prediction and the
+        controller then run on the same timeline whatever the transport's delay.
+        """
+        session, start = self._play[1], self._play[2]
+        session.sent(time.monotonic() - start)
+        ago = time.monotonic() - start - session.segment_start
+        stamp = self.get_clock().now() - Duration(nanoseconds=int(max(ago, 0.0) * 1e9))
+        for controller, joints in self._groups.items():
+            msg = self._trajectory(plan, joints)
+            msg.header.stamp = stamp.to_msg()
+            self._command_pubs[controller].publish(msg)
+
+    def _apply(self, step):
+        """Carry out a Step of the play: report faults, send a motion, end the play."""
+        if step.faults:
+            self._report(step.faults)
+        if step.send is not None and self._play is not None:
+            self._send(step.send)
+            track = self._book.gesture(self._play[0])
+            if track is not None:
+                self._offer(track)        # the answer may have come first
+        if step.outcome is not None and self._play is not None:
+            self._finish(step.outcome)
 
     @staticmethod
     def _trajectory(plan, joints):
         positions, velocities = plan.columns(joints)
-        msg = JointTrajectory(joint_names=list(joints))   # zero stamp: start now
+        msg = JointTrajectory(joint_names=list(joints))
         for t, q, v in zip(plan.times, positions, velocities):
             if t <= 0.0:
                 continue       # the controller starts from where the arm is
@@ -266,24 +426,30 @@ class GesturePlayer(Node):
                 time_from_start=duration_msg(float(t))))
         return msg
 
+    def _report(self, faults):
+        """Publish the faults the play detected; hold them in every later play too."""
+        if not self._waits['report_faults']:
+            return
+        now = time.monotonic()
+        for joint, angle in faults:
+            self._book.report(joint, angle, now)
+        self._fault_pub.publish(JointState(name=[j for j, _ in faults],
+                                           position=[a for _, a in faults]))
+        text = ', '.join(f'{j} held at {math.degrees(a):.1f} deg' for j, a in faults)
+        self.get_logger().warning(f'{self._play[0]}: actuator fault detected: {text}; '
+                                  f'reported on /actuator_fault'
+                                  + ('; carrying on' if self._waits['carry_on'] > 0 else ''))
+
     def _finish(self, outcome):
-        gesture, playback, start, future = self._play
+        future = self._play[3]
         self._play = None
         self._structure.stop()
-        if outcome.faults and self._waits['report_faults']:
-            now = time.monotonic()
-            for joint, angle in outcome.faults:
-                self._book.report(joint, angle, now)
-            self._fault_pub.publish(JointState(name=[j for j, _ in outcome.faults],
-                                               position=[a for _, a in outcome.faults]))
-            self.get_logger().warning(f'{gesture}: {outcome.reason}; reported on '
-                                      f'/actuator_fault')
         if not outcome.ok:
-            self._hold(playback)
+            self._hold()
         future.set_result(outcome)
         self._wake.trigger()
 
-    def _hold(self, playback):
+    def _hold(self):
         """Stop a failed play where the arms are (a locked or stuck joint where it is)."""
         locks = self._book.locks(dict(self._measured))
         for controller, joints in self._groups.items():

@@ -52,7 +52,7 @@ from .spin import run_node
 from ..model.gestures import load_library
 from ..model.robot import load_robot
 from ..model.urdf import urdf_string
-from ..sim.physics import designed_allowances, NamoSim
+from ..sim.physics import designed_allowances, NamoSim, READING_NOISE_DEG
 from ..sim.structure_change import apply_changes, hidden_changes
 from ..sim.tracker import FingertipTracker, TrackerSettings, TrueFingertips
 from ..sim.trajectory import ActiveTrajectory, Command, Point, Rejected, validate
@@ -88,6 +88,9 @@ PARAMETERS = {
                 _T.PARAMETER_BOOL),
     'joint_state_rate': (100.0, '/joint_states rate (Hz)', _T.PARAMETER_DOUBLE),
     'contact_report_rate': (10.0, '~/contacts rate (Hz)', _T.PARAMETER_DOUBLE),
+    'joint_state_noise_deg': (READING_NOISE_DEG, 'standard deviation (deg) of the '
+                              'Gaussian noise added to each /joint_states position, as an '
+                              'encoder reads (0: exact)', _T.PARAMETER_DOUBLE),
     'contact_tolerance_mm': (1.0, 'penetration (mm) below which a contact '
                              'is not counted', _T.PARAMETER_DOUBLE),
     'initial_positions': ([0.0] * 14, 'start angles (rad) of the 14 joints, '
@@ -168,6 +171,7 @@ class SimNode(Node):
                            kv=self.p['kv'], gravity=self.p['gravity'],
                            allowances=designed_allowances(self.robot, library),
                            tolerance=self.p['contact_tolerance_mm'] * 1e-3, urdf=urdf)
+        self.sim.set_reading_noise(math.radians(self.p['joint_state_noise_deg']))
         self.tracker, self.tracker_pubs = create_tracker(self, self.truth.chains)
         self.desired = self._initial_state()
         self.lock = threading.Lock()
@@ -362,12 +366,14 @@ class SimNode(Node):
                 self.sim.step(1)
                 state = report = None
                 if step % state_every == 0 or self.tracker.due(now + dt):
-                    state = (self.sim.positions(), self.sim.velocities(), now + dt)
+                    # Encoders read with their noise; the tracker sees the true pose.
+                    state = (self.sim.readings(), self.sim.velocities(), now + dt,
+                             self.sim.positions())
                 if step % report_every == 0:
                     report = self._contact_status()
             try:
                 if state is not None and step % state_every == 0:
-                    self._publish_state(*state)
+                    self._publish_state(*state[:3])
                 if report is not None:
                     self.contact_pub.publish(report)
                 self._track(now + dt, state)
@@ -391,7 +397,7 @@ class SimNode(Node):
         if not self.tracker_pubs:
             return
         if state is not None and self.tracker.due(now):
-            self.tracker.capture(now, self.truth(dict(zip(self.sim.joint_names, state[0]))))
+            self.tracker.capture(now, self.truth(dict(zip(self.sim.joint_names, state[3]))))
         for m in self.tracker.deliver(now):
             measured, truth = self.tracker_pubs[m.side]
             measured.publish(point_message(m.point_mm, m.capture, self.truth.frame))

@@ -30,6 +30,12 @@ Choices, and why:
   for a flat, soft palm: its contact force would push the pressed palms apart);
   MuJoCo measures its signed distance each step (``mj_geomDistance``) and it counts
   when deeper than the designed depth plus the tolerance.
+- Readings: :meth:`NamoSim.positions` is the physics' exact state; :meth:`NamoSim.readings`
+  is what an encoder reports, that state plus Gaussian noise of ``reading_noise`` rad
+  (standard deviation, independent per joint and reading; 0 by default here,
+  :meth:`NamoSim.set_reading_noise` sets it: the ``namo_sim`` node and ``bench
+  detection-suite`` do), so that a detector is tried
+  against readings that are not exact.
 """
 
 from typing import NamedTuple
@@ -43,6 +49,9 @@ from ..model.urdf import capsule_segments, SEGMENTS, urdf_string
 from ..objective.collision import segment_distance
 
 GRAVITY = (0.0, 0.0, -9.81)
+# Reading noise (deg, standard deviation) of the simulated encoders: about one count
+# of a 14-bit absolute encoder (0.022 deg), the order of a servo's position reading.
+READING_NOISE_DEG = 0.02
 CONTACT_TOLERANCE = 1e-3     # m of penetration tolerated, as the objective's 1 mm
 _RGBA = {'right': (1.0, 0.55, 0.1, 1.0), 'left': (0.1, 0.6, 1.0, 1.0),
          'torso': (0.75, 0.75, 0.75, 1.0)}
@@ -116,6 +125,7 @@ class NamoSim:
                  tolerance=CONTACT_TOLERANCE, urdf=None):
         if timestep <= 0 or kp <= 0 or kv < 0:
             raise ValueError('timestep and kp must be > 0 and kv >= 0')
+        self.set_reading_noise(0.0)
         self.robot = robot
         self.joint_names = tuple(robot.joint_names)
         self.kp, self.kv = float(kp), float(kv)
@@ -187,6 +197,20 @@ class NamoSim:
     def positions(self):
         """Return the 14 joint angles (rad), in ``joint_names`` order."""
         return self.data.qpos[self._qadr].copy()
+
+    def set_reading_noise(self, std, seed=None):
+        """Set the readings' noise: ``std`` rad (>= 0), from a generator seeded ``seed``."""
+        if not std >= 0:
+            raise ValueError(f'reading noise must be >= 0 rad, got {std}')
+        self.reading_noise = float(std)
+        self._rng = np.random.default_rng(seed)
+
+    def readings(self):
+        """Return the 14 angles as the encoders read them: positions plus the noise."""
+        q = self.positions()
+        if self.reading_noise > 0:
+            q += self._rng.normal(0.0, self.reading_noise, q.shape)
+        return q
 
     def velocities(self):
         """Return the velocities of the 14 joints, in rad/s."""
