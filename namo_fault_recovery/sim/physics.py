@@ -113,6 +113,30 @@ class Contact(NamedTuple):
     depth: float
 
 
+def add_capsules(spec, robot, allowances):
+    """
+    Replace a model's URDF geometry by the self-collision capsules and their pairs.
+
+    The URDF's cylinders and spheres go; each capsule of :func:`capsule_segments` is added
+    to its link (collisions only through explicit pairs), and every checked pair that is
+    not a designed contact (``allowances``) becomes a MuJoCo contact pair.
+    """
+    for geom in list(spec.geoms):
+        spec.delete(geom)
+    for cap in capsule_segments(robot):
+        body = spec.body(cap.link) or spec.worldbody
+        side = cap.name.split('_')[0]
+        geom = body.add_geom(name=cap.name, type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                             fromto=np.concatenate((cap.start, cap.end)),
+                             size=[cap.radius, 0.0, 0.0],
+                             rgba=_RGBA.get(side, _RGBA['torso']))
+        geom.contype = 0          # only the explicit pairs below collide
+        geom.conaffinity = 0
+    for a, b in contact_pairs():
+        if (a, b) not in allowances:
+            spec.add_pair(name=f'{a}-{b}', geomname1=a, geomname2=b)
+
+
 class NamoSim:
     """
     The simulated robot: step it, command its actuators, stick joints, read contacts.
@@ -135,23 +159,10 @@ class NamoSim:
         spec.option.timestep = timestep
         spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
         spec.option.gravity = GRAVITY if gravity else (0.0, 0.0, 0.0)
-        for geom in list(spec.geoms):          # the URDF's cylinders and spheres
-            spec.delete(geom)
         for body in spec.bodies:
             if body.name != 'world':
                 body.gravcomp = 1.0
-        for cap in capsule_segments(robot):
-            body = spec.body(cap.link) or spec.worldbody
-            side = cap.name.split('_')[0]
-            geom = body.add_geom(name=cap.name, type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-                                 fromto=np.concatenate((cap.start, cap.end)),
-                                 size=[cap.radius, 0.0, 0.0],
-                                 rgba=_RGBA.get(side, _RGBA['torso']))
-            geom.contype = 0          # only the explicit pairs below collide
-            geom.conaffinity = 0
-        for a, b in contact_pairs():
-            if (a, b) not in self.allowances:
-                spec.add_pair(name=f'{a}-{b}', geomname1=a, geomname2=b)
+        add_capsules(spec, robot, self.allowances)
         for name in self.joint_names:
             joint = spec.joint(name)
             joint.armature = armature
