@@ -281,7 +281,13 @@ def test_optima_of_one_library_keep_the_others():
 
 def test_product_bench_node_parts(tmp_path):
     pytest.importorskip('rclpy')
-    _bench_product(tmp_path, 'latency,refine', '--refine-window', '1', '--refine-reps', '1')
+    # The packaged best-known optima (regenerating them is the offline test's business):
+    # the refinement part scores each version against them.
+    code, text = run_cli(['bench', 'product', '--parts', 'latency,refine', '--joints',
+                          'right_arm_joint2', '--no-burner', '--refine-window', '1',
+                          '--refine-reps', '1', '--out', str(tmp_path / 'out'), '--quiet'])
+    assert code == 0, text
+    assert 'product_best_known.yaml' in text
     summary = json.loads((tmp_path / 'out' / 'summary.json').read_text())
     hit = summary['latency_hit']['conditions']['idle']
     assert hit['n'] == 1 and hit['origins'] == {'table': 1}

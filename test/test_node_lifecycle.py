@@ -11,6 +11,7 @@ import json
 import math
 from pathlib import Path
 import signal
+import subprocess
 import time
 
 from namo_fault_recovery import load_library, load_robot
@@ -248,14 +249,38 @@ BAD_CONFIGS = [
 ]
 
 
-@pytest.mark.parametrize('case, make_args, expected', BAD_CONFIGS,
+REFUSAL_TIMEOUT = 120.0     # all refusals start at once: generous on 2 shared cores
+
+
+@pytest.fixture(scope='module')
+def refused(tmp_path_factory):
+    """
+    Start one node per bad configuration, all at once; return ``{case: (code, node)}``.
+
+    Each refusal is a start-up of its own (own process, files and state directory) that
+    ends before it reaches the network, so they need not wait for one another; the
+    interpreter start-ups then share both cores.  ``code`` is None if it did not exit.
+    """
+    nodes = {}
+    for case, make_args, _ in BAD_CONFIGS:
+        folder = tmp_path_factory.mktemp('bad_config')
+        nodes[case] = NodeProcess(DOMAIN, state_dir=folder / 'state', args=make_args(folder))
+    out = {}
+    for case, node in nodes.items():
+        try:
+            code = node.wait(timeout=REFUSAL_TIMEOUT)
+        except subprocess.TimeoutExpired:
+            code = None
+        node.stop()
+        out[case] = (code, node)
+    return out
+
+
+@pytest.mark.parametrize('case, expected', [(c[0], c[2]) for c in BAD_CONFIGS],
                          ids=[c[0] for c in BAD_CONFIGS])
-def test_invalid_config_refuses_to_start_with_one_clear_line(tmp_path, case, make_args,
-                                                             expected):
-    node = NodeProcess(DOMAIN, state_dir=tmp_path / 'state', args=make_args(tmp_path))
-    code = node.wait()
-    node.stop()
-    assert code == 1
+def test_invalid_config_refuses_to_start_with_one_clear_line(refused, case, expected):
+    code, node = refused[case]
+    assert code == 1, node.describe()
     lines = [line for line in node.stderr.splitlines() if line.strip()]
     assert len(lines) == 1, node.stderr
     assert lines[0].startswith('recovery_node: error: ')

@@ -16,6 +16,7 @@ def test_python_api_example_runs():
     namespace = {}
     exec(compile(code, 'README.md (Python API)', 'exec'), namespace)  # noqa: S102
     result = namespace['result']
+    assert len(namespace['table']) == 2 and namespace['hit'] is not None
     assert result.locks == {'right_arm_joint4': 0.0}
     assert result.success and result['circle'].method == 'per_point'
     assert namespace['res'].fun < 1e-3
