@@ -34,6 +34,7 @@ import time
 from namo_fault_recovery import load_robot
 from namo_fault_recovery.cli.main import main
 from namo_fault_recovery.ros.joint_state_stream import JointStateStream, reference_pose
+from namo_fault_recovery.ros.spun_node import SpunNode
 from namo_fault_recovery.runtime.inputs import BadInput, parse_fault
 from node_harness import (BareSubscriber, DiagnosticsProbe, NodeProcess, RosClient,
                           statuses_values, stress_domain)
@@ -429,24 +430,39 @@ def test_one_caller_with_twenty_outstanding_calls_gets_every_answer(tmp_path):
 
     All 20 answers go to that client's one reader of depth 10: answered together, half
     would be lost.  Every call is answered (within 30 s) and names a library version.
+
+    The client is a node of its own, as a gesture player's is.  The test's observer
+    (``client``) also takes every library version, marker array and diagnostics message on
+    its one executor thread; a reader not taken while more than 10 answers arrive (about
+    0.25 s at the node's pace) loses the oldest, whatever the node does.
     """
     with Running(tmp_path, 2) as (node, client):
         client.wait_library(timeout=LONG, what='the reference library')
         client.publish_fault(['right_arm_joint4'], [0.2])
-        caller = client.node.create_client(Trigger, '/reconfigure_gestures')
-        assert caller.wait_for_service(timeout_sec=LONG)
-        # Answered once first: until the node has matched a new client, its calls wait in
-        # the client's request writer (depth 10) and only the last 10 get through.
-        first, _ = _answers_within([caller.call_async(Trigger.Request())], LONG)
-        assert first[0] is not None, 'the first call was not answered'
-        futures = [caller.call_async(Trigger.Request()) for _ in range(OUTSTANDING)]
-        answers, waited = _answers_within(futures, ANSWER_BOUND)
+        own = SpunNode('stress_one_caller', stress_domain(2))
+        try:
+            answers, waited = _twenty_outstanding(own)
+        finally:
+            own.close()
         assert node.alive(), node.describe()
     unanswered = [i for i, a in enumerate(answers) if a is None]
     assert not unanswered, (f'{len(unanswered)}/{OUTSTANDING} calls unanswered after '
                             f'{waited:.1f} s: {unanswered}')
     unnamed = [a.message for a in answers if version_of(a.message) is None]
     assert not unnamed, f'answers naming no library version: {unnamed}'
+
+
+def _twenty_outstanding(own):
+    """From ``own`` node, answered once, send OUTSTANDING calls; return their answers."""
+    caller = own.node.create_client(Trigger, '/reconfigure_gestures')
+    own.start()
+    assert caller.wait_for_service(timeout_sec=LONG)
+    # Answered once first: until the node has matched a new client, its calls wait in
+    # the client's request writer (depth 10) and only the last 10 get through.
+    first, _ = _answers_within([caller.call_async(Trigger.Request())], LONG)
+    assert first[0] is not None, 'the first call was not answered'
+    futures = [caller.call_async(Trigger.Request()) for _ in range(OUTSTANDING)]
+    return _answers_within(futures, ANSWER_BOUND)
 
 
 # --- 4. kill -9 right after "fault accepted" -----------------------------------------------

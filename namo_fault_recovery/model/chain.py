@@ -30,6 +30,7 @@ import math
 import numpy as np
 
 from .kinematics import ArmJacobian, ArmLandmarks
+from .rotations import rot_x_cs, rot_z
 from .urdf_tree import UrdfTree
 from ..errors import ConfigError
 
@@ -59,15 +60,6 @@ def _snap(value):
         if abs(value - exact) < SNAP:
             return exact
     return value
-
-
-def _rot_z(angle):
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _rot_x(c, s):
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
 
 
 def _axis_frame(axis):
@@ -133,11 +125,11 @@ class ChainCompiler:
         full[:3, :3] = full[:3, :3] @ frame
         a, cb, sb, c = _zxz(full[:3, :3])
         if not self.steps:
-            self.init = (_rot_z(a) @ _rot_x(cb, sb), full[:3, 3].copy())
+            self.init = (rot_z(a) @ rot_x_cs(cb, sb), full[:3, 3].copy())
             self.steps.append(_Step(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0))
         else:
             self._fold_into_previous(a)
-            self.steps.append(self._step(_rot_z(-a) @ full[:3, 3], cb, sb))
+            self.steps.append(self._step(rot_z(-a) @ full[:3, 3], cb, sb))
         self.offsets.append(c)
         self.signs.append(sign)
         self.acc = np.eye(4)
@@ -147,7 +139,7 @@ class ChainCompiler:
         """Turn the previous state by ``RotZ(a)``: its offset grows, its links turn back."""
         self.offsets[-1] += a
         back = np.eye(4)
-        back[:3, :3] = _rot_z(-a)
+        back[:3, :3] = rot_z(-a)
         last = len(self.steps)
         for entry in self.link_frames.values():
             if entry[0] == last:
@@ -156,7 +148,7 @@ class ChainCompiler:
     def _step(self, t, cb, sb):
         tol = 1e-9 * self.scale
         tx, ty, tz = _clean(t, tol)
-        u = _rot_x(cb, sb).T @ np.array([0.0, ty, tz])
+        u = rot_x_cs(cb, sb).T @ np.array([0.0, ty, tz])
         _, uy, uz = _clean(u, tol)
         if (ty != 0.0) + (tz != 0.0) < (uy != 0.0) + (uz != 0.0):
             return _Step(tx, ty, tz, cb, sb, 0.0, 0.0)

@@ -39,6 +39,7 @@ import numpy as np
 
 from .kinematics import shoulder_position
 from .robot import ARMS, N_JOINTS
+from .rotations import rot_x, rot_z
 
 MM = 1e-3
 SEGMENTS = ('upper_arm', 'forearm', 'hand')
@@ -71,20 +72,10 @@ def fingertip_link(side):
     return f'{side}_arm_fingertip'
 
 
-def _rot_x(angle):
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def _rot_z(angle):
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
 def _fixed_part(theta_offset, d, a_prev, alpha_prev, mirrored):
     """Return (R, p in mm) of ``RotX(alpha) TransX(a) RotZ(offset) TransZ(d)``, mirrored."""
     sign = -1.0 if mirrored else 1.0
-    rot = _rot_x(sign * alpha_prev) @ _rot_z(sign * theta_offset)
+    rot = rot_x(sign * alpha_prev) @ rot_z(sign * theta_offset)
     pos = np.array([a_prev, 0.0, 0.0]) + rot @ np.array([0.0, 0.0, d])
     return rot, pos
 
@@ -127,7 +118,7 @@ def _frames(robot, side, q):
     sign = -1.0 if robot.arms[side].mirrored else 1.0
     for i, (rot, pos) in enumerate(joint_origins(robot, side)):
         step = np.eye(4)
-        step[:3, :3] = rot @ (_rot_z(sign * q[i]) if i < N_JOINTS else np.eye(3))
+        step[:3, :3] = rot @ (rot_z(sign * q[i]) if i < N_JOINTS else np.eye(3))
         step[:3, 3] = pos
         pose = pose @ step
         frames.append(pose)
