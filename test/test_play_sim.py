@@ -127,9 +127,17 @@ def _carried_on(arms, response, joint, before, faults, angle=None):
     assert count == 3 and held.size > 10 and np.all(held == report.position[0]), held
     library, version = arms.carried_on_with(response.message)
     assert version['wai'][-1][NAMES.index(joint)] == report.position[0]
-    executed = _score(arms.settled(tol=SETTLED_TOL))
-    assert executed == pytest.approx(_score(version['wai'][-1]), abs=SCORE_TOL)
+    settled = arms.settled(tol=SETTLED_TOL)
+    executed, planned = _score(settled), _score(version['wai'][-1])
+    assert executed == pytest.approx(planned, abs=SCORE_TOL), (
+        executed, planned, _off(settled, version['wai'][-1]), arms.contacts[-1])
     return report
+
+
+def _off(q, planned):
+    """Return the joints more than 0.5 deg off their planned angle, in degrees."""
+    off = np.degrees(np.asarray(q) - np.asarray(planned))
+    return {NAMES[i]: round(float(d), 2) for i, d in enumerate(off) if abs(d) > 0.5}
 
 
 def _stick_and_recover(arms, joint, angle, locked):
