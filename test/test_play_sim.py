@@ -135,9 +135,9 @@ def _carried_on(arms, response, joint, before, faults, angle=None):
 
 
 def _off(q, planned):
-    """Return the joints more than 0.5 deg off their planned angle, in degrees."""
+    """Return the joints more than 0.05 deg off their planned angle, in degrees."""
     off = np.degrees(np.asarray(q) - np.asarray(planned))
-    return {NAMES[i]: round(float(d), 2) for i, d in enumerate(off) if abs(d) > 0.5}
+    return {NAMES[i]: round(float(d), 2) for i, d in enumerate(off) if abs(d) > 0.05}
 
 
 def _stick_and_recover(arms, joint, angle, locked):

@@ -138,7 +138,9 @@ def test_stuck_joint_holds_against_commands_and_release_frees_it(robot, allowanc
     for _ in range(100):
         run(sim, target, 10)
         worst = max(worst, abs(sim.positions()[3] - math.radians(40.0)))
-    assert worst < math.radians(1.0)
+    # Jammed, not sprung: the stuck joint (and so its reading) stays within 0.05 deg
+    # while the others jump to new targets (MuJoCo's default constraint let it swing).
+    assert worst < math.radians(0.05), math.degrees(worst)
     assert abs(sim.positions()[0] - target[0]) < math.radians(0.1)   # the others move
     assert sim.release('right_arm_joint4')
     run(sim, target, 1500)
