@@ -27,21 +27,11 @@ import math
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..model.rotations import rotation_vectors
+
 PRIOR = {'tip_offset': 100.0, 'offset': 10.0, 'bend': 10.0}   # prior std: mm, deg, deg
 SIZES = {'tip_offset': 3, 'offset': 1, 'bend': 3}
 MAX_GROUPS = 2
-
-
-def _rodrigues(w):
-    """Return rotations (N, 3, 3) for rotation vectors ``w`` (N, 3) rad."""
-    theta = np.linalg.norm(w, axis=1)
-    safe = np.where(theta > 1e-12, theta, 1.0)
-    k = w / safe[:, None]
-    kx = np.zeros((len(w), 3, 3))
-    kx[:, 0, 1], kx[:, 0, 2], kx[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
-    kx[:, 1, 0], kx[:, 2, 0], kx[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
-    s, c = np.sin(theta)[:, None, None], (1 - np.cos(theta))[:, None, None]
-    return np.eye(3)[None] + s * kx + c * (kx @ kx)
 
 
 @dataclass(frozen=True)
@@ -86,7 +76,7 @@ def corrected_tip(chain, groups, params, q):
     order = {link: i for i, link in enumerate(chain_links(chain))}
     for link, w in sorted(bends, key=lambda b: -order[b[0]]):     # distal first
         origin, rot = frames[link]
-        turn = rot @ _rodrigues(np.broadcast_to(w, (len(q), 3))) @ np.swapaxes(rot, 1, 2)
+        turn = rot @ rotation_vectors(np.broadcast_to(w, (len(q), 3))) @ np.swapaxes(rot, 1, 2)
         tip = origin + np.einsum('nij,nj->ni', turn, tip - origin)
     return tip
 

@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from .kinematics import ArmJacobian, ArmLandmarks
-from .rotations import rot_x_cs, rot_z
+from .rotations import rot_axis, rot_x_cs, rot_z
 from .urdf_tree import UrdfTree
 from ..errors import ConfigError
 
@@ -70,12 +70,9 @@ def _axis_frame(axis):
                    (1, np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]))):
         if abs(axis[k]) == 1.0:
             return rot, float(axis[k])
-    z = np.array([0.0, 0.0, 1.0])
-    turn = np.cross(z, axis)
+    turn = np.cross([0.0, 0.0, 1.0], axis)
     s, c = float(np.linalg.norm(turn)), float(axis[2])
-    k = turn / s
-    skew = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + s * skew + (1.0 - c) * skew @ skew, 1.0
+    return rot_axis(turn / s, math.atan2(s, c)), 1.0
 
 
 def _zxz(rot):

@@ -1,8 +1,11 @@
 """
-Elementary rotation matrices, shared by the DH-to-URDF writer and the chain compiler.
+Rotation matrices, one definition for every part of the package that builds them.
 
-Both build the same fixed transforms (``RotX(alpha) RotZ(theta)``) from a URDF or a DH
-table; one definition keeps their conventions from drifting apart.
+Users: the URDF writer and the chain compiler build the same fixed transforms
+(``RotX(alpha) RotZ(theta)``) from a URDF or a DH table; the compiler turns a URDF joint
+axis onto z; the simulator's structure changes turn a bent link about an axis; the
+exploration's corrections turn rotation vectors into matrices in batches.  One
+definition keeps their conventions from drifting apart.
 """
 
 import math
@@ -24,3 +27,21 @@ def rot_z(angle: float) -> np.ndarray:
     """Return the 3x3 rotation by ``angle`` (rad) about z."""
     c, s = math.cos(angle), math.sin(angle)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def rotation_vectors(w: np.ndarray) -> np.ndarray:
+    """Return the rotations (N, 3, 3) of rotation vectors ``w`` (N, 3), rad (Rodrigues)."""
+    w = np.asarray(w, dtype=float)
+    theta = np.linalg.norm(w, axis=1)
+    safe = np.where(theta > 1e-12, theta, 1.0)
+    k = w / safe[:, None]
+    kx = np.zeros((len(w), 3, 3))
+    kx[:, 0, 1], kx[:, 0, 2], kx[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
+    kx[:, 1, 0], kx[:, 2, 0], kx[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
+    s, c = np.sin(theta)[:, None, None], (1.0 - np.cos(theta))[:, None, None]
+    return np.eye(3)[None] + s * kx + c * (kx @ kx)
+
+
+def rot_axis(axis, angle: float) -> np.ndarray:
+    """Return the 3x3 rotation by ``angle`` (rad) about the unit vector ``axis``."""
+    return rotation_vectors(np.asarray(axis, dtype=float)[None] * float(angle))[0]

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError
+from ..model.rotations import rot_axis
 from ..model.urdf_tree import load_urdf_document
 
 KINDS = ('tool', 'bend', 'encoder_offset', 'link_length')
@@ -78,13 +79,6 @@ def parse_change(spec: str, source: str = '<parameter>', key: str = 'change') ->
     return StructureChange(kind, joint, value)
 
 
-def _rotation(axis, angle):
-    """Return the 3x3 rotation by ``angle`` (rad) about the unit ``axis`` (Rodrigues)."""
-    x, y, z = axis
-    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
-
-
 def _unit(vec):
     return np.asarray(vec, dtype=float) / float(np.linalg.norm(vec))
 
@@ -112,14 +106,14 @@ def edited_origin(origin: np.ndarray, joint_axis: np.ndarray, change: StructureC
     link = out[:3, 3]
     length = float(np.linalg.norm(link))
     if change.kind == 'encoder_offset':
-        out[:3, :3] = out[:3, :3] @ _rotation(_unit(joint_axis), math.radians(change.amount))
+        out[:3, :3] = out[:3, :3] @ rot_axis(_unit(joint_axis), math.radians(change.amount))
         return out
     if length < _SHORT_M:
         raise ConfigError(where, change.joint, f'{change.kind} needs a link: the joint origin '
                           'has no offset from its parent; expected the joint at the far end '
                           'of a link of some length')
     if change.kind == 'bend':
-        turn = _rotation(_bend_axis(out, joint_axis, change.axis), math.radians(change.amount))
+        turn = rot_axis(_bend_axis(out, joint_axis, change.axis), math.radians(change.amount))
         out[:3, :3] = turn @ out[:3, :3]
         out[:3, 3] = turn @ link
         return out
