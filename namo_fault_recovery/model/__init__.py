@@ -5,7 +5,7 @@ The robot and its gestures, free of ROS: what Namo is and what it should do.
   from ``config/namo_robot.yaml``;
 - :mod:`.kinematics`: forward kinematics and its Jacobian, batched over N configurations;
 - :mod:`.urdf_tree`: any robot's kinematic tree read from its URDF (yourdfpy), checked;
-- :mod:`.rotations`: the elementary rotations the URDF writer and the chain compiler share;
+- :mod:`.rotations`: rotation matrices (elementary, about an axis, batched rotation vectors);
 - :mod:`.chain`: a base-to-tip chain compiled from that tree: batched FK and Jacobians;
 - :mod:`.robot_profile`: the recovery profile (arms, landmarks, roles of joints) over a URDF;
 - :mod:`.profile_robot`: the engine's robot built from a profile (reduced chains);
