@@ -1,9 +1,9 @@
 """
 Drive the real ``recovery_node`` process over DDS from the tests.
 
-Every test module gets its own ROS domain (derived from the test session's pid and a
-per-module offset) so parallel sessions and modules never see each other; the node
-subprocess and the rclpy client of the test share it.
+Every test module gets its own ROS domain (the test session's slot, reserved host-wide
+with a lock file, and a per-module offset) so parallel sessions and modules never see
+each other; the node subprocess and the rclpy client of the test share it.
 """
 
 import atexit
@@ -40,9 +40,43 @@ if 'ROS_LOG_DIR' not in os.environ:
     atexit.register(shutil.rmtree, os.environ['ROS_LOG_DIR'], ignore_errors=True)
 
 
+SLOTS = 20                     # test sessions that can run at once on one host
+_SLOT_DIR = Path(tempfile.gettempdir()) / 'namo_test_domains'
+_slot = []                     # [slot number, its open lock file], once reserved
+
+
+def session_slot():
+    """
+    Return this session's slot (0..SLOTS-1): held, host-wide, until the process ends.
+
+    Two test sessions on one host (a CI runner, a developer's two terminals) must never
+    share a ROS domain: their nodes would answer each other's clients.  A pid-derived
+    guess collides one time in SLOTS; an exclusive ``flock`` on a slot file cannot.  The
+    search starts at ``pid % SLOTS`` and takes the first free slot (all taken: the first
+    guess, as before).
+    """
+    if not _slot:
+        import fcntl
+        _SLOT_DIR.mkdir(exist_ok=True)
+        first = os.getpid() % SLOTS
+        for k in range(SLOTS):
+            slot = (first + k) % SLOTS
+            handle = open(_SLOT_DIR / f'slot{slot}.lock', 'w')
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                handle.close()
+                continue
+            _slot.extend((slot, handle))
+            break
+        else:
+            _slot.extend((first, None))
+    return _slot[0]
+
+
 def session_domain(offset):
     """Return this test session's ROS domain id for a module (offset 0..4)."""
-    base = int(os.environ.get('NAMO_TEST_DOMAIN_BASE', 1 + (os.getpid() % 20) * 5))
+    base = int(os.environ.get('NAMO_TEST_DOMAIN_BASE', 1 + session_slot() * 5))
     return base + offset
 
 
@@ -54,8 +88,7 @@ def stress_domain(index):
     up, still below the ids whose ports reach past the ephemeral range) keeps that
     traffic away from the other modules of this and of parallel sessions.
     """
-    base = int(os.environ.get('NAMO_TEST_STRESS_DOMAIN_BASE',
-                              102 + (os.getpid() % 20) * 5))
+    base = int(os.environ.get('NAMO_TEST_STRESS_DOMAIN_BASE', 102 + session_slot() * 5))
     return base + index
 
 

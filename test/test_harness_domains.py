@@ -1,0 +1,29 @@
+"""Two test sessions on one host never get the same ROS domains (node_harness slots)."""
+
+import os
+import subprocess
+import sys
+
+from node_harness import ROOT, session_domain, session_slot, SLOTS, stress_domain
+
+
+def _other_session_slot(env):
+    # The child draws as if it had this session's pid: a pid-derived slot would collide.
+    code = (f'import os; os.getpid = lambda: {os.getpid()}\n'
+            'from node_harness import session_slot; print(session_slot())')
+    out = subprocess.run([sys.executable, '-c', code], cwd=ROOT / 'test', env=env,
+                         capture_output=True, text=True, timeout=60, check=True)
+    return int(out.stdout.split()[-1])
+
+
+def test_a_concurrent_session_takes_another_slot_and_so_other_domains():
+    mine = session_slot()
+    assert 0 <= mine < SLOTS and session_slot() == mine          # held, not re-drawn
+    assert session_domain(0) == 1 + 5 * mine and stress_domain(0) == 102 + 5 * mine
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [str(ROOT), str(ROOT / 'test'), os.environ.get('PYTHONPATH', '')]))
+    env.pop('NAMO_TEST_DOMAIN_BASE', None)
+    others = {_other_session_slot(env) for _ in range(2)}
+    # Each child starts its search at this session's slot, finds it held and takes the
+    # next free one (held only while the child runs: both children may take the same).
+    assert mine not in others
