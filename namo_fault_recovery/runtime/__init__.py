@@ -21,6 +21,8 @@ fast unit tests that need no DDS.
 - :mod:`.restore`: the checks before publishing, and the restore decision;
 - :mod:`.state_store`: the persisted fault set and library (no ROS types);
 - :mod:`.diagnostic_keys`: the ``/diagnostics`` names and keys shared by writer and readers;
+- :mod:`.trial_robot`: the gesture player's trial robot for exploration (one arm's
+  command, settle, tracker readings), fed by its callbacks, waited on by its worker;
 - :mod:`.private_node`: the node processes that the demos, the node benchmarks and the
   tests start (the executables' commands, a private domain, one way to stop a process).
 """
