@@ -22,8 +22,9 @@ has ended).  One exploration adapts one motion of one arm:
 
 Progress and outcome: ``/diagnostics`` status ``gesture_player: exploration`` after
 every trial.  The result is served by the player itself: the next plays of that gesture
-play the explored version (origin ``explored``) while the library version it was
-explored from is current, and it is published on ``~/explored_motions`` (latched).
+play the explored version (origin ``explored``) while the library's version of the
+gesture is the one it was explored from (the same keyframes), and it is published on
+``~/explored_motions`` (latched, stamped with that version).
 """
 
 from dataclasses import dataclass, replace
@@ -103,9 +104,16 @@ def declare_exploration(node) -> dict:
 class Explored:
     """A motion explored on the robot, as the player serves it."""
 
-    base_stamp: int           # the library version (stamp, ns) it was explored from
+    base: object              # the GestureTrack it was explored from (its library version)
     track: object             # the GestureTrack played instead (the base, one arm adapted)
     result: object            # the ExploredMotion
+
+    def adapts(self, track) -> bool:
+        """Return True if ``track`` is the motion this was explored from (same keyframes)."""
+        base = self.base
+        return (track.joint_names == base.joint_names and track.positions.shape ==
+                base.positions.shape and np.allclose(track.times, base.times, atol=1e-9)
+                and np.allclose(track.positions, base.positions, atol=1e-9))
 
 
 @dataclass(frozen=True)
@@ -260,9 +268,9 @@ class Exploration:
     def served(self, track):
         """Return the explored version of ``track`` if it was explored from it, else ``track``."""
         found = None if track is None else self.explored.get(track.name)
-        if found is None or found.base_stamp != track.stamp:
+        if found is None or not found.adapts(track):
             return track
-        return found.track
+        return replace(found.track, stamp=track.stamp)
 
     def stop(self) -> None:
         """End a running exploration (before its next trial) and wait for its thread."""
@@ -364,11 +372,10 @@ class Exploration:
         names = self.robot.arms[side].joint_names
         positions = np.array(track.positions, dtype=float)
         positions[:, [track.joint_names.index(j) for j in names]] = res.q
-        self.explored[track.name] = Explored(track.stamp, replace(track, positions=positions),
-                                             res)
+        self.explored[track.name] = Explored(track, replace(track, positions=positions), res)
         msg = JointTrajectory(joint_names=list(track.joint_names))
         msg.header.frame_id = track.name
-        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(track.stamp), 10 ** 9)
         for t, q in zip(track.times, positions):
             msg.points.append(JointTrajectoryPoint(positions=[float(a) for a in q],
                                                    time_from_start=duration_msg(float(t))))
@@ -407,7 +414,7 @@ class Exploration:
                 'correction': res.correction})
             found = self.explored.get(gesture)
             if found is not None and found.result is res:
-                values['library_stamp'] = str(found.base_stamp)
+                values['library_stamp'] = str(found.base.stamp)
         values.update(extra or {})
         status = DiagnosticStatus(level=level, name=STATUS_NAME, message=text[:300],
                                   hardware_id=self.robot.name,
