@@ -8,8 +8,9 @@ player notices the change on ``/structure_change``; its exploration runs on its 
 after the play (trials on the simulated robot, measured by the tracker); the circle is
 played again, as explored.  The replay's true fingertip (the simulator's ground truth)
 keeps to the designed path within the issue's target (mean <= 3 mm, max <= 10 mm), and
-the recovery node's parameters never held the tool.  The figures (trials, robot seconds,
-the error before and after) are printed.
+the recovery node's parameters never held the tool.  The player is then restarted: it
+serves the explored circle again from its ``explore_state_file``, on the path as well.
+The figures (trials, robot seconds, the error before and after) are printed.
 """
 
 import threading
@@ -116,33 +117,43 @@ class ExploreRecorder(Recorder):
         return np.array(out)
 
 
+def start_player(kept):
+    """Start gesture_player: the demo library's design, adapt on a change, kept in ``kept``."""
+    return NodeProcess(DOMAIN, command=player_command(), env=ros_env(DOMAIN),
+                       args=['-p', 'on_structure_change:=adapt', '-p', f'gesture_file:={DEMO}',
+                             '-p', f'explore_state_file:={kept}'])
+
+
 @pytest.fixture(scope='module')
 def world(tmp_path_factory):
     env = ros_env(DOMAIN)
-    sim = NodeProcess(DOMAIN, command=sim_command(), env=env,
-                      args=['-p', 'hidden_tool_right_mm:=50.0', '-p', 'publish_ground_truth:=true',
-                            '-p', 'tracker_sigma_mm:=1.0'])
-    recovery = NodeProcess(DOMAIN, state_dir=tmp_path_factory.mktemp('state'), env=env,
-                           args=['-p', f'gesture_file:={DEMO}', '-p', 'contingency_table:=false'])
-    player = NodeProcess(DOMAIN, command=player_command(), env=env,
-                         args=['-p', 'on_structure_change:=adapt', '-p', f'gesture_file:={DEMO}'])
+    kept = tmp_path_factory.mktemp('player') / 'explored.json'
+    procs = {'sim': NodeProcess(DOMAIN, command=sim_command(), env=env, args=[
+        '-p', 'hidden_tool_right_mm:=50.0', '-p', 'publish_ground_truth:=true',
+        '-p', 'tracker_sigma_mm:=1.0']),
+        'recovery': NodeProcess(DOMAIN, state_dir=tmp_path_factory.mktemp('state'), env=env,
+                                args=['-p', f'gesture_file:={DEMO}',
+                                      '-p', 'contingency_table:=false']),
+        'player': start_player(kept)}
     arms = ExploreRecorder(DOMAIN)
     try:
         arms.wait(lambda: (arms.newest_library() or {}).get('circle') is not None, TIMEOUT,
                   'the demo library')
         arms.wait(lambda: arms.states > 10 and arms.truth, TIMEOUT, 'the simulator')
-        yield arms, sim, recovery, player
+        yield arms, procs, kept
     finally:
         arms.close()
-        codes = [proc.stop() for proc in (player, recovery, sim)]
-        for proc, code in zip((player, recovery, sim), codes):
+        order = [procs[k] for k in ('player', 'recovery', 'sim')]
+        codes = [proc.stop() for proc in order]
+        for proc, code in zip(order, codes):
             assert code == 0, proc.describe()
-        for proc in (player, recovery):
+        for proc in order[:2]:
             assert 'Traceback' not in proc.stderr + proc.stdout, proc.describe()
 
 
 def test_the_circle_is_explored_on_the_robot_and_replayed_on_its_path(world):
-    arms, sim, recovery, player = world
+    arms, procs, kept = world
+    player = procs['player']
     began = time.monotonic()
     since = len(arms.commands)
     first = arms.play('circle', timeout=30.0)
@@ -175,3 +186,16 @@ def test_the_circle_is_explored_on_the_robot_and_replayed_on_its_path(world):
     assert not [n for n, v in params.items() if 'hidden' in n or v == 50.0], params
     assert not [s for s in (player.stdout + player.stderr).splitlines()
                 if 'structure change suspected' in s][1:], player.describe()   # once only
+    # A restarted player serves the explored circle again, from explore_state_file.
+    assert kept.exists()
+    assert player.stop() == 0 and 'Traceback' not in player.stderr, player.describe()
+    procs['player'] = player = start_player(kept)
+    player.wait_output('circle: explored version restored from')
+    since = len(arms.commands)
+    again = arms.play('circle', timeout=30.0)
+    assert again.success, again.message
+    restarted = arms.errors(arms.play_window(since))
+    print(f'after a restart of the player: {restarted.mean():.2f} mm mean, '
+          f'{restarted.max():.2f} max ({len(restarted)} samples)')
+    assert restarted.mean() <= 3.0 and restarted.max() <= 10.0, restarted
+    assert not arms.exploration('running') and 'structure change' not in player.stderr

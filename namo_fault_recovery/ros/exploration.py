@@ -29,6 +29,7 @@ gesture is the one it was explored from (the same keyframes), and it is publishe
 
 from dataclasses import dataclass, replace
 import math
+import os
 import threading
 import time
 
@@ -50,8 +51,10 @@ from ..explore.safety import capsule_clearance
 from ..explore.trial import SafetyCheck, TrialSession
 from ..model.gestures import load_library
 from ..model.robot_profile import load_profile
+from ..playback.book import GestureTrack
 from ..recovery.motion import DEFAULT_DISTORTION_MM, typical_points
 from ..resources import config_path, NAMO_PROFILE_FILE
+from ..runtime.explored_store import load_motions, save_motions, stored
 from ..runtime.trial_robot import RosTrialRobot, TrialTimeout, TrialTiming
 
 STATUS_NAME = 'gesture_player: exploration'
@@ -87,6 +90,9 @@ def declare_exploration(node) -> dict:
                                            'measures after this long even if not still'),
         'explore_margin_mm': _declare(node, 'explore_margin_mm', 5.0, 'self-collision '
                                       'clearance (mm, by the model) every trial keeps'),
+        'explore_state_file': _declare(node, 'explore_state_file', '', 'JSON file the '
+                                       'explored motions are kept in across restarts (~ '
+                                       'expanded; empty: not kept)'),
     }
     if p['explore_method'] not in METHODS:
         raise ValueError(f'explore_method: {p["explore_method"]!r}; expected one of '
@@ -129,6 +135,67 @@ class PlayerHooks:
     wake: object              # () -> wake the executor (a future was completed)
 
 
+def restored(kept) -> Explored:
+    """Return the Explored of a StoredMotion (served for its base keyframes only)."""
+    base = GestureTrack(kept.name, kept.joint_names, np.array(kept.times),
+                        np.array(kept.base), 0)
+    return Explored(base, replace(base, positions=np.array(kept.positions)), None)
+
+
+def explored_message(track, positions) -> JointTrajectory:
+    """Return ``~/explored_motions``' message: ``positions`` on ``track``'s joints and times."""
+    msg = JointTrajectory(joint_names=list(track.joint_names))
+    msg.header.frame_id = track.name
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(track.stamp), 10 ** 9)
+    for t, q in zip(track.times, positions):
+        msg.points.append(JointTrajectoryPoint(positions=[float(a) for a in q],
+                                               time_from_start=duration_msg(float(t))))
+    return msg
+
+
+def outcome_values(session, res) -> dict:
+    """Return the status values of a TrialSession's cost and an ExploredMotion (if any)."""
+    values = {}
+    if session is not None:
+        values.update({'trials': str(session.trials), 'refused': str(session.refused),
+                       'robot_seconds': f'{session.seconds:.2f}'})
+    if res is not None:
+        values.update({
+            'origin': res.origin, 'status': res.status,
+            'typical_points': str(len(res.typical)),
+            'trials_per_point': ' '.join(map(str, res.trials_per_point)),
+            'measured_error_mm': f'{res.measured_mean_mm:.2f}',
+            'measured_error_max_mm': f'{max(res.measured_error_mm):.2f}',
+            'stage': str(res.stage), 'free_joints': ' '.join(res.free_joints),
+            'correction': res.correction})
+    return values
+
+
+def motion_spec(explorer, track, side) -> tuple:
+    """Return (MotionSpec, SafetyCheck) of ``track``'s ``side`` arm for an Exploration."""
+    robot, gesture = explorer.robot, explorer.library[track.name]
+    names = robot.arms[side].joint_names
+    design = track.positions[:, [track.joint_names.index(j) for j in names]]
+    if len(design) > DENSE:
+        picks = tuple(int(p) for p in typical_points(robot, [gesture],
+                                                     DEFAULT_DISTORTION_MM, 2)
+                      [gesture.name].typical)
+    else:
+        picks = tuple(range(len(design)))
+    locks = {names.index(j): a for j, a in explorer.hooks.locks().items() if j in names}
+    chain = explorer.chains[side]
+    spec = MotionSpec(track.name, chain, design, picks, locks,
+                      motion_layouts(robot, gesture, side,
+                                     {j: a for j, a in explorer.hooks.locks().items()
+                                      if j in names}), names)
+    measured = explorer.hooks.measured()
+    held = np.array([measured.get(j, 0.0) for j in robot.joint_names])
+    safety = SafetyCheck(chain.lower, chain.upper, explorer.arms[side].velocity,
+                         capsule_clearance(robot, side, held),
+                         explorer.params['explore_margin_mm'])
+    return spec, safety
+
+
 class Exploration:
     """Attached to the player: the services, the worker thread, the explored motions."""
 
@@ -150,12 +217,45 @@ class Exploration:
             lambda q, duration, s=side: self._send(s, q, duration), self._now,
             self.params['timing']) for side in robot.arms}
         self.explored = {}             # gesture -> Explored
+        self.kept = {}                 # gesture -> StoredMotion (explore_state_file)
         self.noticed = None            # (gesture, side) of the last suspicion
         self.active = None             # (gesture, side) while an exploration runs or waits
         self._stop = threading.Event()
         self._thread = None
         self._lock = threading.Lock()
         self._create_interfaces(callback_group, service_group)
+        self._restore()
+
+    def _restore(self):
+        """Serve the motions kept in ``explore_state_file`` (a bad file: one-line error)."""
+        path = os.path.expanduser(self.params['explore_state_file'])
+        if not path:
+            return
+        try:
+            self.kept = load_motions(path)
+        except ValueError as exc:
+            self.node.get_logger().error(f'explore_state_file: {exc}; starting without '
+                                         f'explored motions')
+            return
+        for name, kept in self.kept.items():
+            self.explored[name] = restored(kept)
+            self.node.get_logger().info(
+                f'{name}: explored version restored from {path} ({kept.side} arm, '
+                f'{kept.trials} trials, measured {np.mean(kept.measured_error_mm):.2f} mm '
+                f'mean; correction {", ".join(kept.groups) or "none"})')
+
+    def _keep(self, track, side, positions, res):
+        """Write every explored motion to ``explore_state_file`` (if set; never fatal)."""
+        path = os.path.expanduser(self.params['explore_state_file'])
+        if not path:
+            return
+        self.kept[track.name] = stored(track.name, side, track.joint_names, track.times,
+                                       track.positions, positions, res)
+        try:
+            save_motions(path, self.kept)
+        except OSError as exc:
+            self.node.get_logger().error(f'cannot write {path}: {exc}; the explored '
+                                         f'{track.name} will not survive a restart')
 
     def _create_interfaces(self, group, services):
         node = self.node
@@ -298,8 +398,10 @@ class Exploration:
         finally:
             with self._lock:
                 self.active = None
-            log = self.node.get_logger()
-            (log.info if ok else log.warning)(text)
+            if ok:          # one call site per severity (rclpy's rule)
+                self.node.get_logger().info(text)
+            else:
+                self.node.get_logger().warning(text)
             if future is not None:
                 future.set_result((ok, text))
                 self.hooks.wake()
@@ -309,7 +411,7 @@ class Exploration:
         track = self.hooks.track(gesture)
         if track is None:
             raise KeyError(f'{gesture!r} is not in the library received')
-        spec, safety = self._spec(track, side)
+        spec, safety = motion_spec(self, track, side)
         picks = list(spec.picks)
         targets = dict(zip(picks, spec.chain.batch_forward(spec.design[picks]).tip))
         session = TrialSession(self.arms[side], safety)
@@ -330,30 +432,6 @@ class Exploration:
                      'on', session, res)
         return True, text
 
-    def _spec(self, track, side):
-        """Return the MotionSpec and the SafetyCheck of ``track``'s ``side`` arm."""
-        robot, gesture = self.robot, self.library[track.name]
-        names = robot.arms[side].joint_names
-        design = track.positions[:, [track.joint_names.index(j) for j in names]]
-        if len(design) > DENSE:
-            picks = tuple(int(p) for p in typical_points(robot, [gesture],
-                                                         DEFAULT_DISTORTION_MM, 2)
-                          [gesture.name].typical)
-        else:
-            picks = tuple(range(len(design)))
-        locks = {names.index(j): a for j, a in self.hooks.locks().items() if j in names}
-        chain = self.chains[side]
-        spec = MotionSpec(track.name, chain, design, picks, locks,
-                          motion_layouts(robot, gesture, side,
-                                         {j: a for j, a in self.hooks.locks().items()
-                                          if j in names}), names)
-        measured = self.hooks.measured()
-        held = np.array([measured.get(j, 0.0) for j in robot.joint_names])
-        safety = SafetyCheck(chain.lower, chain.upper, self.arms[side].velocity,
-                             capsule_clearance(robot, side, held),
-                             self.params['explore_margin_mm'])
-        return spec, safety
-
     def _send(self, side, q, duration):
         """Command ``side``'s controller to reach ``q`` in ``duration`` s (from now)."""
         names = self.robot.arms[side].joint_names
@@ -373,13 +451,8 @@ class Exploration:
         positions = np.array(track.positions, dtype=float)
         positions[:, [track.joint_names.index(j) for j in names]] = res.q
         self.explored[track.name] = Explored(track, replace(track, positions=positions), res)
-        msg = JointTrajectory(joint_names=list(track.joint_names))
-        msg.header.frame_id = track.name
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(track.stamp), 10 ** 9)
-        for t, q in zip(track.times, positions):
-            msg.points.append(JointTrajectoryPoint(positions=[float(a) for a in q],
-                                                   time_from_start=duration_msg(float(t))))
-        self._explored_pub.publish(msg)
+        self._keep(track, side, positions, res)
+        self._explored_pub.publish(explored_message(track, positions))
 
     def _progress(self, session, gesture, side, targets):
         """Publish the progress before each trial; return True to stop (should_stop)."""
@@ -400,18 +473,8 @@ class Exploration:
                  'stopped': DiagnosticStatus.WARN}.get(state, DiagnosticStatus.ERROR)
         values = {'state': state, 'gesture': gesture, 'arm': str(side),
                   'method': self.params['explore_method']}
-        if session is not None:
-            values.update({'trials': str(session.trials), 'refused': str(session.refused),
-                           'robot_seconds': f'{session.seconds:.2f}'})
+        values.update(outcome_values(session, res))
         if res is not None:
-            values.update({
-                'origin': res.origin, 'status': res.status,
-                'typical_points': str(len(res.typical)),
-                'trials_per_point': ' '.join(map(str, res.trials_per_point)),
-                'measured_error_mm': f'{res.measured_mean_mm:.2f}',
-                'measured_error_max_mm': f'{max(res.measured_error_mm):.2f}',
-                'stage': str(res.stage), 'free_joints': ' '.join(res.free_joints),
-                'correction': res.correction})
             found = self.explored.get(gesture)
             if found is not None and found.result is res:
                 values['library_stamp'] = str(found.base.stamp)

@@ -352,8 +352,6 @@ class GesturePlayer(Node):
     async def _play_gesture(self, gesture):
         if self._play is not None:
             return Outcome(False, f'busy playing {self._play[0]!r}')
-        if self._exploration.busy():
-            return Outcome(False, self._exploration.busy())
         end = time.monotonic() + self._waits['library']
         while self._book.library_outdated() and time.monotonic() < end:
             await self._wait(end)
@@ -383,7 +381,7 @@ class GesturePlayer(Node):
         if idle:
             return Outcome(False, f'nobody subscribes to {idle[0]}/joint_trajectory; is the '
                                   f'controller running?')
-        if self._exploration.busy():      # it started while this play waited
+        if self._exploration.busy():      # no trials while a gesture plays
             return Outcome(False, self._exploration.busy())
         future = Future()
         session = CarryOn(plan, list(self._groups.values()), self._monitor, self._replan,
@@ -393,7 +391,8 @@ class GesturePlayer(Node):
                           functools.partial(pressed_joints, self._robot, self._joints))
         self._play = (gesture, session, time.monotonic(), future)
         self._send(plan)
-        self._structure.start(gesture, design)
+        self._structure.start(gesture, design, None if track is designed  # explored:
+                              else np.ptp(track.times))           # not its approach
         return await future
 
     def _plan(self, track, played=None):   # timed as ``played`` is (its approach), if given
