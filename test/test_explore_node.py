@@ -10,6 +10,8 @@ played again, as explored.  The replay's true fingertip (the simulator's ground 
 keeps to the designed path within the issue's target (mean <= 3 mm, max <= 10 mm), and
 the recovery node's parameters never held the tool.  The player is then restarted: it
 serves the explored circle again from its ``explore_state_file``, on the path as well.
+Last, an exploration is started and ended by ``~/stop_exploration``, another by a new
+``/actuator_fault``, each within one trial (and a play asked for meanwhile is refused).
 The figures (trials, robot seconds, the error before and after) are printed.
 """
 
@@ -31,6 +33,8 @@ import pytest
 from rcl_interfaces.srv import GetParameters, ListParameters
 from rclpy.parameter import parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
 
 pytestmark = pytest.mark.slow
 
@@ -83,6 +87,27 @@ class ExploreRecorder(Recorder):
         future = client.call_async(request)
         assert wait_until(future.done, TIMEOUT), name
         return future.result()
+
+    def call_async(self, name):
+        """Call a std_srvs/Trigger service without waiting; return its future."""
+        client = self.node.create_client(Trigger, name)
+        assert client.wait_for_service(timeout_sec=TIMEOUT), name
+        return client.call_async(Trigger.Request())
+
+    def stopped_within_one_trial(self, stop):
+        """Start ~/explore, wait for its first trials, ``stop()`` it; check it ended at once."""
+        answer = self.call_async('/gesture_player/explore')
+        running = self.wait(lambda: self.exploration('running'), 30.0, 'a running exploration')
+        refused = self.play('circle', timeout=10.0)
+        assert not refused.success and 'busy exploring' in refused.message, refused.message
+        seen = int(self.exploration('running')['trials'])
+        stop()
+        assert wait_until(answer.done, 10.0), 'no answer from ~/explore after the stop'
+        assert not answer.result().success and 'stopped' in answer.result().message
+        final = self.exploration()
+        assert final['state'] == 'stopped', final
+        assert int(final['trials']) <= seen + 1, (seen, final)      # within one trial
+        return int(running['trials']), int(final['trials'])
 
     def play_window(self, since):
         """
@@ -199,3 +224,12 @@ def test_the_circle_is_explored_on_the_robot_and_replayed_on_its_path(world):
           f'{restarted.max():.2f} max ({len(restarted)} samples)')
     assert restarted.mean() <= 3.0 and restarted.max() <= 10.0, restarted
     assert not arms.exploration('running') and 'structure change' not in player.stderr
+    # A stop request, then a new fault, each end an exploration within one trial; no play
+    # while it runs.
+    stop = arms.trigger('/gesture_player/stop_exploration')
+    assert not stop.success and 'no exploration is running' in stop.message
+    arms.stopped_within_one_trial(
+        lambda: arms.trigger('/gesture_player/stop_exploration').success or pytest.fail())
+    fault = arms.node.create_publisher(JointState, '/actuator_fault', 10)
+    arms.stopped_within_one_trial(lambda: fault.publish(
+        JointState(name=['left_arm_joint7'], position=[0.0])))
