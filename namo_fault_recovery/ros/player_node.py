@@ -23,7 +23,10 @@ on ``/actuator_fault`` mid-play is carried on through the same way (the joint he
 its measured angle).  Without that library in time (or with ``carry_on_wait_sec`` 0)
 the play fails with the fault, and the next play waits (``library_wait_sec``) for the
 new version.  The callbacks never wait: the play's ``async`` service callback awaits a
-future that the joint-state, library, fault and timer callbacks complete.
+future that the joint-state, library, fault and timer callbacks complete.  The structure
+watch (:mod:`.structure_watch`) compares the tracked fingertips with the designed path;
+the exploration on the robot (:mod:`.exploration`: ``~/explore``, a worker thread of its
+own) adapts a motion to what it noticed, and the explored version is played from then on.
 """
 
 import functools
