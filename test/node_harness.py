@@ -92,6 +92,16 @@ def stress_domain(index):
     return base + index
 
 
+def explore_domain():
+    """
+    Return a ROS domain id for the exploration test module, apart from all the others.
+
+    202 and up (to 221, below ROS 2's highest usable id, 232): no other module and no
+    stress test uses them, whatever the session's base.
+    """
+    return int(os.environ.get('NAMO_TEST_EXPLORE_DOMAIN', 202 + os.getpid() % 20))
+
+
 def proc_status_kb(pid, field='VmRSS'):
     """Return one ``kB`` figure of /proc/<pid>/status (e.g. VmRSS, VmHWM)."""
     for line in Path(f'/proc/{pid}/status').read_text().splitlines():

@@ -64,6 +64,15 @@ def test_a_stuck_joint_is_not_taken_for_a_structure_change():
     assert np.max(np.linalg.norm(tip - tip[0], axis=1)) > 100.0
 
 
+def test_samples_before_the_watched_part_are_ignored():
+    plan = plan_of('bye')
+    watch = DeviationWatch(ROBOT, plan, 0.0, DeviationThresholds(), begin=1.0)
+    far = watch.designed['right'][0] + 200.0
+    assert all(watch.fingertip('right', t, far) is None for t in np.arange(0.0, 1.0, 0.02))
+    found = [watch.fingertip('right', t, far) for t in np.arange(1.0, 2.0, 0.02)]
+    assert any(f is not None for f in found)        # from 1 s on, the same samples count
+
+
 def test_the_designed_distance_allows_the_lag_window():
     watch = DeviationWatch(ROBOT, plan_of('bye'), 0.0, DeviationThresholds(lag_s=0.1))
     t = 1.0

@@ -84,8 +84,10 @@ class DeviationWatch:
     """
 
     def __init__(self, robot, plan, start: float,
-                 thresholds: DeviationThresholds = DeviationThresholds()):
+                 thresholds: DeviationThresholds = DeviationThresholds(), begin: float = 0.0):
+        """Watch ``plan`` from ``begin`` s into it (samples captured earlier are ignored)."""
         self.robot, self.start, self.thresholds = robot, float(start), thresholds
+        self.begin = float(begin)
         self.duration = plan.duration
         self.times = np.asarray(plan.times, dtype=float)
         self.joints, self.designed = {}, {}
@@ -136,7 +138,7 @@ class DeviationWatch:
     def fingertip(self, side: str, stamp: float, point_mm) -> Suspicion | None:
         """Take one tracked sample (capture stamp in s, point in mm); return a new Suspicion."""
         t = stamp - self.start
-        if side not in self.designed or side in self.suspected or t < 0:
+        if side not in self.designed or side in self.suspected or t < self.begin:
             return None
         designed = self.designed_distance(side, t, point_mm)
         explained = self.explained_distance(side, stamp, point_mm)

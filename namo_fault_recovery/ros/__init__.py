@@ -30,6 +30,8 @@ The gesture player and the simulated robot:
   and reports a joint that stays off its command;
 - :mod:`.structure_watch`: the player's watch for a structure change (the tracked
   fingertip off the designed path), on ``/diagnostics`` and ``/structure_change``;
+- :mod:`.exploration`: the player's exploration on the robot (``~/explore``, a worker
+  thread, progress on ``/diagnostics``, the explored motions it then plays);
 - :mod:`.sim_node`: ``namo_sim``, Namo in MuJoCo behind two joint trajectory controllers,
   with a structure the planner does not know and a fingertip tracker (the physics, the
   controller rules, the changes and the tracker are in ``sim/``, free of ROS);

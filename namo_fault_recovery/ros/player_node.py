@@ -23,7 +23,10 @@ on ``/actuator_fault`` mid-play is carried on through the same way (the joint he
 its measured angle).  Without that library in time (or with ``carry_on_wait_sec`` 0)
 the play fails with the fault, and the next play waits (``library_wait_sec``) for the
 new version.  The callbacks never wait: the play's ``async`` service callback awaits a
-future that the joint-state, library, fault and timer callbacks complete.
+future that the joint-state, library, fault and timer callbacks complete.  The structure
+watch (:mod:`.structure_watch`) compares the tracked fingertips with the designed path;
+the exploration on the robot (:mod:`.exploration`: ``~/explore``, a worker thread of its
+own) adapts a motion to what it noticed, and the explored version is played from then on.
 """
 
 import functools
@@ -46,6 +49,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from .exploration import Exploration, PlayerHooks
 from .messages import duration_msg, stamp_key, status_values, trajectory_angles
 from .spin import run_node
 from .structure_watch import StructureWatch
@@ -160,6 +164,27 @@ def _joint_limits(robot, joints):
     return np.array(limits), np.array(lower), np.array(upper)
 
 
+def plan_message(plan, joints) -> JointTrajectory:
+    """Return the JointTrajectory of ``plan`` for one controller's ``joints`` (no t = 0)."""
+    positions, velocities = plan.columns(joints)
+    msg = JointTrajectory(joint_names=list(joints))
+    for t, q, v in zip(plan.times, positions, velocities):
+        if t <= 0.0:
+            continue       # the controller starts from where the arm is
+        msg.points.append(JointTrajectoryPoint(
+            positions=[float(a) for a in q], velocities=[float(a) for a in v],
+            time_from_start=duration_msg(float(t))))
+    return msg
+
+
+def explorer(player, robot, inputs, services) -> Exploration:
+    """Return the player's :class:`~.exploration.Exploration`, wired to its state."""
+    return Exploration(player, robot, PlayerHooks(
+        player._command_pubs, player._groups, lambda: player._play is not None,
+        player._book.gesture, lambda: player._book.locks(dict(player._measured)),
+        lambda: dict(player._measured), player._wake.trigger), inputs, services)
+
+
 class GesturePlayer(Node):
     """Play gestures of the current library on trajectory controllers."""
 
@@ -200,6 +225,8 @@ class GesturePlayer(Node):
                               for c in self._groups}
         self.create_timer(TICK, self._tick, callback_group=inputs)
         self._structure = StructureWatch(self, self._robot, inputs)   # structure_watch.py
+        self._exploration = explorer(self, self._robot, inputs, self._service_group)
+        self._structure.on_notice = self._exploration.notice
         self.get_logger().info(f'controllers: {", ".join(self._groups)}; waiting for '
                                f'/gesture_library')
 
@@ -331,7 +358,8 @@ class GesturePlayer(Node):
         end = time.monotonic() + self._waits['library']
         while self._book.library_outdated() and time.monotonic() < end:
             await self._wait(end)
-        track = self._book.gesture(gesture)
+        designed = self._book.gesture(gesture)
+        track = self._exploration.served(designed)       # its explored version, if any
         if track is None:
             return Outcome(False, 'not in the library')
         end = time.monotonic() + self._waits['first_states']
@@ -345,6 +373,7 @@ class GesturePlayer(Node):
                                   + (', '.join(missing[:3]) if missing else 'the arms'))
         try:
             plan = self._plan(track)
+            design = plan if track is designed else self._plan(designed, track)   # watched
         except (KeyError, ValueError) as exc:
             return Outcome(False, f'cannot plan: {exc}')
         end = time.monotonic() + self._waits['first_states']
@@ -355,6 +384,8 @@ class GesturePlayer(Node):
         if idle:
             return Outcome(False, f'nobody subscribes to {idle[0]}/joint_trajectory; is the '
                                   f'controller running?')
+        if self._exploration.busy():      # no trials while a gesture plays
+            return Outcome(False, self._exploration.busy())
         future = Future()
         session = CarryOn(plan, list(self._groups.values()), self._monitor, self._replan,
                           BlendLimits(self._limits[0],
@@ -363,12 +394,15 @@ class GesturePlayer(Node):
                           functools.partial(pressed_joints, self._robot, self._joints))
         self._play = (gesture, session, time.monotonic(), future)
         self._send(plan)
-        self._structure.start(gesture, plan)
+        self._structure.start(gesture, design, None if track is designed  # explored:
+                              else np.ptp(track.times))           # not its approach
         return await future
 
-    def _plan(self, track):
+    def _plan(self, track, played=None):   # timed as ``played`` is (its approach), if given
         columns = [track.joint_names.index(j) for j in self._joints]
-        start = [self._measured[j] for j in self._joints]
+        start = np.array([self._measured[j] for j in self._joints])
+        if played is not None:      # the same approach: from as far from the first frame
+            start += track.positions[0, columns] - played.positions[0, columns]
         return self._plan_frames(track.times, track.positions[:, columns], start,
                                  self._book.locks(dict(self._measured)))
 
@@ -398,7 +432,7 @@ class GesturePlayer(Node):
         ago = time.monotonic() - start - session.segment_start
         stamp = self.get_clock().now() - Duration(nanoseconds=int(max(ago, 0.0) * 1e9))
         for controller, joints in self._groups.items():
-            msg = self._trajectory(plan, joints)
+            msg = plan_message(plan, joints)
             msg.header.stamp = stamp.to_msg()
             self._command_pubs[controller].publish(msg)
 
@@ -413,18 +447,6 @@ class GesturePlayer(Node):
                 self._offer(track)        # the answer may have come first
         if step.outcome is not None and self._play is not None:
             self._finish(step.outcome)
-
-    @staticmethod
-    def _trajectory(plan, joints):
-        positions, velocities = plan.columns(joints)
-        msg = JointTrajectory(joint_names=list(joints))
-        for t, q, v in zip(plan.times, positions, velocities):
-            if t <= 0.0:
-                continue       # the controller starts from where the arm is
-            msg.points.append(JointTrajectoryPoint(
-                positions=[float(a) for a in q], velocities=[float(a) for a in v],
-                time_from_start=duration_msg(float(t))))
-        return msg
 
     def _report(self, faults):
         """Publish the faults the play detected; hold them in every later play too."""
@@ -458,6 +480,10 @@ class GesturePlayer(Node):
                 joint_names=list(joints), points=[JointTrajectoryPoint(
                     positions=q, velocities=[0.0] * len(joints),
                     time_from_start=duration_msg(0.2))]))
+
+    def stop(self):
+        """End an exploration under way (run_node calls it as the node stops)."""
+        self._exploration.stop()
 
 
 def main(args=None):

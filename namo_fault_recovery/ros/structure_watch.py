@@ -12,9 +12,9 @@ and the stamped ``/joint_states``, and during each play feeds them to a
   ``on_structure_change``;
 - on ``/structure_change`` (diagnostic_msgs/DiagnosticStatus, reliable, transient local,
   depth 10), the same status, with ``adapt`` = ``true`` when ``on_structure_change`` is
-  ``adapt``: the request an exploration service consumes to start adapting that arm on
-  its own; with ``report`` (``adapt`` = ``false``) it waits to be asked.  This version
-  has no exploration: nothing here adapts anything.
+  ``adapt``: the player's exploration (:mod:`.exploration`, told through ``on_notice``)
+  then adapts that arm on its own once the play has ended; with ``report``
+  (``adapt`` = ``false``) it waits for ``~/explore``.
 """
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -56,6 +56,7 @@ class StructureWatch:
                           'tracker topics <prefix>/<side> (empty: no watch)')
         self.watch, self.gesture = None, None
         self.suspicions = []
+        self.on_notice = None          # on_notice(gesture, side, adapt): the exploration's
         if not prefix:
             return
         for side in robot.arms:
@@ -75,10 +76,18 @@ class StructureWatch:
     def _now(self):
         return self.node.get_clock().now().nanoseconds * 1e-9
 
-    def start(self, gesture, plan):
-        """Watch a play whose motion starts now."""
+    def start(self, gesture, plan, keyframe_span=None):
+        """
+        Watch a play whose motion starts now.
+
+        ``keyframe_span`` (s, the gesture's keyframes from first to last): only its end of
+        the plan is watched, not the approach before it (None: all of it).  An explored
+        version is watched against the designed path so: its approach, from wherever the
+        last trial left the arm, has no designed counterpart.
+        """
         if hasattr(self, '_diag_pub'):
-            self.watch = DeviationWatch(self.robot, plan, self._now(), self.thresholds)
+            begin = 0.0 if keyframe_span is None else max(plan.duration - keyframe_span, 0.0)
+            self.watch = DeviationWatch(self.robot, plan, self._now(), self.thresholds, begin)
             self.gesture = gesture
 
     def stop(self):
@@ -109,6 +118,8 @@ class StructureWatch:
                                   hardware_id=self.robot.name,
                                   values=[KeyValue(key=k, value=v) for k, v in values.items()])
         self.suspicions.append(found)
+        if self.on_notice is not None:
+            self.on_notice(self.gesture, found.side, adapt)
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.node.get_clock().now().to_msg()
         self._diag_pub.publish(msg)

@@ -21,6 +21,10 @@ fast unit tests that need no DDS.
 - :mod:`.restore`: the checks before publishing, and the restore decision;
 - :mod:`.state_store`: the persisted fault set and library (no ROS types);
 - :mod:`.diagnostic_keys`: the ``/diagnostics`` names and keys shared by writer and readers;
+- :mod:`.trial_robot`: the gesture player's trial robot for exploration (one arm's
+  command, settle, tracker readings), fed by its callbacks, waited on by its worker;
+- :mod:`.explored_store`: the player's explored motions and their fitted corrections
+  on disk (``explore_state_file``), so that a restart serves them again;
 - :mod:`.private_node`: the node processes that the demos, the node benchmarks and the
   tests start (the executables' commands, a private domain, one way to stop a process).
 """
