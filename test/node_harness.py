@@ -97,9 +97,9 @@ def explore_domain():
     Return a ROS domain id for the exploration test module, apart from all the others.
 
     202 and up (to 221, below ROS 2's highest usable id, 232): no other module and no
-    stress test uses them, whatever the session's base.
+    stress test uses them, whatever the session's slot (:func:`session_slot`).
     """
-    return int(os.environ.get('NAMO_TEST_EXPLORE_DOMAIN', 202 + os.getpid() % 20))
+    return int(os.environ.get('NAMO_TEST_EXPLORE_DOMAIN', 202 + session_slot()))
 
 
 def proc_status_kb(pid, field='VmRSS'):
