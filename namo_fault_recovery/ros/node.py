@@ -102,7 +102,14 @@ def describe_reports(reports, lock_strategy):
 class RecoveryNode(Node):
     """The fault-recovery node; see the module docstring and ``msg_docs/``."""
 
-    def __init__(self, **kwargs):
+    def __init__(self, engine=None, **kwargs):
+        """
+        Build the node; raise StartupError (one line) for a bad configuration.
+
+        ``engine``: an :class:`EngineProcess` started early (:meth:`EngineProcess.early`,
+        by ``recovery_node`` before its imports), given its files here; else one is
+        started here.  Either way the node owns it from here and stops it.
+        """
         super().__init__(NODE_NAME, **kwargs)
         self._ready = False
         self._last_param_reason = None
@@ -121,9 +128,9 @@ class RecoveryNode(Node):
                                                           or self._inputs.log_pending()))
         self._inputs = InputMonitor(self._robot, self._log_rejection, self._tick.wake)
         self._last_stamp_ns = 0
-        self._engine = EngineProcess(values['robot_file'] or None, values['gesture_file'] or None,
-                                     values['engine_start_timeout_sec'])
-        self._engine.start()
+        self._engine = engine or EngineProcess()
+        self._engine.load(values['robot_file'] or None, values['gesture_file'] or None,
+                          values['engine_start_timeout_sec'])
         # The engine process imports, loads and warms up (about a second): the node is
         # not ready to meet its deadline before, so it waits here (a signal still ends it).
         try:
