@@ -7,6 +7,9 @@ run book (:mod:`.run_book`) says which library is wanted; the dispatcher
 publishes.  Nothing here blocks an executor thread: joint states are kept raw (parsed only
 when needed), services answer from ``async`` callbacks that await the run book, and the
 periodic work runs on a steady clock, independent of ``use_sim_time``.
+``RecoveryNode(engine=...)`` takes an engine started early (``EngineProcess.early()``, as
+``recovery_node`` does before its imports) and gives it its files; without one it starts
+its own.  It stops it either way.
 
 An idle node wakes only for what is due: ``/diagnostics`` once per
 ``diagnostics_period_sec`` (the heartbeat), and a 10 Hz tick only while it has work (a
@@ -103,13 +106,6 @@ class RecoveryNode(Node):
     """The fault-recovery node; see the module docstring and ``msg_docs/``."""
 
     def __init__(self, engine=None, **kwargs):
-        """
-        Build the node; raise StartupError (one line) for a bad configuration.
-
-        ``engine``: an :class:`EngineProcess` started early (:meth:`EngineProcess.early`,
-        by ``recovery_node`` before its imports), given its files here; else one is
-        started here.  Either way the node owns it from here and stops it.
-        """
         super().__init__(NODE_NAME, **kwargs)
         self._ready = False
         self._last_param_reason = None

@@ -41,31 +41,38 @@ def die_with_parent(parent_pid=None):
         os._exit(0)     # the parent is already gone: nobody is left to read our answers
 
 
-def _serve(conn, current, parent_pid=None):
+def _load_models(conn):
     """
-    Child main loop: import, load the models, warm up, then answer until told to stop.
+    Child: return the (robot, library) the first message names; None if told to stop.
 
-    The robot and gesture files are the first message: a child started before the
-    node knew them (:meth:`EngineProcess.early`) does its imports meanwhile.
+    The files come over the pipe: a child started before the node knew them
+    (:meth:`EngineProcess.early`) has done its imports meanwhile.
     """
-    signal.signal(signal.SIGINT, signal.SIG_IGN)     # Ctrl-C is the parent's to handle
-    die_with_parent(parent_pid)
     from ..model.gestures import load_library
     from ..model.robot import load_robot
+    try:
+        files = conn.recv()
+    except (EOFError, OSError):
+        return None                                  # the node went away (or refused)
+    if files is _STOP:
+        return None
+    robot = load_robot(files[0])
+    # The node reports the library's warnings; the engine child loads it silently.
+    return robot, load_library(robot, files[1], on_warning=lambda line: None)
+
+
+def _serve(conn, current, parent_pid=None):
+    """Child main loop: import, load the models, warm up, then answer until told to stop."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)     # Ctrl-C is the parent's to handle
+    die_with_parent(parent_pid)
     from ..optimize.base import Clock
     from ..recovery.engine import recover, RecoverySettings
     from ..recovery.motion import typical_points
 
-    try:
-        files = conn.recv()
-    except (EOFError, OSError):
-        return                                       # the node went away (or refused)
-    if files is _STOP:
+    models = _load_models(conn)
+    if models is None:
         return
-    robot_file, gesture_file = files
-    robot = load_robot(robot_file)
-    # The node reports the library's warnings; the engine child loads it silently.
-    library = load_library(robot, gesture_file, on_warning=lambda line: None)
+    robot, library = models
     cache = {}
 
     def quantisations(vq_distortion_mm, clock=None):
