@@ -7,6 +7,7 @@ each other; the node subprocess and the rclpy client of the test share it.
 """
 
 import atexit
+import json
 import math
 import os
 from pathlib import Path
@@ -213,6 +214,44 @@ class NodeProcess:
             self._err.close()
             shutil.rmtree(self._logdir, ignore_errors=True)
         return self.proc.returncode
+
+
+class ForkedStart:
+    """The outcome of one start-up run by ``node_refusals.py``: exit code and output."""
+
+    def __init__(self, argv, code, stdout, stderr):
+        self.argv, self.code, self.stdout, self.stderr = argv, code, stdout, stderr
+
+    def describe(self):
+        """Return the command line, exit code and output, for assertion messages."""
+        return (f'{" ".join(self.argv)}: exit code {self.code}\n--- stdout\n{self.stdout}'
+                f'\n--- stderr\n{self.stderr}')
+
+
+def forked_starts(domain, arg_lists, timeout=120.0):
+    """
+    Run ``recovery_node``'s ``main()`` once per ROS argument list; return ForkedStart each.
+
+    One process imports the node's modules, then forks a child per list that runs what
+    the console script runs (see ``node_refusals.py``): the same start-up and the same
+    refusal as a node process of its own, without paying its interpreter start and
+    imports each time.  For start-ups that end before the network (bad configurations).
+    """
+    folder = Path(tempfile.mkdtemp(prefix='namo_forked_'))
+    try:
+        argvs = [[node_command()[-1], '--ros-args', *args] for args in arg_lists]
+        cases = [[argv, str(folder / f'{i}.out'), str(folder / f'{i}.err')]
+                 for i, argv in enumerate(argvs)]
+        run = subprocess.run([sys.executable, str(Path(__file__).with_name('node_refusals.py'))],
+                             input=json.dumps(cases), capture_output=True, text=True,
+                             env=ros_env(domain), timeout=timeout)
+        assert run.returncode == 0, run.stdout + run.stderr
+        codes = json.loads(run.stdout.splitlines()[-1])
+        return [ForkedStart(argv, code, Path(out).read_text(errors='replace'),
+                            Path(err).read_text(errors='replace'))
+                for (argv, out, err), code in zip(cases, codes)]
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 class LibraryVersion:

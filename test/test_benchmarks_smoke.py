@@ -289,6 +289,9 @@ def test_product_bench_node_parts(tmp_path):
     assert code == 0, text
     assert 'product_best_known.yaml' in text
     summary = json.loads((tmp_path / 'out' / 'summary.json').read_text())
+    # The hit part waits for the one entry it times, not the whole table.
+    assert summary['latency_hit']['table_entries_waited'] == 1
+    assert summary['latency_hit']['build']['cpu_s'] is None
     hit = summary['latency_hit']['conditions']['idle']
     assert hit['n'] == 1 and hit['origins'] == {'table': 1}
     assert summary['latency_miss']['conditions']['idle']['origins'] == {'deadline': 1}

@@ -16,7 +16,8 @@ import time
 
 from namo_fault_recovery import load_library, load_robot
 from namo_fault_recovery.runtime.state_store import decode_state, StateStore
-from node_harness import NodeProcess, RosClient, session_domain, statuses_values
+from node_harness import (forked_starts, NodeProcess, RosClient, session_domain,
+                          statuses_values)
 import pytest
 
 pytestmark = pytest.mark.slow
@@ -249,23 +250,33 @@ BAD_CONFIGS = [
 ]
 
 
+# Run as node processes of their own, end to end (console script, exit code, stderr): one
+# refusal of each stage (parameter file read before ROS, rcl's file parsing with the
+# file named, rclpy's type check, the setting check, the gesture file).  The others run
+# the same main() in forks of one process that imported the node once (node_refusals.py).
+END_TO_END = ('params file not YAML', 'params file missing', 'bad value in a params file',
+              'integer deadline', 'gesture file not YAML')
 REFUSAL_TIMEOUT = 120.0     # all refusals start at once: generous on 2 shared cores
 
 
 @pytest.fixture(scope='module')
 def refused(tmp_path_factory):
     """
-    Start one node per bad configuration, all at once; return ``{case: (code, node)}``.
+    Start every bad configuration, all at once; return ``{case: (code, outcome)}``.
 
     Each refusal is a start-up of its own (own process, files and state directory) that
     ends before it reaches the network, so they need not wait for one another; the
     interpreter start-ups then share both cores.  ``code`` is None if it did not exit.
     """
-    nodes = {}
+    nodes, forked = {}, {}
     for case, make_args, _ in BAD_CONFIGS:
         folder = tmp_path_factory.mktemp('bad_config')
-        nodes[case] = NodeProcess(DOMAIN, state_dir=folder / 'state', args=make_args(folder))
-    out = {}
+        if case in END_TO_END:
+            nodes[case] = NodeProcess(DOMAIN, state_dir=folder / 'state', args=make_args(folder))
+        else:
+            forked[case] = make_args(folder) + ['-p', f'state_dir:={folder / "state"}']
+    out = {case: (start.code, start) for case, start in zip(
+        forked, forked_starts(DOMAIN, list(forked.values()), REFUSAL_TIMEOUT))}
     for case, node in nodes.items():
         try:
             code = node.wait(timeout=REFUSAL_TIMEOUT)

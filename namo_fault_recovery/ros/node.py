@@ -7,6 +7,9 @@ run book (:mod:`.run_book`) says which library is wanted; the dispatcher
 publishes.  Nothing here blocks an executor thread: joint states are kept raw (parsed only
 when needed), services answer from ``async`` callbacks that await the run book, and the
 periodic work runs on a steady clock, independent of ``use_sim_time``.
+``RecoveryNode(engine=...)`` takes an engine started early (``EngineProcess.early()``, as
+``recovery_node`` does before its imports) and gives it its files; without one it starts
+its own.  It stops it either way.
 
 An idle node wakes only for what is due: ``/diagnostics`` once per
 ``diagnostics_period_sec`` (the heartbeat), and a 10 Hz tick only while it has work (a
@@ -102,7 +105,7 @@ def describe_reports(reports, lock_strategy):
 class RecoveryNode(Node):
     """The fault-recovery node; see the module docstring and ``msg_docs/``."""
 
-    def __init__(self, **kwargs):
+    def __init__(self, engine=None, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         self._ready = False
         self._last_param_reason = None
@@ -121,9 +124,9 @@ class RecoveryNode(Node):
                                                           or self._inputs.log_pending()))
         self._inputs = InputMonitor(self._robot, self._log_rejection, self._tick.wake)
         self._last_stamp_ns = 0
-        self._engine = EngineProcess(values['robot_file'] or None, values['gesture_file'] or None,
-                                     values['engine_start_timeout_sec'])
-        self._engine.start()
+        self._engine = engine or EngineProcess()
+        self._engine.load(values['robot_file'] or None, values['gesture_file'] or None,
+                          values['engine_start_timeout_sec'])
         # The engine process imports, loads and warms up (about a second): the node is
         # not ready to meet its deadline before, so it waits here (a signal still ends it).
         try:

@@ -4,7 +4,9 @@
 This module is the executable's entry point and stays light: it installs the signal
 handlers first, so that SIGINT or SIGTERM at any moment of start-up (even while numpy,
 scipy and rclpy are still being imported) ends the process cleanly with exit code 0,
-then imports the node (:mod:`.node`), spins it, and shuts everything down.  The contract
+starts the engine's child process (it imports the engine meanwhile; the node hands it
+its files once its parameters are read), then imports the node (:mod:`.node`), spins
+it, and shuts everything down.  The contract
 (topics, services, QoS, behaviour) is documented in ``msg_docs/``.
 """
 
@@ -85,6 +87,17 @@ def _run(args):
     if problem:
         sys.stderr.write(f'{NODE_NAME}: error: {_one_line(problem)}\n')
         return EXIT_CONFIG
+    # The engine child imports the engine while this process imports the node (both
+    # take about a second): it gets its files once the parameters are read.
+    from ..runtime.engine_process import EngineProcess
+    engine = EngineProcess.early()
+    try:
+        return _run_node(args, engine)
+    finally:
+        engine.stop()        # a refused configuration (else the node stopped it already)
+
+
+def _run_node(args, engine):
     from .node import RecoveryNode
     from .parameters import StartupError
     from .spin import run_node
@@ -96,8 +109,8 @@ def _run(args):
     # From here rclpy's handlers shut ROS down (spin then ends) and chain to ours, which
     # no longer raises: an exception at an arbitrary point could leave a thread behind.
     _BEFORE_ROS[0] = False
-    return run_node(NODE_NAME, RecoveryNode, args, config_errors=(StartupError,),
-                    interrupted=lambda: bool(_SIGNALS))
+    return run_node(NODE_NAME, lambda: RecoveryNode(engine=engine), args,
+                    config_errors=(StartupError,), interrupted=lambda: bool(_SIGNALS))
 
 
 if __name__ == '__main__':
