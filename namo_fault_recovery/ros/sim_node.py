@@ -365,14 +365,15 @@ class SimNode(Node):
                 self._control(now)
                 self.sim.step(1)
                 state = report = None
-                if step % state_every == 0 or self.tracker.due(now + dt):
+                state_due = step % state_every == 0      # /joint_states this step
+                if state_due or self.tracker.due(now + dt):
                     # Encoders read with their noise; the tracker sees the true pose.
                     state = (self.sim.readings(), self.sim.velocities(), now + dt,
                              self.sim.positions())
                 if step % report_every == 0:
                     report = self._contact_status()
             try:
-                if state is not None and step % state_every == 0:
+                if state_due:
                     self._publish_state(*state[:3])
                 if report is not None:
                     self.contact_pub.publish(report)
