@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .task import ExploreTask, PointOutcome
-from .trial import ExplorationStopped, TrialSession, UnsafeTrial
+from .trial import recording_end, TrialSession, UnsafeTrial
 
 
 @dataclass(frozen=True)
@@ -75,7 +75,7 @@ def explore_annealing(session: TrialSession, task: ExploreTask,
     k = len(task.start)
     out = PointOutcome(np.array(task.start, dtype=float), np.zeros((k, 3)),
                        np.zeros(k, dtype=int))
-    try:
+    with recording_end(out):
         for p in range(k):
             q = out.q[p]
             for stage, free in task.layouts:
@@ -88,10 +88,4 @@ def explore_annealing(session: TrialSession, task: ExploreTask,
                 out.free = tuple(int(j) for j in free) if stage >= out.stage else out.free
                 if err <= task.expansion_mm:
                     break
-    except ExplorationStopped as stop:
-        out.status = 'stopped'
-        out.notes.append(str(stop))
-    except UnsafeTrial as why:
-        out.status = 'refused'
-        out.notes.append(str(why))
     return out

@@ -27,7 +27,7 @@ import numpy as np
 
 from .corrections import select, solve_poses
 from .task import ExploreTask, PointOutcome
-from .trial import ExplorationStopped, TrialSession, UnsafeTrial
+from .trial import recording_end, TrialSession
 
 
 @dataclass(frozen=True)
@@ -65,7 +65,7 @@ def explore_secant(session: TrialSession, task: ExploreTask,
     """Explore ``task``'s typical points with our explorer; return what was measured."""
     st = _State(task)
     out = PointOutcome(st.q, st.meas, st.trials)
-    try:
+    with recording_end(out):
         for k in range(len(task.start)):
             st.record(k, session.trial(st.q[k], task.point_ids[k] if task.point_ids else k))
             st.prev[k] = (st.q[k].copy(), st.meas[k].copy())
@@ -74,12 +74,6 @@ def explore_secant(session: TrialSession, task: ExploreTask,
             predicted = _run_stage(session, task, st, np.asarray(free, int), options, out)
             if np.max(predicted) <= task.expansion_mm:
                 break
-    except ExplorationStopped as stop:
-        out.status = 'stopped'
-        out.notes.append(str(stop))
-    except UnsafeTrial as why:
-        out.status = 'refused'
-        out.notes.append(str(why))
     _keep_best(task, st)
     out.q, out.trials = st.q, st.trials
     out.measured = st.meas

@@ -11,6 +11,7 @@ request ends exploration within one trial), and counts the trials and the robot
 seconds they cost (move + settle + tracker latency).
 """
 
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Callable, NamedTuple, Optional, Protocol
 
@@ -49,6 +50,24 @@ class ExplorationStopped(Exception):
 
 class UnsafeTrial(ValueError):
     """Raised when a trial pose fails a safety check; nothing was commanded."""
+
+
+@contextmanager
+def recording_end(out):
+    """
+    Run an explorer's trials; a stop request or an unsafe trial ends them, said on ``out``.
+
+    ``out`` (a :class:`.task.PointOutcome`) gets status ``stopped`` or ``refused`` and the
+    reason in its notes; what it holds so far stays, as every explorer reports it.
+    """
+    try:
+        yield out
+    except ExplorationStopped as stop:
+        out.status = 'stopped'
+        out.notes.append(str(stop))
+    except UnsafeTrial as why:
+        out.status = 'refused'
+        out.notes.append(str(why))
 
 
 def move_duration(q_from, q_to, velocity, peak=SMOOTH_PEAK, shortest=MIN_MOVE_SEC):
