@@ -1,11 +1,21 @@
 """What the ``namo-recovery`` subcommands share: the usage error, faults, settings options."""
 
 import argparse
+from contextlib import contextmanager
 import math
 
 
 class UsageError(Exception):
     """A bad command-line value; reported on one line with exit code 2."""
+
+
+@contextmanager
+def writing_out(path):
+    """Write ``--out`` within it: a failed write is one UsageError naming the file and why."""
+    try:
+        yield path
+    except OSError as exc:
+        raise UsageError(f'--out: cannot write {path}: {exc.strerror or exc}') from None
 
 
 class Parser(argparse.ArgumentParser):

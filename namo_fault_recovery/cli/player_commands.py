@@ -42,6 +42,14 @@ def _common(parser, timeout):
                         help='ROS domain id (default: $ROS_DOMAIN_ID, else 0)')
 
 
+def add_case_filters(p):
+    """Add ``--gesture`` and ``--joint``: the cases of a stuck-joint bench to run."""
+    p.add_argument('--gesture', action='append', metavar='G',
+                   help='only this gesture (repeatable; default: all)')
+    p.add_argument('--joint', action='append', metavar='JOINT',
+                   help='only stick this joint (repeatable; default: all 14)')
+
+
 def register(subparsers, bench_subparsers):
     """Add ``play`` and ``demo-play``, and the ``detection`` and ``carry-on`` benchmarks."""
     p = subparsers.add_parser('play', help='play a gesture on the running gesture_player')
@@ -63,10 +71,7 @@ def register(subparsers, bench_subparsers):
     p = bench_subparsers.add_parser(
         'detection', help='stuck-joint detection, false alarms and recovery on the '
                           'simulator (MuJoCo, in process)')
-    p.add_argument('--gesture', action='append', metavar='G',
-                   help='only this gesture (repeatable; default: all)')
-    p.add_argument('--joint', action='append', metavar='JOINT',
-                   help='only stick this joint (repeatable; default: all 14)')
+    add_case_filters(p)
     p.add_argument('--recover', action='append', metavar='G',
                    help='gestures whose detected faults are recovered and replayed '
                         '(repeatable; default: wai)')
@@ -78,10 +83,7 @@ def register(subparsers, bench_subparsers):
     p = bench_subparsers.add_parser(
         'carry-on', help='a joint sticks mid-gesture: the time until the arm is back on the '
                          'reconfigured trajectory (simulator, MuJoCo, in process)')
-    p.add_argument('--gesture', action='append', metavar='G',
-                   help='only this gesture (repeatable; default: all)')
-    p.add_argument('--joint', action='append', metavar='JOINT',
-                   help='only stick this joint (repeatable; default: all 14)')
+    add_case_filters(p)
     p.add_argument('--busy', action='store_true',
                    help='a second pass with a CPU burner on the other core')
     p.add_argument('--acceleration-deg', type=float, default=600.0, metavar='DEG_S2',

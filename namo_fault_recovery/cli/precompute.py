@@ -11,7 +11,8 @@ robot, library and settings (but the deadline) are the same.
 import math
 import time
 
-from .common import add_setting_options, engine_settings, parse_faults, UsageError
+from .common import (add_setting_options, engine_settings, parse_faults, UsageError,
+                     writing_out)
 
 
 def cmd_precompute(args, out):
@@ -60,10 +61,8 @@ def cmd_precompute(args, out):
     began = time.monotonic()
     table = contingency.build_table(robot, library, settings, sets, jobs=args.jobs,
                                     progress=show, seeds=range(args.seeds), budget_sec=budget)
-    try:
+    with writing_out(args.out):
         table.save(args.out)
-    except OSError as exc:
-        raise UsageError(f'--out: cannot write {args.out}: {exc.strerror or exc}') from None
     scores = [result.total_score for _, result in table.entries.values()]
     out.write(f'wrote {len(table)} entries to {contingency.expand(args.out)} in '
               f'{time.monotonic() - began:.1f} s (total scores {min(scores):.4f} .. '

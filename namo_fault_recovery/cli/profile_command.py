@@ -13,7 +13,7 @@ it is (a person still checks it: the fingertip offset, for one, no URDF knows).
 import os
 from pathlib import Path
 
-from .common import UsageError
+from .common import UsageError, writing_out
 from ..errors import ConfigError
 
 
@@ -30,10 +30,8 @@ def cmd_profile(args, out):
     target = Path(args.out)
     ref = os.path.relpath(urdf, target.resolve().parent)
     template = guess_profile(tree, ref)
-    try:
+    with writing_out(args.out):
         target.write_text(template.text, encoding='utf-8')
-    except OSError as exc:
-        raise UsageError(f'--out: cannot write {args.out}: {exc.strerror or exc}') from None
     out.write(f'wrote {args.out}\nguessed:\n')
     out.write(''.join(f'  - {line}\n' for line in template.guessed))
     out.write('could not (check these):\n')

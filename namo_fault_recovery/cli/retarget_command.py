@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .common import UsageError
+from .common import UsageError, writing_out
 
 
 def _degrees(robot, side, q):
@@ -72,10 +72,8 @@ def cmd_retarget(args, out):
     if args.out is None:
         out.write(text)
         return 0
-    try:
+    with writing_out(args.out):
         Path(args.out).write_text(text, encoding='utf-8')
-    except OSError as exc:
-        raise UsageError(f'--out: cannot write {args.out}: {exc.strerror or exc}') from None
     load_library(target, args.out, on_warning=lambda line: out.write(line + '\n'))
     out.write(f'wrote {args.out}; it loads on {target.name}\n')
     return 0

@@ -9,7 +9,7 @@ packaged robot file.
 
 from pathlib import Path
 
-from .common import UsageError
+from .common import writing_out
 
 
 def cmd_urdf(args, out):
@@ -20,10 +20,8 @@ def cmd_urdf(args, out):
     if args.out is None:
         out.write(text)
         return 0
-    try:
+    with writing_out(args.out):
         Path(args.out).write_text(text, encoding='utf-8')
-    except OSError as exc:
-        raise UsageError(f'--out: cannot write {args.out}: {exc.strerror or exc}') from None
     out.write(f'wrote {args.out}\n')
     return 0
 
