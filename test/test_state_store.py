@@ -187,3 +187,21 @@ def test_a_corrupted_state_file_is_set_aside_and_the_journal_still_counts(tmp_pa
     state, problem = store.load()
     assert 'set aside' in problem and state.faults == FAULTS and state.library is None
     store.journal.close()
+
+
+def test_a_write_between_the_reads_never_hides_the_newest_fault_set(tmp_path, monkeypatch):
+    # A running node writes while a reader loads: the state file (the cleared fault set,
+    # change 6) replaces the old one (change 3), then the journal holding change 5 is emptied.
+    store = StateStore(tmp_path)
+    assert store.save(FAULTS, library(), 'fp', seq=3)
+    store.journal.append(5, {})
+    records = store.journal.records
+
+    def writer_catches_up():
+        assert store.save({}, library(), 'fp', seq=6)     # replaces the file, empties
+        return records()
+
+    monkeypatch.setattr(store.journal, 'records', writer_catches_up)
+    state, problem = store.load()
+    assert problem is None and state.faults == {}
+    store.journal.close()

@@ -252,9 +252,15 @@ class StateStore:
         says where to (a journal record still gives the faults).  A journal record
         replaces the file's fault set; the file's library stays (a restart recomputes a
         library computed for another fault set).
+
+        The journal is read before the file: a writer replaces the file first and empties
+        the journal after, so a record read here is either still newer than the file read
+        next or covered by it.  Read the other way round, a running node's write between
+        the two reads would hide its newest fault set.
         """
+        records = self.journal.records()
         state, problem = self._load_file()
-        newer = [r for r in self.journal.records() if state is None or r[0] > state.seq]
+        newer = [r for r in records if state is None or r[0] > state.seq]
         if not newer:
             return state, problem
         seq, faults = max(newer, key=lambda r: r[0])
