@@ -10,8 +10,10 @@ import math
 
 from namo_fault_recovery import load_library, load_robot
 from namo_fault_recovery.benchmarks.notice import plan_from_rest, play_watched
+from namo_fault_recovery.model.kinematics import forward_kinematics
 from namo_fault_recovery.model.urdf import urdf_string
 from namo_fault_recovery.playback.deviation import DeviationThresholds, DeviationWatch
+from namo_fault_recovery.playback.timing import plan_motion
 from namo_fault_recovery.resources import config_path, DEMO_MOTION_FILE
 from namo_fault_recovery.sim.structure_change import apply_changes, parse_change
 from namo_fault_recovery.sim.tracker import TrackerSettings
@@ -80,6 +82,43 @@ def test_the_designed_distance_allows_the_lag_window():
     assert watch.designed_distance('right', t, behind) < 1.0
     far = watch.designed['right'][np.searchsorted(watch.times, t - 0.5)]
     assert watch.designed_distance('right', t, far) > 10.0
+
+
+def lagging_explored_play(offset_mm, lag=0.3, thresholds=DeviationThresholds()):
+    """
+    Watch an explored bye that runs ``lag`` s behind its command (a loaded machine).
+
+    The played joints differ from the design's (the exploration's correction for a change
+    the model does not know), and the true fingertip follows the designed path, plus
+    ``offset_mm`` (a further change): the model explains none of it.
+    """
+    design = plan_of('bye')
+    gesture = LIBRARY['bye']
+    frames = [np.concatenate([kf.right, kf.left]) + np.radians(6.0)
+              for kf in gesture.keyframes]
+    played = plan_motion(ROBOT.joint_names, np.full(len(ROBOT.joint_names), np.radians(6.0)),
+                         [kf.time_from_start for kf in gesture.keyframes], frames,
+                         list(ROBOT.velocity_limits) * 2)
+    assert played.duration == pytest.approx(design.duration)     # timed as it
+    watch, found = DeviationWatch(ROBOT, design, 0.0, thresholds, played=played), []
+    names = list(ROBOT.joint_names)
+    for k, t in enumerate(np.arange(0.0, design.duration + 1.0, 0.01)):
+        watch.joint_state(t, names, played.command_at(t - lag))
+        if k % 3 == 0:
+            tip = forward_kinematics(ROBOT, design.command_at(t - lag)[:7], 'right').tip
+            hit = watch.fingertip('right', t, tip + offset_mm)
+            found += [hit] if hit else []
+    return found
+
+
+def test_an_arm_behind_its_command_is_watched_at_the_moment_it_is_at():
+    # 0.3 s behind, the fingertip is tens of mm behind the designed point of the plan's
+    # clock; read off the measured joints, the moment the arm is at matches the design.
+    assert lagging_explored_play(np.zeros(3)) == []
+    assert lagging_explored_play(np.zeros(3), thresholds=DeviationThresholds(max_lag_s=0.0))
+    found = lagging_explored_play(np.array([0.0, 30.0, 0.0]))
+    assert len(found) == 1 and found[0].side == 'right'
+    assert 25.0 < found[0].error_mm < 35.0
 
 
 def test_bad_thresholds_are_one_line():

@@ -4,10 +4,14 @@ Noticing a change the model does not know: the tracked fingertip leaves the desi
 While a gesture plays, each tracked fingertip sample (``msg_docs/fingertip_tracker.md``)
 is compared, at its *capture* stamp, with two predictions of the planner's own model:
 
-- the **designed path**: the model's FK of the planned joints at that moment of the
-  play.  A controller lags a little behind its command, so the distance is taken to the
-  nearest designed fingertip over the last ``lag_s`` of the plan (as the joint monitor
-  does with ``tracking_lag_sec``);
+- the **designed path**: the model's FK of the planned joints at the moment of the play
+  that the arm is really at.  A controller runs behind its command (a little always, and
+  more on a loaded machine, or when the simulator falls behind real time), so that
+  moment is read off the measured joints: the time, within the last ``max_lag_s`` of the
+  commanded motion, whose commanded joints are nearest the measured ones.  The distance
+  is then taken to the nearest designed fingertip over the ``lag_s`` before it (as the
+  joint monitor does with ``tracking_lag_sec``).  A structure change moves the fingertip,
+  not the joints, so it keeps its full distance; only a lag is taken out;
 - the **model's fingertip for the measured joints**: FK of the joint angles measured at
   the capture stamp (interpolated between ``/joint_states``).  A stuck joint or a lag
   moves the fingertip off the designed path *and* the joints off their command; the
@@ -45,11 +49,13 @@ class DeviationThresholds:
     lag_s: float = 0.1
     share: float = 0.8
     min_samples: int = 5
+    max_lag_s: float = 1.0       # the most the arm is taken to run behind its command
 
     def __post_init__(self):
         """Refuse thresholds that cannot decide (one line naming the value)."""
         for name, ok in (('threshold_mm', self.threshold_mm > 0),
                          ('sustain_s', self.sustain_s > 0), ('lag_s', self.lag_s >= 0),
+                         ('max_lag_s', self.max_lag_s >= 0),
                          ('share', 0.0 < self.share <= 1.0),
                          ('min_samples', self.min_samples >= 1)):
             value = getattr(self, name)
@@ -78,21 +84,27 @@ class DeviationWatch:
     """
     Watch one play: feed it joint states and tracked fingertips; it returns a Suspicion.
 
-    ``plan`` is the player's :class:`~.timing.PlannedMotion`; ``start`` the stamp (s,
-    the clock of the tracker's stamps) at which the motion started.  Arms whose joints
-    the plan does not all hold are not watched.
+    ``plan`` is the player's :class:`~.timing.PlannedMotion` of the designed path;
+    ``start`` the stamp (s, the clock of the tracker's stamps) at which the motion
+    started.  ``played`` is the motion the controllers were sent, timed as ``plan`` (an
+    explored version of it; None: ``plan`` itself): the measured joints are compared
+    with it to tell where in the play the arm is.  Arms whose joints the plan does not
+    all hold are not watched.
     """
 
     def __init__(self, robot, plan, start: float,
-                 thresholds: DeviationThresholds = DeviationThresholds(), begin: float = 0.0):
+                 thresholds: DeviationThresholds = DeviationThresholds(), begin: float = 0.0,
+                 played=None):
         """Watch ``plan`` from ``begin`` s into it (samples captured earlier are ignored)."""
         self.robot, self.start, self.thresholds = robot, float(start), thresholds
         self.begin = float(begin)
         self.duration = plan.duration
         self.times = np.asarray(plan.times, dtype=float)
+        self.played = plan if played is None else played
         self.joints, self.designed = {}, {}
         for side, arm in robot.arms.items():
-            if all(j in plan.joint_names for j in arm.joint_names):
+            if all(j in plan.joint_names for j in arm.joint_names) and \
+                    all(j in self.played.joint_names for j in arm.joint_names):
                 self.joints[side] = list(arm.joint_names)
                 q = plan.columns(arm.joint_names)[0]
                 self.designed[side] = forward_kinematics(robot, q, side).tip
@@ -116,8 +128,8 @@ class DeviationWatch:
         path = np.vstack([ends, tips[inside]])
         return float(np.min(np.linalg.norm(path - np.asarray(point, float), axis=1)))
 
-    def explained_distance(self, side: str, stamp: float, point) -> float | None:
-        """Return the distance (mm) to the model's fingertip at the measured joints, or None."""
+    def measured_joints(self, side: str, stamp: float):
+        """Return the arm's measured joints (rad) at ``stamp``, interpolated, or None."""
         before = after = None
         for entry in self._states:
             if entry[0] <= stamp:
@@ -129,9 +141,26 @@ class DeviationWatch:
             return None
         if len(near) == 2 and after[0] > before[0]:
             w = (stamp - before[0]) / (after[0] - before[0])
-            q = [(1 - w) * before[1][j] + w * after[1][j] for j in self.joints[side]]
-        else:
-            q = [near[0][1][j] for j in self.joints[side]]
+            return np.array([(1 - w) * before[1][j] + w * after[1][j]
+                             for j in self.joints[side]])
+        return np.array([near[0][1][j] for j in self.joints[side]])
+
+    def executed_time(self, side: str, t: float, q) -> float:
+        """
+        Return the moment of the play (s) the arm is at: ``t``, less its lag behind command.
+
+        The time within the last ``max_lag_s`` of the commanded motion whose commanded
+        joints are nearest the measured ``q`` (10 ms steps; the latest of equals).
+        """
+        grid = np.arange(t, max(t - self.thresholds.max_lag_s, 0.0) - 1e-9, -0.01)
+        if grid.size < 2:
+            return t
+        index = [self.played.joint_names.index(j) for j in self.joints[side]]
+        commanded = self.played.command_at(grid)[:, index]
+        return float(grid[np.argmin(np.linalg.norm(commanded - q, axis=1))])
+
+    def explained_distance(self, side: str, q, point) -> float:
+        """Return the distance (mm) from ``point`` to the model's fingertip at joints ``q``."""
         tip = forward_kinematics(self.robot, q, side).tip
         return float(np.linalg.norm(tip - np.asarray(point, float)))
 
@@ -140,8 +169,10 @@ class DeviationWatch:
         t = stamp - self.start
         if side not in self.designed or side in self.suspected or t < self.begin:
             return None
-        designed = self.designed_distance(side, t, point_mm)
-        explained = self.explained_distance(side, stamp, point_mm)
+        q = self.measured_joints(side, stamp)
+        at = t if q is None else self.executed_time(side, t, q)
+        designed = self.designed_distance(side, at, point_mm)
+        explained = None if q is None else self.explained_distance(side, q, point_mm)
         value = designed if explained is None else min(designed, explained)
         samples = self._samples[side]
         samples.append((stamp, value, designed, designed if explained is None else explained))

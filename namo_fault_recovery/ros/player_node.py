@@ -394,8 +394,9 @@ class GesturePlayer(Node):
                           functools.partial(pressed_joints, self._robot, self._joints))
         self._play = (gesture, session, time.monotonic(), future)
         self._send(plan)
-        self._structure.start(gesture, design, None if track is designed  # explored:
-                              else np.ptp(track.times))           # not its approach
+        explored = track is not designed        # watched against its design, not approach
+        self._structure.start(gesture, design, np.ptp(track.times) if explored else None,
+                              plan if explored else None)
         return await future
 
     def _plan(self, track, played=None):   # timed as ``played`` is (its approach), if given

@@ -76,18 +76,20 @@ class StructureWatch:
     def _now(self):
         return self.node.get_clock().now().nanoseconds * 1e-9
 
-    def start(self, gesture, plan, keyframe_span=None):
+    def start(self, gesture, plan, keyframe_span=None, played=None):
         """
         Watch a play whose motion starts now.
 
         ``keyframe_span`` (s, the gesture's keyframes from first to last): only its end of
         the plan is watched, not the approach before it (None: all of it).  An explored
         version is watched against the designed path so: its approach, from wherever the
-        last trial left the arm, has no designed counterpart.
+        last trial left the arm, has no designed counterpart.  ``played``: the motion sent
+        to the controllers, if not ``plan`` (an explored version, timed as ``plan``).
         """
         if hasattr(self, '_diag_pub'):
             begin = 0.0 if keyframe_span is None else max(plan.duration - keyframe_span, 0.0)
-            self.watch = DeviationWatch(self.robot, plan, self._now(), self.thresholds, begin)
+            self.watch = DeviationWatch(self.robot, plan, self._now(), self.thresholds, begin,
+                                        played)
             self.gesture = gesture
 
     def stop(self):
