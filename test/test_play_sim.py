@@ -118,7 +118,8 @@ def _score(q):
 def _carried_on(arms, response, joint, before, faults, angle=None):
     """Check a play that carried on through ``joint``; return its fault report."""
     assert response.success and 'carried on' in response.message, (
-        response.message, arms.contacts[-1] if arms.contacts else None)
+        f'{response.message} | the simulator: '
+        f'{arms.contacts[-1] if arms.contacts else None}')
     report = arms.wait(lambda: arms.faults[faults:], 5.0, '/actuator_fault')[-1]
     assert list(report.name) == [joint]
     if angle is not None:

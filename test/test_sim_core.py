@@ -172,6 +172,9 @@ def test_reference_wai_counts_no_contact_and_the_torso_does(robot, allowances,
     run(sim, np.radians([0, 40, 0, 0, 0, 0, 0] + [0] * 7), 1000)
     assert sim.contact_events >= 1 and sim.max_depth > 1e-3
     assert sim.positions()[1] < math.radians(10.0)
+    assert sim.pairs_seen and all('torso' in pair and any(g.startswith('right_arm_')
+                                                          for g in pair)
+                                  for pair in sim.pairs_seen), sim.pairs_seen   # named
 
 
 @pytest.mark.parametrize('name', ['wai', 'bye', 'salute', 'side_invite'])

@@ -310,4 +310,5 @@ def test_reference_wai_makes_no_self_contact_and_the_torso_does(sim):
     report = client.report_after(time.monotonic())
     assert int(report['contact_events']) >= 1, report
     assert float(report['max_depth_mm']) > 1.0, report
+    assert 'torso' in report['pairs_since_reset'], report
     move_to(client, [0.0] * 7, [0.0] * 7)

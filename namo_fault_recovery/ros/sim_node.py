@@ -429,6 +429,8 @@ class SimNode(Node):
                   'contact_steps': self.sim.contact_steps,
                   'max_depth_mm': f'{self.sim.max_depth * 1e3:.3f}',
                   'current_pairs': ','.join(pairs),
+                  'pairs_since_reset': ','.join(sorted(f'{a}-{b}'
+                                                       for a, b in self.sim.pairs_seen)),
                   'stuck': ','.join(f'{n}:{math.degrees(a):.3f}'
                                     for n, a in self.sim.stuck.items()),
                   'sim_time': f'{self.sim.time:.3f}'}

@@ -193,6 +193,7 @@ class NamoSim:
         self.contact_steps = 0          # steps with at least one counted contact
         self.contact_events = 0         # pair contacts that began (onsets)
         self.max_depth = 0.0            # deepest counted penetration seen (m)
+        self.pairs_seen = set()         # (geom, geom) of every counted contact since reset
         self._touching = set()
         self.set_positions(np.zeros(len(self.joint_names)))
 
@@ -290,6 +291,7 @@ class NamoSim:
             if touching:
                 self.contact_steps += 1
             self.contact_events += len(touching - self._touching)
+            self.pairs_seen |= touching
             self._touching = touching
 
     def contacts(self):
@@ -320,3 +322,4 @@ class NamoSim:
         self.contact_steps = 0
         self.contact_events = 0
         self.max_depth = 0.0
+        self.pairs_seen = set()
