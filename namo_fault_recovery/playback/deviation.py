@@ -11,7 +11,9 @@ is compared, at its *capture* stamp, with two predictions of the planner's own m
   commanded motion, whose commanded joints are nearest the measured ones.  The distance
   is then taken to the nearest designed fingertip over the ``lag_s`` before it (as the
   joint monitor does with ``tracking_lag_sec``).  A structure change moves the fingertip,
-  not the joints, so it keeps its full distance; only a lag is taken out;
+  not the joints, so it keeps its full distance; only a lag is taken out.  An explored
+  version is timed by its own joints (another approach, other segments slowed down), so
+  its moment maps to the design's keyframe for keyframe;
 - the **model's fingertip for the measured joints**: FK of the joint angles measured at
   the capture stamp (interpolated between ``/joint_states``).  A stuck joint or a lag
   moves the fingertip off the designed path *and* the joints off their command; the
@@ -100,7 +102,8 @@ class DeviationWatch:
         self.begin = float(begin)
         self.duration = plan.duration
         self.times = np.asarray(plan.times, dtype=float)
-        self.played = plan if played is None else played
+        self.plan, self.played = plan, plan if played is None else played
+        self.waypoint_times = np.asarray(plan.waypoint_times, dtype=float)
         self.joints, self.designed = {}, {}
         for side, arm in robot.arms.items():
             if all(j in plan.joint_names for j in arm.joint_names) and \
@@ -159,6 +162,23 @@ class DeviationWatch:
         commanded = self.played.command_at(grid)[:, index]
         return float(grid[np.argmin(np.linalg.norm(commanded - q, axis=1))])
 
+    def design_time(self, t: float) -> float:
+        """
+        Return the moment of the design that the played motion's moment ``t`` (s) plays.
+
+        An explored version is timed by its own joints: its approach (from wherever the
+        last trial left the arm) and its segments (slowed down where its joints would
+        pass their speed limits) take other times than the design's.  Keyframe for
+        keyframe it is the same motion, so the time maps through the keyframe times
+        (identity when the two have different keyframes, or are one motion).
+        """
+        ours, theirs = self.played.waypoint_times, self.waypoint_times
+        if self.played is self.plan or len(ours) != len(theirs):
+            return t
+        u = np.interp(t, ours, np.arange(len(ours)))
+        return float(np.interp(u, np.arange(len(theirs)), theirs)) + \
+            max(t - ours[-1], 0.0)
+
     def explained_distance(self, side: str, q, point) -> float:
         """Return the distance (mm) from ``point`` to the model's fingertip at joints ``q``."""
         tip = forward_kinematics(self.robot, q, side).tip
@@ -167,10 +187,12 @@ class DeviationWatch:
     def fingertip(self, side: str, stamp: float, point_mm) -> Suspicion | None:
         """Take one tracked sample (capture stamp in s, point in mm); return a new Suspicion."""
         t = stamp - self.start
-        if side not in self.designed or side in self.suspected or t < self.begin:
+        if side not in self.designed or side in self.suspected:
             return None
         q = self.measured_joints(side, stamp)
-        at = t if q is None else self.executed_time(side, t, q)
+        at = self.design_time(t if q is None else self.executed_time(side, t, q))
+        if at < self.begin:
+            return None
         designed = self.designed_distance(side, at, point_mm)
         explained = None if q is None else self.explained_distance(side, q, point_mm)
         value = designed if explained is None else min(designed, explained)
