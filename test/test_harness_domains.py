@@ -27,3 +27,18 @@ def test_a_concurrent_session_takes_another_slot_and_so_other_domains():
     # Each child starts its search at this session's slot, finds it held and takes the
     # next free one (held only while the child runs: both children may take the same).
     assert mine not in others
+
+
+def test_a_benchmarks_private_node_never_takes_a_test_domain(monkeypatch):
+    # Every domain a test session can use (all slots: modules, stress tests, exploration)
+    # against every domain a private node (benchmarks, demos) can draw.
+    from namo_fault_recovery.runtime import private_node
+    tests = set()
+    for slot in range(SLOTS):
+        tests |= {1 + 5 * slot + k for k in range(5)} | {102 + 5 * slot + k for k in range(5)}
+        tests.add(202 + slot)
+    drawn = set()
+    for pid in range(1000, 1100):
+        monkeypatch.setattr(private_node.os, 'getpid', lambda pid=pid: pid)
+        drawn.add(private_node.private_domain())
+    assert drawn and max(drawn) <= 232 and not drawn & tests, sorted(drawn & tests)

@@ -44,8 +44,14 @@ def player_command():
 
 
 def private_domain():
-    """Return a domain id for a private node, away from the usual 0."""
-    return 70 + os.getpid() % 30
+    """
+    Return a domain id for a private node: 222-232, away from the usual 0 and from tests.
+
+    The top of ROS 2's usable ids on Linux (232): their ports lie above the ephemeral
+    range, and the test suite's domains (1-221, ``test/node_harness.py``) never reach
+    them, so a benchmark's node never answers a test's client, nor the other way round.
+    """
+    return 222 + os.getpid() % 11
 
 
 def stop_process(proc, sig=signal.SIGINT, timeout=STOP_TIMEOUT_SEC):
