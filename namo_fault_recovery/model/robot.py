@@ -41,8 +41,8 @@ class RobotJoints:
 
     Shared by Namo's DH :class:`RobotModel` and a robot built from a recovery profile
     (:class:`~namo_fault_recovery.model.profile_robot.ProfileRobot`); a subclass is a
-    frozen dataclass with ``arms`` ({side: ArmModel}), ``tools`` and ``corrections``
-    fields.  A robot
+    frozen dataclass with ``arms`` ({side: ArmModel}), ``tools``, ``corrections`` and
+    ``learned`` fields.  A robot
     with a ``chains`` field has its kinematics run by its compiled chains; without one
     (the DH model) :mod:`.kinematics` runs its DH table.
     """
@@ -95,6 +95,22 @@ class RobotJoints:
                 raise ValueError(f'corrected arm: expected one of {ARMS}, got {side!r}')
         return replace(self, corrections=tuple(sorted(items, key=lambda kv: kv[0])))
 
+    def with_learned(self, learned) -> 'RobotModel':
+        """
+        Return this robot carrying corrections learned on the robot, not yet applied.
+
+        ``learned`` holds :class:`~.structure.LearnedArm` entries (a correction and its
+        compiled chain).  This robot's own kinematics stay nominal (it is the reference
+        a design is scored against); :meth:`changed_model` applies them, as it applies
+        a tool.
+        """
+        return replace(self, learned=tuple(sorted(learned, key=lambda a: a.correction.side)))
+
+    def changed_model(self, tool_mm: float = 0.0, tool_arm: str = 'right') -> 'RobotModel':
+        """Return the model of the changed structure: the tool and the learned corrections."""
+        return self.with_tool(tool_mm, tool_arm).with_corrections(
+            {a.correction.side: a.chain for a in self.learned})
+
     def changed(self, side: str) -> bool:
         """Return True if one arm's structure differs from the design: a tool or a correction."""
         return self.tool_length(side) > 0 or self.corrected_arm(side) is not None
@@ -142,6 +158,8 @@ class RobotModel(RobotJoints):
     tools: tuple = ()   # ((arm, length mm), ...): tools that lengthen the hands
     # ((arm, ArmChain), ...): arms whose kinematics run a learned correction (structure.py)
     corrections: tuple = field(default=(), compare=False, repr=False)
+    # (LearnedArm, ...): corrections learned on the robot, applied by changed_model()
+    learned: tuple = field(default=(), compare=False, repr=False)
     # Speed limit (rad/s) of joints 1..7, the same for both arms; used to time playback.
     velocity_limits: tuple = tuple(math.radians(v) for v in DEFAULT_VELOCITY_LIMITS_DEG)
 

@@ -19,8 +19,10 @@ offset moves the fingertip landmark, so the compiled chain's forward kinematics 
 analytic Jacobians are those of the corrected arm, for every landmark (elbow, wrist,
 fingertip, palm).  ``RobotJoints.with_corrections`` then gives the engine a robot whose
 kinematics run that chain for the corrected arm (:mod:`.kinematics`), on Namo's DH
-model as on a profile robot; the nominal robot stays the reference the design is
-scored against.  The profile's nominal chain must be the robot's own arm: checked at a
+model as on a profile robot.  The engine is handed the nominal robot carrying the
+corrections (``with_learned``: a :class:`LearnedArm` per arm), so that the design is
+still scored against the nominal robot; its ``changed_model`` applies them where it
+applies a tool.  The profile's nominal chain must be the robot's own arm: checked at a
 few poses (:func:`check_matches`), else a one-line ValueError.
 """
 
@@ -111,6 +113,19 @@ class ArmCorrection:
                        str(doc.get('profile', '')))
         except (KeyError, TypeError, AttributeError) as exc:
             raise ValueError(f'malformed correction: {exc!r}') from None
+
+
+@dataclass(frozen=True)
+class LearnedArm:
+    """A correction and its compiled arm chain, as ``RobotJoints.with_learned`` takes it."""
+
+    correction: ArmCorrection
+    chain: ArmChain
+
+
+def learned_arms(profile, corrections) -> tuple:
+    """Return the LearnedArm of each ArmCorrection, compiled on ``profile``."""
+    return tuple(LearnedArm(c, corrected_arm(profile, c)) for c in corrections)
 
 
 def _turned(joint: UrdfJoint, rot: np.ndarray, before: bool) -> UrdfJoint:
