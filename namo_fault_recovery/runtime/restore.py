@@ -91,6 +91,8 @@ def restore_decision(robot, library, state, fingerprint, settings):
     if (_tool(saved.tool_mm, saved.tool_arm)
             != _tool(settings.tool_length_mm, settings.tool_arm)):
         return 'the tool (tool_length_mm, tool_arm) changed since it was saved'
+    if saved.corrections != {c.side: c.to_dict() for c in state.corrections}:
+        return 'the saved library was computed for other measured corrections'
     return check_result(robot, library, saved, state.faults)
 
 
@@ -102,6 +104,7 @@ class RestartPlan:
     library: object = None        # the saved LibraryResult if it can be republished
     problem: str = None           # an unusable state file (it was set aside)
     message: str = ''
+    corrections: tuple = ()       # ArmCorrection per arm, measured on the robot
 
 
 def plan_restart(store, robot, library, fingerprint, settings):
@@ -112,13 +115,16 @@ def plan_restart(store, robot, library, fingerprint, settings):
         if problem:
             problem = store.set_aside(problem)
             state = None
-    if state is None or not state.faults:
+    if state is None or not (state.faults or state.corrections):
         return RestartPlan(problem=problem)
     reason = restore_decision(robot, library, state, fingerprint, settings)
-    joints = ', '.join(state.faults)
+    what = ', '.join([f'faults {", ".join(state.faults)}'] * bool(state.faults)
+                     + [f'the measured {c.side} arm ({", ".join(c.groups) or "nominal"})'
+                        for c in state.corrections])
     if reason is None:
         return RestartPlan(dict(state.faults), state.library, problem,
-                           f'restored faults {joints} and their library from {store.path}')
+                           f'restored {what} and their library from {store.path}',
+                           state.corrections)
     return RestartPlan(dict(state.faults), None, problem,
-                       f'restored faults {joints} from {store.path}; {reason}: '
-                       f'reconfiguring')
+                       f'restored {what} from {store.path}; {reason}: reconfiguring',
+                       state.corrections)
