@@ -65,8 +65,8 @@ def test_the_profile_must_be_the_robots_own_arm():
 
 
 @pytest.mark.parametrize('bad, words', [
-    (dict(side='middle'), "arm 'middle'"), (dict(groups=('twist',)), "group 'twist'"),
-    (dict(params=((1.0, 2.0),)), 'expected 3 finite values'),
+    ({'side': 'middle'}, "arm 'middle'"), ({'groups': ('twist',)}, "group 'twist'"),
+    ({'params': ((1.0, 2.0),)}, 'expected 3 finite values'),
 ])
 def test_a_malformed_correction_is_refused_in_one_line(bad, words):
     with pytest.raises(ValueError, match=words):

@@ -224,5 +224,5 @@ def check_matches(robot, profile, side: str, samples: int = 8) -> None:
                 zip(ours[:3], theirs[:3]))
     if worst > MATCH_MM:
         raise ValueError(f'profile {profile.source}: its {side} arm is not the robot '
-                         f'{robot.name}\'s ({worst:.3g} mm apart); a correction fitted on '
-                         f'it does not apply')
+                         f"{robot.name}'s ({worst:.3g} mm apart); a correction fitted on "
+                         'it does not apply')

@@ -131,7 +131,7 @@ class ExploredIntake:
     def _adopt(self, correction, msg):
         """Compile, check, persist and publish one exploration's outcome (worker thread)."""
         try:
-            current = dict((a.correction.side, a) for a in self._book.learned)
+            current = {a.correction.side: a for a in self._book.learned}
             current[correction.side] = self.learned([correction])[0]
             learned = tuple(current.values())
             result = self._explored(correction, msg)

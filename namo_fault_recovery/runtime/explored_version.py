@@ -14,6 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..model.robot import ARMS
 from ..recovery import pacing
 from ..recovery.result import GestureResult
 
@@ -36,6 +37,9 @@ def explored_library(robot, current, name, times, positions, correction):
         raise ValueError(f'explored {name}: {positions.shape[0]} keyframes of '
                          f'{positions.shape[-1]} joints; expected {len(base.times)} of '
                          f'{len(robot.joint_names)}')
+    lower = np.concatenate([robot.arms[s].lower for s in ARMS if s in robot.arms])
+    upper = np.concatenate([robot.arms[s].upper for s in ARMS if s in robot.arms])
+    positions = np.clip(positions, lower, upper)   # the profile's limits, to 9 digits
     errors = tuple(float(e) for e in correction.measured_error_mm) or (float('nan'),)
     worst, mean = float(max(errors)), float(np.mean(errors))
     message = (f'{name}: explored on the robot ({correction.side} arm, {correction.trials} '
