@@ -224,7 +224,7 @@ def _rows(engine_rows, weight_rows):
         Setting('profile_file', str, '', 'recovery profile (URDF + profile YAML) of the '
                 "nominal chains the gesture player's measured corrections are fitted on (its "
                 'profile_file); empty = the packaged Namo profile', read_only=True),
-        Setting('explored_topic', str, '/gesture_player/explored_motions', 'the gesture '
+        Setting('explored_topic', str, 'gesture_player/explored_motions', 'the gesture '
                 "player's latched explored motions: with its correction on "
                 '/structure_correction each becomes a library version (library_origin: '
                 "explored) and the arm's corrected model for later faults; empty = off",
