@@ -23,7 +23,7 @@ import pytest
 
 ROBOT = load_robot()
 TOOL = ArmCorrection('right', ('tip_offset',), ((-50.0, 0.1, -0.2),), 'circle', 7,
-                     (0.4, 0.9), 26, 'secant', 'namo')
+                     (0.4, 0.9), 26, 'secant', 'namo', (49.0, 51.0))
 
 
 @lru_cache(maxsize=1)
@@ -92,7 +92,7 @@ def test_a_later_fault_on_the_changed_arm_is_searched_on_the_corrected_model():
 
 
 def explored(library):
-    current = reference_result(library, settings=RecoverySettings().public())
+    current = reference_result(library)      # as the node publishes it at start
     q = np.array(current['bye'].positions)
     q[:, 1] += 0.01
     return explored_library(ROBOT, current, 'bye', current['bye'].times, q, TOOL)
@@ -103,6 +103,7 @@ def test_the_explored_version_is_scored_by_what_was_measured():
     gesture = result['bye']
     assert result.origin == 'explored' and gesture.method == 'explored'
     assert gesture.score_after == 0.9 and gesture.tip_error_mm == pytest.approx(0.65)
+    assert gesture.score_before == 51.0 and gesture.tip_error_before_mm == 50.0
     assert result.corrections == {'right': TOOL.to_dict()}
     assert 'explored on the robot' in result.notes[-1]
     assert result['wai'] == reference_result(load_library(ROBOT))['wai']     # only bye
@@ -138,5 +139,5 @@ def test_the_correction_message_round_trips():
         measured_error_mm, trials, method, correction = (0.4, 0.9), 26, 'secant', 'tool'
 
     track = GestureTrack('circle', ('a',), np.zeros(2), np.zeros((2, 1)), 7)
-    status = correction_status(ROBOT, profile(), track, 'right', Found())
+    status = correction_status(ROBOT, profile(), track, 'right', Found(), (49.0, 51.0))
     assert parse_correction(status) == TOOL

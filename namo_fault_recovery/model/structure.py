@@ -52,7 +52,8 @@ class ArmCorrection:
     or deg per group); ``gesture``, ``library_stamp`` (ns), ``measured_error_mm`` (at the
     typical points, as the tracker measured the explored poses), ``trials`` and
     ``method`` say where it comes from; ``profile`` names the robot of the chain it was
-    fitted on.
+    fitted on; ``unadapted_error_mm`` is what the first trial of each typical point
+    measured (the poses of the version explored from).
     """
 
     side: str
@@ -64,6 +65,7 @@ class ArmCorrection:
     trials: int = 0
     method: str = ''
     profile: str = ''
+    unadapted_error_mm: tuple = ()     # per typical point, its first trial (the old poses)
 
     def __post_init__(self):
         """Refuse a malformed correction with one line naming the value."""
@@ -99,7 +101,8 @@ class ArmCorrection:
                 'params': [list(p) for p in self.params], 'gesture': self.gesture,
                 'library_stamp': int(self.library_stamp),
                 'measured_error_mm': list(self.measured_error_mm), 'trials': self.trials,
-                'method': self.method, 'profile': self.profile}
+                'method': self.method, 'profile': self.profile,
+                'unadapted_error_mm': list(self.unadapted_error_mm)}
 
     @classmethod
     def from_dict(cls, doc: dict) -> 'ArmCorrection':
@@ -110,7 +113,8 @@ class ArmCorrection:
                        str(doc.get('gesture', '')), int(doc.get('library_stamp', 0)),
                        tuple(float(e) for e in doc.get('measured_error_mm', ())),
                        int(doc.get('trials', 0)), str(doc.get('method', '')),
-                       str(doc.get('profile', '')))
+                       str(doc.get('profile', '')),
+                       tuple(float(e) for e in doc.get('unadapted_error_mm', ())))
         except (KeyError, TypeError, AttributeError) as exc:
             raise ValueError(f'malformed correction: {exc!r}') from None
 

@@ -173,14 +173,24 @@ def outcome_values(session, res) -> dict:
     return values
 
 
-def correction_status(robot, profile, track, side, res) -> DiagnosticStatus:
+def first_errors(session, targets) -> tuple:
+    """Return per typical point what its first trial measured (mm): the unadapted poses."""
+    first = {}
+    for point, _, trial in session.log:
+        if point in targets and point not in first:
+            first[point] = float(np.linalg.norm(trial.tip - targets[point]))
+    return tuple(first[p] for p in sorted(first))
+
+
+def correction_status(robot, profile, track, side, res, unadapted=()) -> DiagnosticStatus:
     """
     Return the ``/structure_correction`` status of an exploration served (latched).
 
     What ``recovery_node`` adopts with the explored motion of ``~/explored_motions``:
     the arm, the gesture and the library version (``library_stamp``) it was explored
     from, the fitted correction's ``groups`` and ``params`` (one group per ``;``), the
-    measured errors at the typical points, the trials, the explorer and the profile.
+    measured errors at the typical points (after, and at their first trial: before),
+    the trials, the explorer and the profile.
     """
     model = res.model
     groups = tuple(model.groups) if model is not None else ()
@@ -189,6 +199,7 @@ def correction_status(robot, profile, track, side, res) -> DiagnosticStatus:
               'groups': ' '.join(groups),
               'params': '; '.join(' '.join(repr(float(v)) for v in p) for p in params),
               'measured_errors_mm': ' '.join(repr(float(e)) for e in res.measured_error_mm),
+              'unadapted_errors_mm': ' '.join(repr(float(e)) for e in unadapted),
               'trials': str(res.trials), 'method': res.method, 'profile': profile.name}
     return DiagnosticStatus(level=DiagnosticStatus.OK, name=CORRECTION_NAME,
                             message=f'{track.name}: {side} arm as measured: {res.correction}'
@@ -493,12 +504,12 @@ class Exploration:
             self._status('stopped' if res.status == 'stopped' else 'failed', gesture, side,
                          text, session, res)
             return False, text
-        self._serve(track, side, res)
+        self._serve(track, side, res, first_errors(session, targets))
         self._status('done', gesture, side, text + '; the explored version is played from now '
                      'on', session, res)
         return True, text
 
-    def _serve(self, track, side, res):
+    def _serve(self, track, side, res, unadapted=()):
         """Keep the explored version of ``track`` to play, and publish it (latched)."""
         names = self.robot.arms[side].joint_names
         positions = np.array(track.positions, dtype=float)
@@ -507,7 +518,7 @@ class Exploration:
         self._keep(track, side, positions, res)
         self._explored_pub.publish(explored_message(track, positions))
         self._correction_pub.publish(correction_status(self.robot, self.profile, track, side,
-                                                       res))
+                                                       res, unadapted))
         if res.model is not None:
             corrected_watch(self, side, res.model.groups, res.model.params)
 

@@ -7,7 +7,8 @@ publishes, latched, the explored motion (``explored_topic``,
 carries a gesture, stamped with the library version it was explored from) and the
 structural correction it fitted for that arm (``structure_correction``, a
 ``diagnostic_msgs/DiagnosticStatus``: ``arm``, ``gesture``, ``library_stamp``,
-``groups``, ``params``, ``measured_errors_mm``, ``trials``, ``method``, ``profile``).
+``groups``, ``params``, ``measured_errors_mm``, ``unadapted_errors_mm``, ``trials``,
+``method``, ``profile``).
 When the two of one exploration are in, :class:`ExploredIntake` adopts them in a worker
 thread of its own (compiling the corrected chain reads the profile's URDF: never in a
 callback):
@@ -53,7 +54,8 @@ def parse_correction(status: DiagnosticStatus) -> ArmCorrection:
             int(values.get('library_stamp', '0') or 0),
             tuple(float(e) for e in values.get('measured_errors_mm', '').split()),
             int(values.get('trials', '0') or 0), values.get('method', ''),
-            values.get('profile', ''))
+            values.get('profile', ''),
+            tuple(float(e) for e in values.get('unadapted_errors_mm', '').split()))
     except KeyError as exc:
         raise ValueError(f'structure_correction: missing key {exc.args[0]!r}') from None
 

@@ -7,7 +7,9 @@ fingertip tracker, and hands the node the explored keyframes and the correction 
 version the node publishes: the library version the motion was explored from, with that
 gesture replaced by the explored keyframes.  Its scores are the tracker's, not the
 model's: ``score_after`` / ``tip_error_max_mm`` the largest fingertip error measured at
-the typical points, ``score_mean`` / ``tip_error_mm`` their mean (mm).
+the typical points, ``score_mean`` / ``tip_error_mm`` their mean (mm); ``score_before``
+/ ``score_before_mean`` / ``tip_error_before_mm`` the same of what the first trial at
+each typical point measured (the poses of the version explored from).
 """
 
 from dataclasses import replace
@@ -42,6 +44,9 @@ def explored_library(robot, current, name, times, positions, correction):
     positions = np.clip(positions, lower, upper)   # the profile's limits, to 9 digits
     errors = tuple(float(e) for e in correction.measured_error_mm) or (float('nan'),)
     worst, mean = float(max(errors)), float(np.mean(errors))
+    old = correction.unadapted_error_mm
+    before = (float(max(old)), float(np.mean(old))) if old else (base.score_after,
+                                                                 base.score_mean)
     message = (f'{name}: explored on the robot ({correction.side} arm, {correction.trials} '
                f'trials, {correction.method}): measured {mean:.2f} mm mean, {worst:.2f} mm '
                f'max at {len(correction.measured_error_mm)} typical points; correction '
@@ -49,10 +54,11 @@ def explored_library(robot, current, name, times, positions, correction):
     gesture = GestureResult(
         name=name, times=tuple(float(t) for t in times),
         positions=tuple(tuple(float(a) for a in q) for q in positions),
-        score_before=base.score_after, score_after=worst, score_mean=mean,
-        score_before_mean=base.score_mean, status='converged', message=message,
+        score_before=before[0], score_after=worst, score_mean=mean,
+        score_before_mean=before[1], status='converged', message=message,
         method=ORIGIN, typical_points=len(correction.measured_error_mm),
-        tip_error_mm=mean, tip_error_max_mm=worst, tip_error_before_mm=base.tip_error_mm,
+        tip_error_mm=mean, tip_error_max_mm=worst,
+        tip_error_before_mm=before[1] if old else base.tip_error_mm,
         free_joints=base.free_joints, stage=base.stage,
         speed_ratio=pacing.speed_ratio(robot.velocity_limits, list(times), positions))
     gestures = tuple(gesture if g.name == name else g for g in current.gestures)

@@ -77,7 +77,8 @@ def restore_decision(robot, library, state, fingerprint, settings):
     Return None if ``state.library`` can be republished as it is, else the reason.
 
     ``settings`` are the node's engine settings now; the saved library must have been
-    computed from the same files, for the same fault set, lock strategy and tool.
+    computed from the same files, for the same fault set, lock strategy (with faults:
+    it chose their angles) and tool, on the same measured corrections.
     """
     saved = state.library
     if saved is None:
@@ -86,7 +87,7 @@ def restore_decision(robot, library, state, fingerprint, settings):
         return 'the robot or gesture file changed since it was saved'
     if saved.faults != {j: f.angle for j, f in state.faults.items()}:
         return 'the saved library was computed for another fault set'
-    if saved.settings.get('lock_strategy') != settings.lock_strategy:
+    if saved.faults and saved.settings.get('lock_strategy') != settings.lock_strategy:
         return 'the lock strategy changed since it was saved'
     if (_tool(saved.tool_mm, saved.tool_arm)
             != _tool(settings.tool_length_mm, settings.tool_arm)):
