@@ -8,10 +8,15 @@ player notices the change on ``/structure_change``; its exploration runs on its 
 after the play (trials on the simulated robot, measured by the tracker); the circle is
 played again, as explored.  The replay's true fingertip (the simulator's ground truth)
 keeps to the designed path within the issue's target (mean <= 3 mm, max <= 10 mm), and
-the recovery node's parameters never held the tool.  The player is then restarted: it
-serves the explored circle again from its ``explore_state_file``, on the path as well.
+the recovery node's parameters never held the tool.  ``recovery_node`` adopts the
+player's outcome: ``/gesture_library`` carries an ``explored`` version scored by the
+measured error, with the arm's correction.  The player and the node are then restarted:
+the node republishes the explored version from its state file, the player keeps its own
+from ``explore_state_file``, and the circle stays on its path.
 Last, an exploration is started and ended by ``~/stop_exploration``, another by a new
-``/actuator_fault``, each within one trial (and a play asked for meanwhile is refused).
+``/actuator_fault``, each within one trial (and a play asked for meanwhile is refused);
+a joint fault on the changed arm then gives a library searched on the corrected model,
+whose circle keeps to its path on the tooled arm.
 The figures (trials, robot seconds, the error before and after) are printed.
 """
 
@@ -25,6 +30,7 @@ from namo_fault_recovery.resources import config_path, DEMO_MOTION_FILE
 from namo_fault_recovery.ros.fingertip_topics import measurement, TRACKER_QOS
 from namo_fault_recovery.ros.sim_node import sim_command
 from namo_fault_recovery.ros.spun_node import wait_until
+from namo_fault_recovery.runtime.diagnostic_keys import format_stamp
 from namo_fault_recovery.runtime.private_node import player_command
 from node_harness import explore_domain, NodeProcess, ros_env, TIMEOUT
 import numpy as np
@@ -142,6 +148,28 @@ class ExploreRecorder(Recorder):
         return np.array(out)
 
 
+def explored_version(arms):
+    """Return recovery_node's reconfiguration values if it publishes an explored version."""
+    values = arms.reconfiguration()
+    return values if values.get('library_origin') == 'explored' else {}
+
+
+def faulted_version(arms):
+    """Return the reconfiguration values once both joint 7 are locked in the newest version."""
+    library, values = arms.client.newest_library(), arms.reconfiguration()
+    if library is None or values.get('library_stamp') != format_stamp(library.stamp):
+        return {}
+    q = arms.newest_library()['circle']
+    locked = np.allclose(q[:, 6], 0.2) and np.allclose(q[:, 13], 0.0)
+    return values if locked and values.get('up_to_date') == 'true' else {}
+
+
+def start_recovery(state_dir):
+    """Start recovery_node on the demo library, its state in ``state_dir``."""
+    return NodeProcess(DOMAIN, state_dir=state_dir, env=ros_env(DOMAIN),
+                       args=['-p', f'gesture_file:={DEMO}', '-p', 'contingency_table:=false'])
+
+
 def start_player(kept):
     """Start gesture_player: the demo library's design, adapt on a change, kept in ``kept``."""
     return NodeProcess(DOMAIN, command=player_command(), env=ros_env(DOMAIN),
@@ -156,9 +184,7 @@ def world(tmp_path_factory):
     procs = {'sim': NodeProcess(DOMAIN, command=sim_command(), env=env, args=[
         '-p', 'hidden_tool_right_mm:=50.0', '-p', 'publish_ground_truth:=true',
         '-p', 'tracker_sigma_mm:=1.0']),
-        'recovery': NodeProcess(DOMAIN, state_dir=tmp_path_factory.mktemp('state'), env=env,
-                                args=['-p', f'gesture_file:={DEMO}',
-                                      '-p', 'contingency_table:=false']),
+        'recovery': start_recovery(tmp_path_factory.mktemp('state')),
         'player': start_player(kept)}
     arms = ExploreRecorder(DOMAIN)
     try:
@@ -191,6 +217,16 @@ def test_the_circle_is_explored_on_the_robot_and_replayed_on_its_path(world):
     explored_at = time.monotonic()
     assert done['state'] == 'done', done
     assert done['origin'] == 'explored' and done['arm'] == 'right', done
+    # recovery_node adopts it: /gesture_library carries the explored version, scored as
+    # the tracker measured it, and the arm's correction.
+    adopted = arms.wait(lambda: explored_version(arms), 10.0,
+                        'an explored version\n' + procs['recovery'].describe())
+    assert abs(float(adopted['circle.score_after'])
+               - float(done['measured_error_max_mm'])) <= 0.005, (adopted, done)
+    assert adopted['corrections'].startswith('right: tip_offset'), adopted
+    print(f'\nrecovery_node published the explored version {time.monotonic() - explored_at:.1f} s '
+          f'after the exploration: circle {adopted["circle.score_before"]} -> '
+          f'{adopted["circle.score_after"]} mm as measured; {adopted["corrections"]}')
     since = len(arms.commands)
     replay = arms.play('circle', timeout=30.0)
     assert replay.success, replay.message
@@ -211,11 +247,19 @@ def test_the_circle_is_explored_on_the_robot_and_replayed_on_its_path(world):
     assert not [n for n, v in params.items() if 'hidden' in n or v == 50.0], params
     assert not [s for s in (player.stdout + player.stderr).splitlines()
                 if 'structure change suspected' in s][1:], player.describe()   # once only
-    # A restarted player serves the explored circle again, from explore_state_file.
+    # A restarted player and a restarted recovery_node (both at once) keep what was
+    # learned: the node republishes the explored version and keeps the correction.
     assert kept.exists()
-    assert player.stop() == 0 and 'Traceback' not in player.stderr, player.describe()
+    for name in ('player', 'recovery'):
+        assert procs[name].stop() == 0 and 'Traceback' not in procs[name].stderr, \
+            procs[name].describe()
+    arms.diagnostics.clear()
+    procs['recovery'] = recovery = start_recovery(procs['recovery'].state_dir)
     procs['player'] = player = start_player(kept)
     player.wait_output('circle: explored version restored from')
+    recovery.wait_output('and their library from')
+    assert 'restored the measured right arm (tip_offset' in recovery.stderr, recovery.describe()
+    arms.wait(lambda: explored_version(arms), 10.0, 'the explored version republished')
     since = len(arms.commands)
     again = arms.play('circle', timeout=30.0)
     assert again.success, again.message
@@ -233,3 +277,17 @@ def test_the_circle_is_explored_on_the_robot_and_replayed_on_its_path(world):
     fault = arms.node.create_publisher(JointState, '/actuator_fault', 10)
     arms.stopped_within_one_trial(lambda: fault.publish(
         JointState(name=['left_arm_joint7'], position=[0.0])))
+    # A joint fault that comes later on the changed arm: its library is searched on the
+    # corrected model, so the circle stays on its path on the real (tooled) arm.
+    fault.publish(JointState(name=['right_arm_joint7'], position=[0.2]))
+    faulted = arms.wait(lambda: faulted_version(arms), 30.0, 'the library of both faults')
+    assert faulted['corrections'].startswith('right: tip_offset'), faulted
+    assert faulted['library_origin'] in ('deadline', 'refined'), faulted
+    q = arms.newest_library()['circle'][:, :7]
+    design = LIBRARY['circle'].joint_matrix()[:, :7]
+    true = ROBOT.with_tool(50.0, 'right')            # the simulator's hidden tool
+    off = np.linalg.norm(forward_kinematics(true, q, 'right').tip
+                         - forward_kinematics(ROBOT, design, 'right').tip, axis=1)
+    print(f'faulted library (right_arm_joint7 at 0.2 rad) on the tooled arm: '
+          f'{off.mean():.2f} mm mean, {off.max():.2f} max')
+    assert off.mean() <= 3.0 and off.max() <= 10.0, off

@@ -139,6 +139,9 @@ def forward_kinematics(robot: RobotModel, q: ArrayLike, arm: str = 'right') -> A
 
 def batch_forward(robot, q, arm):
     """Forward kinematics without input checks, for callers that already validated q."""
+    corrected = robot.corrected_arm(arm)
+    if corrected is not None:     # a correction learned on the robot (structure.py)
+        return corrected.forward(q, robot.tool_length(arm))
     chains = getattr(robot, 'chains', None)
     if chains is not None:        # a robot from a URDF profile: its compiled chain
         return chains[arm].forward(q, robot.tool_length(arm))
@@ -185,6 +188,9 @@ def forward_kinematics_jacobian(robot, q, arm='right'):
 
 def batch_forward_jacobian(robot, q, arm):
     """:func:`forward_kinematics_jacobian` without input checks, on q of shape (N, 7)."""
+    corrected = robot.corrected_arm(arm)
+    if corrected is not None:
+        return corrected.jacobian(q, robot.tool_length(arm))
     chains = getattr(robot, 'chains', None)
     if chains is not None:
         return chains[arm].jacobian(q, robot.tool_length(arm))

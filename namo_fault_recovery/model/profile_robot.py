@@ -103,6 +103,8 @@ class ProfileRobot(RobotJoints):
     capsules: CapsuleModel = CapsuleModel()
     tools: tuple = ()
     velocity_limits: tuple = ()
+    corrections: tuple = field(default=(), compare=False, repr=False)
+    learned: tuple = field(default=(), compare=False, repr=False)
     arm_velocity: dict = field(default_factory=dict)
     profile: RobotProfile | None = field(default=None, compare=False, repr=False)
 

@@ -1,6 +1,6 @@
 """The arm model: the DH table, joint names and limits, loaded from a validated YAML file."""
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 import math
 import os
 from pathlib import Path
@@ -41,7 +41,8 @@ class RobotJoints:
 
     Shared by Namo's DH :class:`RobotModel` and a robot built from a recovery profile
     (:class:`~namo_fault_recovery.model.profile_robot.ProfileRobot`); a subclass is a
-    frozen dataclass with ``arms`` ({side: ArmModel}) and ``tools`` fields.  A robot
+    frozen dataclass with ``arms`` ({side: ArmModel}), ``tools``, ``corrections`` and
+    ``learned`` fields.  A robot
     with a ``chains`` field has its kinematics run by its compiled chains; without one
     (the DH model) :mod:`.kinematics` runs its DH table.
     """
@@ -71,6 +72,48 @@ class RobotJoints:
         if length_mm > 0:
             tools = tuple(sorted(tools + ((arm, float(length_mm)),)))
         return replace(self, tools=tools)
+
+    def corrected_arm(self, side: str):
+        """Return the corrected chain of one arm (:mod:`.structure`), or None."""
+        for arm, chain in self.corrections:
+            if arm == side:
+                return chain
+        return None
+
+    def with_corrections(self, corrections) -> 'RobotModel':
+        """
+        Return this robot whose kinematics run ``corrections`` ({side: ArmChain}).
+
+        A correction learned on the robot (:func:`.structure.corrected_arm`) is a
+        structure change like a tool: the corrected arm's landmarks come from its
+        corrected chain; joints, limits and the other arm are unchanged.  An empty
+        mapping gives the nominal robot back.
+        """
+        items = dict(corrections).items()
+        for side, _ in items:
+            if side not in ARMS:
+                raise ValueError(f'corrected arm: expected one of {ARMS}, got {side!r}')
+        return replace(self, corrections=tuple(sorted(items, key=lambda kv: kv[0])))
+
+    def with_learned(self, learned) -> 'RobotModel':
+        """
+        Return this robot carrying corrections learned on the robot, not yet applied.
+
+        ``learned`` holds :class:`~.structure.LearnedArm` entries (a correction and its
+        compiled chain).  This robot's own kinematics stay nominal (it is the reference
+        a design is scored against); :meth:`changed_model` applies them, as it applies
+        a tool.
+        """
+        return replace(self, learned=tuple(sorted(learned, key=lambda a: a.correction.side)))
+
+    def changed_model(self, tool_mm: float = 0.0, tool_arm: str = 'right') -> 'RobotModel':
+        """Return the model of the changed structure: the tool and the learned corrections."""
+        return self.with_tool(tool_mm, tool_arm).with_corrections(
+            {a.correction.side: a.chain for a in self.learned})
+
+    def changed(self, side: str) -> bool:
+        """Return True if one arm's structure differs from the design: a tool or a correction."""
+        return self.tool_length(side) > 0 or self.corrected_arm(side) is not None
 
     @property
     def joint_names(self) -> tuple:
@@ -113,6 +156,10 @@ class RobotModel(RobotJoints):
     source: str = '<memory>'
     capsules: CapsuleModel = CapsuleModel()
     tools: tuple = ()   # ((arm, length mm), ...): tools that lengthen the hands
+    # ((arm, ArmChain), ...): arms whose kinematics run a learned correction (structure.py)
+    corrections: tuple = field(default=(), compare=False, repr=False)
+    # (LearnedArm, ...): corrections learned on the robot, applied by changed_model()
+    learned: tuple = field(default=(), compare=False, repr=False)
     # Speed limit (rad/s) of joints 1..7, the same for both arms; used to time playback.
     velocity_limits: tuple = tuple(math.radians(v) for v in DEFAULT_VELOCITY_LIMITS_DEG)
 

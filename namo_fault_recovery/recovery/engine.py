@@ -29,9 +29,15 @@ if TYPE_CHECKING:
     from ..model.robot import RobotModel
 
 
-def structure_changed(faults, settings):
-    """Return True if the library must be adapted: a fault, or a tool in a hand."""
-    return bool(faults) or settings.tool_length_mm > 0
+def structure_changed(faults, settings, robot=None):
+    """Return True if the library must be adapted: a fault, a tool, a learned correction."""
+    return (bool(faults) or settings.tool_length_mm > 0
+            or bool(robot is not None and robot.learned))
+
+
+def learned_record(robot) -> dict:
+    """Return ``{side: correction dict}`` of the corrections ``robot`` carries (learned)."""
+    return {a.correction.side: a.correction.to_dict() for a in robot.learned}
 
 
 def recover(robot: 'RobotModel', library: 'GestureLibrary', faults: Optional[dict] = None,
@@ -42,6 +48,9 @@ def recover(robot: 'RobotModel', library: 'GestureLibrary', faults: Optional[dic
     """
     Adapt ``library`` to a fault set (and a tool); return a :class:`LibraryResult`.
 
+    A ``robot`` carrying corrections learned on the robot (``robot.with_learned``,
+    :mod:`~..model.structure`) is searched on its corrected model, its nominal
+    kinematics the reference; the result records them (``corrections``).
     ``faults`` maps joint names to a lock angle (rad) or None (the lock strategy chooses).
     ``measured`` maps joints to their measured angles, for the ``measured`` strategy.
     ``clock`` owns the deadline and the cancel flag; None runs with
@@ -64,7 +73,7 @@ def recover(robot: 'RobotModel', library: 'GestureLibrary', faults: Optional[dic
     if seed is None:
         seed = int(np.random.SeedSequence().entropy % (2 ** 63))
     seed = int(seed)
-    if not structure_changed(faults, settings):
+    if not structure_changed(faults, settings, robot):
         budget = None if clock.end is None else float(clock.end - clock.start)
         return reference_result(library, budget, settings.public(), seed,
                                 velocity_limits=robot.velocity_limits)
@@ -78,5 +87,5 @@ def recover(robot: 'RobotModel', library: 'GestureLibrary', faults: Optional[dic
                            stay_close=DEFAULT_STAY_CLOSE if motion else 0.0)
     # The run's wall time counts the typical points too, for the library and each gesture.
     wall = float(time.monotonic() - began)
-    return replace(result, wall_time=wall,
+    return replace(result, wall_time=wall, corrections=learned_record(robot),
                    gestures=tuple(replace(g, wall_time=wall) for g in result.gestures))

@@ -128,7 +128,7 @@ def no_worse_than_locked(robot, gesture, result, locks, settings) -> GestureResu
                       for kf in gesture.keyframes)
     collides, pairs = result.collides, result.colliding_pairs
     if settings.collision_check:
-        model = robot.with_tool(settings.tool_length_mm, settings.tool_arm)
+        model = robot.changed_model(settings.tool_length_mm, settings.tool_arm)
         checker = CollisionModel(model, gesture_targets(gesture), robot.capsules)
         q = np.array(positions)
         lm_r = batch_forward(model, q[:, :N_JOINTS], 'right')

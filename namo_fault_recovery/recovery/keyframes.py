@@ -416,7 +416,7 @@ def reconfigure_library(robot, library, faults, settings, *,
     """
     start = time.monotonic()
     reference = robot
-    robot = robot.with_tool(settings.tool_length_mm, settings.tool_arm)
+    robot = robot.changed_model(settings.tool_length_mm, settings.tool_arm)
     clock = Clock(settings.deadline_sec) if clock is None else clock
     if seed is None:
         seed = int(np.random.SeedSequence().entropy % (2 ** 63))
@@ -484,11 +484,11 @@ class _Setup:
             self.checker = CollisionModel(robot, targets, robot.capsules)
         self.ref_r = np.array([t.q_right for t in targets])
         self.ref_l = np.array([t.q_left for t in targets])
-        # The arms whose structure changed: a failed joint or a tool.  Every lock set
-        # tried for this library locks the same joints, so all of this is shared.
+        # The arms whose structure changed: a failed joint, a tool or a learned correction.
+        # Every lock set tried for this library locks the same joints: all of it is shared.
         self.faulted = {side for side in ARMS
                         if any(robot.locate_joint(j)[0] == side for j in locks)
-                        or robot.tool_length(side) > 0}
+                        or robot.changed(side)}
         self.locked = locked_sets(robot, locks)
         self.frozen = tuple(side for side in ARMS if len(self.locked[side]) == N_JOINTS)
         for side in self.frozen:

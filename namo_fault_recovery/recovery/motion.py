@@ -107,7 +107,7 @@ class _Job:
         self.quantisations = quantisations
         self.optimizer_overrides = optimizer_overrides
         self.stay_close = stay_close
-        self.model = robot.with_tool(settings.tool_length_mm, settings.tool_arm)
+        self.model = robot.changed_model(settings.tool_length_mm, settings.tool_arm)
         self.picks = {g.name: (tuple(range(len(g.keyframes)))
                                if quantisations.get(g.name) is None
                                else tuple(int(i) for i in quantisations[g.name].typical))
@@ -249,7 +249,7 @@ class _Context:
         robot, model = job.robot, job.model
         self.robot, self.model, self.locks = robot, model, locks
         self.locked = locked_sets(robot, locks)
-        self.faulted = {s for s in ARMS if self.locked[s] or model.tool_length(s) > 0}
+        self.faulted = {s for s in ARMS if self.locked[s] or model.changed(s)}
         targets = [t for g in job.library for t in gesture_targets(g)]
         self.scorer = SimilarityScore(model, targets, job.settings.weights,
                                       reference_robot=robot)

@@ -238,7 +238,11 @@ class LibraryResult:
     - ``origin``: how this version was obtained: ``reference`` (no structure change),
       ``deadline`` (a search within the deadline), ``unbounded`` (a search with no
       deadline), ``table`` (the node's precomputed contingency table) or ``refined`` (the
-      node's background refinement after a deadline result).
+      node's background refinement after a deadline result) or ``explored`` (a motion
+      explored on the robot by the gesture player, scored by what its tracker measured);
+    - ``corrections``: the structural corrections learned on the robot that the search
+      ran on, per arm (``ArmCorrection.to_dict()``: ``groups``, ``params``, what they
+      were measured against); {} for the nominal model.
     """
 
     gestures: tuple
@@ -259,6 +263,7 @@ class LibraryResult:
     origin: str = 'deadline'
     refined_after: Optional[float] = None
     refines_version: int = 0
+    corrections: dict = field(default_factory=dict)
 
     @property
     def names(self) -> tuple:
@@ -295,6 +300,7 @@ class LibraryResult:
             'seed': self.seed, 'notes': list(self.notes), 'nfev': self.nfev,
             'origin': self.origin, 'refined_after': self.refined_after,
             'refines_version': self.refines_version,
+            'corrections': {side: dict(c) for side, c in self.corrections.items()},
         }
 
     @classmethod
@@ -333,6 +339,8 @@ class LibraryResult:
                 origin=str(doc.get('origin', 'deadline')),
                 refined_after=optional_number(doc.get('refined_after')),
                 refines_version=int(doc.get('refines_version', 0)),
+                corrections={str(side): dict(c) for side, c in
+                             dict(doc.get('corrections', {})).items()},
             )
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             if isinstance(exc, MalformedResult):
@@ -368,7 +376,8 @@ def reference_result(library, deadline: Optional[float] = 0.0, settings: Optiona
 
 ORIGIN_TEXT = {'deadline': ' by a live search',
                'unbounded': ' by a search without deadline',
-               'table': ' from the contingency table'}    # refined: in timing_text
+               'table': ' from the contingency table',
+               'explored': ' explored on the robot'}    # refined: in timing_text
 
 
 def deadline_text(result: LibraryResult) -> str:
@@ -404,12 +413,14 @@ def timing_text(result: LibraryResult) -> str:
 def summary(result: LibraryResult) -> str:
     """Return the one-line summary of a library version that a person reads."""
     tool = result.tool_mm > 0
-    if not result.faults and not result.locks and not tool:
+    if not result.faults and not result.locks and not tool and not result.corrections:
         return (f'no faults: the reference library is published '
                 f'({len(result.gestures)} gestures, unchanged)')
     changes = [f'{j} at {math.degrees(a):.2f} deg' for j, a in result.locks.items()]
     if tool:
         changes.append(f'a {result.tool_mm:g} mm tool in the {result.tool_arm} hand')
+    changes += [f'the {side} arm as measured ({", ".join(c.get("groups", ())) or "nominal"})'
+                for side, c in sorted(result.corrections.items())]
     locks = ', '.join(changes)
     finite = sum(1 for g in result.gestures if math.isfinite(g.score_after))
     parts = [f'{g.name} {g.score_before:.2f} -> {g.score_after:.2f} in {g.wall_time:.3f} s'

@@ -221,6 +221,14 @@ def _rows(engine_rows, weight_rows):
         Setting('contingency_file', str, '', "a table built offline ('namo-recovery "
                 "precompute --jobs N --out FILE'), merged at start if its fingerprint (robot, "
                 'library, settings) matches; otherwise the reason is logged', read_only=True),
+        Setting('profile_file', str, '', 'recovery profile (URDF + profile YAML) of the '
+                "nominal chains the gesture player's measured corrections are fitted on (its "
+                'profile_file); empty = the packaged Namo profile', read_only=True),
+        Setting('explored_topic', str, 'gesture_player/explored_motions', 'the gesture '
+                "player's latched explored motions: with its correction on "
+                '/structure_correction each becomes a library version (library_origin: '
+                "explored) and the arm's corrected model for later faults; empty = off",
+                read_only=True),
         Setting('diagnostics_period_sec', float, 1.0, 'period of /diagnostics (also '
                 'published on every change)', unit='s', limits=(0.1, 60.0), read_only=True),
         Setting('engine_start_timeout_sec', float, 60.0, 'the engine process must be '

@@ -37,4 +37,5 @@ The gesture player and the simulated robot:
   controller rules, the changes and the tracker are in ``sim/``, free of ROS);
 - :mod:`.fingertip_topics`: the fingertip tracker's topics, both ends (names, QoS,
   ``PointStamped`` in metres to and from mm).
+- :mod:`.explored_intake`: the node adopts the player's measured corrections and motions;
 """

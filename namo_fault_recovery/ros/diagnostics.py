@@ -14,6 +14,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
 from .messages import fmt_angle
+from ..model.structure import ArmCorrection
 from ..recovery.locks import frozen_arms
 from ..recovery.result import summary
 from ..runtime import diagnostic_keys as dk
@@ -137,6 +138,12 @@ def _inputs_status(snap, hw, prefix):
     return status(prefix, dk.INPUTS, 'WARN' if recent else 'OK', message, hw, pairs)
 
 
+def corrections_text(result):
+    """Return the measured corrections a library was searched on, e.g. ``right: ...``."""
+    return '; '.join(f'{side}: {ArmCorrection.from_dict(c).describe()}'
+                     for side, c in sorted(result.corrections.items()))
+
+
 def _seconds(value, digits=4):
     """Return a duration in seconds as text, '' if not measured yet."""
     return '' if value is None else f'{value:.{digits}f}'
@@ -165,7 +172,8 @@ def reconfiguration_status(snap, up_to_date, hw, prefix):
               (dk.SUCCESS, dk.flag(current.success)),
               (dk.FROZEN_ARMS, ' '.join(current.frozen_arms)),
               (dk.SEED, '' if current.seed is None else current.seed),
-              (dk.TOOL_LENGTH_MM, f'{current.tool_mm:g}'), (dk.TOOL_ARM, current.tool_arm)]
+              (dk.TOOL_LENGTH_MM, f'{current.tool_mm:g}'), (dk.TOOL_ARM, current.tool_arm),
+              (dk.CORRECTIONS, corrections_text(current))]
     if current.refined_after is not None:
         pairs.append((dk.REFINED_AFTER_SEC, _seconds(current.refined_after)))
     for g in current.gestures:

@@ -51,6 +51,7 @@ from ..explore.safety import capsule_clearance
 from ..explore.trial import SafetyCheck, TrialSession
 from ..model.gestures import load_library
 from ..model.robot_profile import load_profile
+from ..model.structure import ArmCorrection, corrected_arm
 from ..playback.book import GestureTrack
 from ..recovery.motion import DEFAULT_DISTORTION_MM, typical_points
 from ..resources import config_path, NAMO_PROFILE_FILE
@@ -58,6 +59,7 @@ from ..runtime.explored_store import load_motions, save_motions, stored
 from ..runtime.trial_robot import RosTrialRobot, TrialTimeout, TrialTiming
 
 STATUS_NAME = 'gesture_player: exploration'
+CORRECTION_NAME = 'gesture_player: structure correction'
 DEFAULT_GESTURE = 'circle'
 DENSE = 20                  # keyframes: a longer motion is explored at VQ's typical points
 SERVED = ('converged', 'budget')
@@ -171,6 +173,73 @@ def outcome_values(session, res) -> dict:
     return values
 
 
+def first_errors(session, targets) -> tuple:
+    """Return per typical point what its first trial measured (mm): the unadapted poses."""
+    first = {}
+    for point, _, trial in session.log:
+        if point in targets and point not in first:
+            first[point] = float(np.linalg.norm(trial.tip - targets[point]))
+    return tuple(first[p] for p in sorted(first))
+
+
+def correction_status(robot, profile, track, side, res, unadapted=()) -> DiagnosticStatus:
+    """
+    Return the ``/structure_correction`` status of an exploration served (latched).
+
+    What ``recovery_node`` adopts with the explored motion of ``~/explored_motions``:
+    the arm, the gesture and the library version (``library_stamp``) it was explored
+    from, the fitted correction's ``groups`` and ``params`` (one group per ``;``), the
+    measured errors at the typical points (after, and at their first trial: before),
+    the trials, the explorer and the profile.
+    """
+    model = res.model
+    groups = tuple(model.groups) if model is not None else ()
+    params = tuple(model.params) if model is not None else ()
+    values = {'arm': side, 'gesture': track.name, 'library_stamp': str(int(track.stamp)),
+              'groups': ' '.join(groups),
+              'params': '; '.join(' '.join(repr(float(v)) for v in p) for p in params),
+              'measured_errors_mm': ' '.join(repr(float(e)) for e in res.measured_error_mm),
+              'unadapted_errors_mm': ' '.join(repr(float(e)) for e in unadapted),
+              'trials': str(res.trials), 'method': res.method, 'profile': profile.name}
+    return DiagnosticStatus(level=DiagnosticStatus.OK, name=CORRECTION_NAME,
+                            message=f'{track.name}: {side} arm as measured: {res.correction}'
+                            [:300], hardware_id=robot.name,
+                            values=[KeyValue(key=k, value=v) for k, v in values.items()])
+
+
+def corrected_watch(explorer, side, groups, params) -> None:
+    """Let the structure watch judge ``side`` on its corrected model (a measured change)."""
+    watch = explorer.watch
+    if watch is None or not groups:
+        return
+    arm = corrected_arm(explorer.profile, ArmCorrection(side, tuple(groups), tuple(params)))
+    current = dict(watch.robot.corrections)
+    current[side] = arm
+    watch.robot = watch.robot.with_corrections(current)
+
+
+def attach_watch(explorer, watch) -> None:
+    """Give ``explorer`` the player's StructureWatch, corrected as its kept motions say."""
+    explorer.watch = watch
+    for side, groups, params in explorer.restored_corrections:
+        corrected_watch(explorer, side, groups, params)
+
+
+def send_pose(explorer, side, q, duration) -> None:
+    """Command ``side``'s controller to reach ``q`` in ``duration`` s (from now)."""
+    hooks = explorer.hooks
+    names = explorer.robot.arms[side].joint_names
+    for controller, joints in hooks.groups.items():
+        if not set(joints) & set(names):
+            continue
+        measured = hooks.measured()
+        target = dict(zip(names, q))
+        msg = JointTrajectory(joint_names=list(joints), points=[JointTrajectoryPoint(
+            positions=[float(target.get(j, measured.get(j, 0.0))) for j in joints],
+            velocities=[0.0] * len(joints), time_from_start=duration_msg(duration))])
+        hooks.publishers[controller].publish(msg)
+
+
 def motion_spec(explorer, track, side) -> tuple:
     """Return (MotionSpec, SafetyCheck) of ``track``'s ``side`` arm for an Exploration."""
     robot, gesture = explorer.robot, explorer.library[track.name]
@@ -209,14 +278,17 @@ class Exploration:
             profile = load_profile(self.params['profile_file'] or config_path(NAMO_PROFILE_FILE))
         except (ConfigError, FileNotFoundError) as exc:
             raise ValueError(str(exc).splitlines()[0]) from None
+        self.profile = profile
+        self.watch = None              # the player's StructureWatch (its model is corrected)
         self.chains = {side: profile.arms[side].chain for side in robot.arms}
         velocity = np.asarray(robot.velocity_limits, dtype=float)
         self.arms = {side: RosTrialRobot(
             robot.arms[side].joint_names,
             (self.chains[side].lower, self.chains[side].upper, velocity),
-            lambda q, duration, s=side: self._send(s, q, duration), self._now,
+            lambda q, duration, s=side: send_pose(self, s, q, duration), self._now,
             self.params['timing']) for side in robot.arms}
         self.explored = {}             # gesture -> Explored
+        self.restored_corrections = []     # (side, groups, params) from explore_state_file
         self.kept = {}                 # gesture -> StoredMotion (explore_state_file)
         self.noticed = None            # (gesture, side) of the last suspicion
         self.active = None             # (gesture, side) while an exploration runs or waits
@@ -239,6 +311,7 @@ class Exploration:
             return
         for name, kept in self.kept.items():
             self.explored[name] = restored(kept)
+            self.restored_corrections.append((kept.side, kept.groups, kept.params))
             self.node.get_logger().info(
                 f'{name}: explored version restored from {path} ({kept.side} arm, '
                 f'{kept.trials} trials, measured {np.mean(kept.measured_error_mm):.2f} mm '
@@ -280,6 +353,10 @@ class Exploration:
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._explored_pub = node.create_publisher(JointTrajectory, '~/explored_motions',
                                                    latched)
+        self._correction_pub = node.create_publisher(
+            DiagnosticStatus, '/structure_correction',
+            QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL))
 
     def _now(self):
         return self.node.get_clock().now().nanoseconds * 1e-9
@@ -427,25 +504,12 @@ class Exploration:
             self._status('stopped' if res.status == 'stopped' else 'failed', gesture, side,
                          text, session, res)
             return False, text
-        self._serve(track, side, res)
+        self._serve(track, side, res, first_errors(session, targets))
         self._status('done', gesture, side, text + '; the explored version is played from now '
                      'on', session, res)
         return True, text
 
-    def _send(self, side, q, duration):
-        """Command ``side``'s controller to reach ``q`` in ``duration`` s (from now)."""
-        names = self.robot.arms[side].joint_names
-        for controller, joints in self.hooks.groups.items():
-            if not set(joints) & set(names):
-                continue
-            measured = self.hooks.measured()
-            target = dict(zip(names, q))
-            msg = JointTrajectory(joint_names=list(joints), points=[JointTrajectoryPoint(
-                positions=[float(target.get(j, measured.get(j, 0.0))) for j in joints],
-                velocities=[0.0] * len(joints), time_from_start=duration_msg(duration))])
-            self.hooks.publishers[controller].publish(msg)
-
-    def _serve(self, track, side, res):
+    def _serve(self, track, side, res, unadapted=()):
         """Keep the explored version of ``track`` to play, and publish it (latched)."""
         names = self.robot.arms[side].joint_names
         positions = np.array(track.positions, dtype=float)
@@ -453,6 +517,10 @@ class Exploration:
         self.explored[track.name] = Explored(track, replace(track, positions=positions), res)
         self._keep(track, side, positions, res)
         self._explored_pub.publish(explored_message(track, positions))
+        self._correction_pub.publish(correction_status(self.robot, self.profile, track, side,
+                                                       res, unadapted))
+        if res.model is not None:
+            corrected_watch(self, side, res.model.groups, res.model.params)
 
     def _progress(self, session, gesture, side, targets):
         """Publish the progress before each trial; return True to stop (should_stop)."""

@@ -17,6 +17,7 @@ joint state to parse, a change to publish); it stops itself when it finds none, 
 whatever brings new work restarts it.
 """
 
+from dataclasses import replace
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -34,6 +35,7 @@ from visualization_msgs.msg import MarkerArray
 
 from . import diagnostics
 from . import messages as conv
+from .explored_intake import ExploredIntake
 from .input_monitor import InputMonitor
 from .parameters import (check_parameter, declare_parameters, DEFAULT_STATE_DIR, MARKER_PARAMS,
                          node_config, one_line, parameter_specs, RERUN_PARAMS, StartupError)
@@ -124,17 +126,7 @@ class RecoveryNode(Node):
                                                           or self._inputs.log_pending()))
         self._inputs = InputMonitor(self._robot, self._log_rejection, self._tick.wake)
         self._last_stamp_ns = 0
-        self._engine = engine or EngineProcess()
-        self._engine.load(values['robot_file'] or None, values['gesture_file'] or None,
-                          values['engine_start_timeout_sec'])
-        # The engine process imports, loads and warms up (about a second): the node is
-        # not ready to meet its deadline before, so it waits here (a signal still ends it).
-        try:
-            self._engine.wait_ready(timeout=values['engine_start_timeout_sec'],
-                                    keep_waiting=self.context.ok)
-        except EngineError as exc:
-            self._engine.stop()
-            raise StartupError(f'the engine process did not start: {exc}') from None
+        self._engine = self._start_engine(engine or EngineProcess(), values)
         self._book = RunBook(on_request=self._engine.cancel)
         self._state = Persistence(values['state_dir'] or DEFAULT_STATE_DIR, self._robot,
                                   self._library, self._book, self.get_logger().error)
@@ -148,6 +140,9 @@ class RecoveryNode(Node):
                                       self._log, self._publish_refined, self._table)
         self._markers = LatestWorker(self._publish_markers, MARKER_DELAY, name='markers',
                                      hold=self._intake.busy)
+        self._explored = ExploredIntake(self, (self._robot, self._library), self._book,
+                                        self._state, self._publish_library, self._log,
+                                        values['profile_file'], values['explored_topic'])
         try:
             self._create_interfaces()
             self._restore()
@@ -155,7 +150,8 @@ class RecoveryNode(Node):
             self.stop()
             raise
         self._answers = AnswerPacer(self._wake.trigger)
-        for part in (self._answers, self._markers, self._state, self._intake, self._dispatcher):
+        for part in (self._answers, self._markers, self._state, self._intake, self._dispatcher,
+                     self._explored):
             part.start()
         if self._config.contingency_table:
             self._table.configure(self._config.settings,
@@ -165,6 +161,20 @@ class RecoveryNode(Node):
             f'robot {self._robot.name} ({self._robot.source}), {len(self._library)} gestures '
             f'({self._library.source}); state in {self._state.store.directory}; engine process '
             f'started')
+
+    def _start_engine(self, engine, values):
+        """Give ``engine`` its files and wait until it is ready (StartupError if not)."""
+        engine.load(values['robot_file'] or None, values['gesture_file'] or None,
+                    values['engine_start_timeout_sec'])
+        # The engine process imports, loads and warms up (about a second): the node is
+        # not ready to meet its deadline before, so it waits here (a signal still ends it).
+        try:
+            engine.wait_ready(timeout=values['engine_start_timeout_sec'],
+                              keep_waiting=self.context.ok)
+        except EngineError as exc:
+            engine.stop()
+            raise StartupError(f'the engine process did not start: {exc}') from None
+        return engine
 
     # --- interfaces -----------------------------------------------------------------
 
@@ -342,22 +352,10 @@ class RecoveryNode(Node):
                 self.get_logger().warning(f'could not publish /gesture_markers: {exc}')
 
     def _restore(self):
-        """Publish the reference, then restore the persisted fault set (and library)."""
+        """Publish the reference, then restore the persisted state (see :func:`restore`)."""
         reference = reference_result(self._library)
         self._book.mark_published_without_run(reference, self._publish_library(reference))
-        plan = self._state.plan_restart(self._config.settings)
-        if plan.problem:
-            self.get_logger().error(f'{self._state.problem}; starting without faults')
-        if not plan.faults:
-            if self._config.settings.tool_length_mm > 0:
-                self._book.request()      # a tool from the start is a structure change
-            return
-        self._book.set_faults(plan.faults, request=plan.library is None)
-        if plan.library is not None:
-            self._book.mark_published_without_run(plan.library,
-                                                  self._publish_library(plan.library))
-        log = self.get_logger().info if plan.library is not None else self.get_logger().warning
-        log(plan.message)
+        restore(self, self._state.plan_restart(self._config.settings))
 
     # --- periodic work and diagnostics ---------------------------------------------
 
@@ -398,7 +396,41 @@ class RecoveryNode(Node):
         self._intake.stop()
         self._dispatcher.join()
         self._engine.stop()
-        for name in ('_table', '_state', '_answers', '_markers'):   # those built so far
+        for name in ('_table', '_explored', '_state', '_answers', '_markers'):   # built so far
             part = getattr(self, name, None)
             if part is not None:
                 part.stop()
+
+
+def restore(node, plan):
+    """
+    Restore a RecoveryNode's persisted state: corrections, fault set and library.
+
+    Measured corrections are compiled again (a profile that no longer fits is logged
+    and they are dropped); the saved library is republished if it is still the one
+    for that state, else a run is requested.
+    """
+    logger, book = node.get_logger(), node._book
+    if plan.problem:
+        logger.error(f'{node._state.problem}; starting without faults')
+    if plan.corrections:
+        try:
+            book.set_learned(node._explored.learned(plan.corrections))
+            node._state.corrections = plan.corrections
+        except ValueError as exc:
+            logger.error(f'measured corrections not restored: {exc}')
+            plan = replace(plan, library=None)
+    if not plan.faults:
+        if plan.library is not None and book.learned:
+            book.mark_published_without_run(plan.library, node._publish_library(plan.library))
+            logger.info(plan.message)
+        elif book.learned or node._config.settings.tool_length_mm > 0:
+            book.request()      # a tool from the start, or a measured arm: a structure change
+            if book.learned:
+                logger.warning(plan.message)
+        return
+    book.set_faults(plan.faults, request=plan.library is None)
+    if plan.library is not None:
+        book.mark_published_without_run(plan.library, node._publish_library(plan.library))
+    log = logger.info if plan.library is not None else logger.warning
+    log(plan.message)

@@ -49,7 +49,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from .exploration import Exploration, PlayerHooks
+from .exploration import attach_watch, Exploration, PlayerHooks
 from .messages import duration_msg, stamp_key, status_values, trajectory_angles
 from .spin import run_node
 from .structure_watch import StructureWatch
@@ -227,6 +227,7 @@ class GesturePlayer(Node):
         self._structure = StructureWatch(self, self._robot, inputs)   # structure_watch.py
         self._exploration = explorer(self, self._robot, inputs, self._service_group)
         self._structure.on_notice = self._exploration.notice
+        attach_watch(self._exploration, self._structure)   # judged on its corrected model
         self.get_logger().info(f'controllers: {", ".join(self._groups)}; waiting for '
                                f'/gesture_library')
 

@@ -27,4 +27,5 @@ fast unit tests that need no DDS.
   on disk (``explore_state_file``), so that a restart serves them again;
 - :mod:`.private_node`: the node processes that the demos, the node benchmarks and the
   tests start (the executables' commands, a private domain, one way to stop a process).
+- :mod:`.explored_version`: a library version explored on the robot, scored as measured;
 """

@@ -6,8 +6,10 @@ to the engine process with the deadline counted from the moment it was requested
 engine keeps a margin of it for the work after the search, publishing included), checks
 the result and publishes it, unless a newer request superseded it meanwhile (the node then
 writes it to the state file, off this path).  Publishing is a callable given by the node.
-A run with no structure change (no fault and no tool) needs no engine: the reference
-library is published at once.
+A run with no structure change (no fault, no tool, no correction learned on the robot)
+needs no engine: the reference library is published at once.  With a learned correction
+(the run's ``learned``) the engine searches on the corrected model and the contingency
+table, computed on the nominal one, is not consulted.
 """
 
 from dataclasses import replace
@@ -72,19 +74,20 @@ class Dispatcher:
         config = self._config()
         settings = config.settings
         faults = {j: f.angle for j, f in run.faults.items()}
-        if not structure_changed(faults, settings):
+        if not structure_changed(faults, settings) and not run.learned:
             # No structure change: the engine returns the reference library at once.
             result = recover(self._robot, self._library, faults, settings, seed=config.seed)
         else:
             measured = {j: f.measured for j, f in run.faults.items() if f.measured is not None}
-            result = self._lookup(faults, settings, measured, config)
+            # The table was computed on the nominal model: not for a corrected arm.
+            result = None if run.learned else self._lookup(faults, settings, measured, config)
             if result is None:
                 if self._table is not None:
                     self._table.pause()            # the live run gets the CPU
                 try:
                     result, self.last_engine_time = self._engine.run(
                         run.generation, faults, settings, config.seed, run.requested_at,
-                        measured)
+                        measured, run.learned)
                 except EngineError as exc:
                     self._fail(run, str(exc))
                     return
@@ -136,7 +139,7 @@ class Dispatcher:
 
         try:
             self._engine.refine(run.generation, result, config.settings,
-                                config.refine_budget_sec, improved)
+                                config.refine_budget_sec, improved, run.learned)
         except EngineError as exc:
             self._log('warning', f'refinement stopped: {exc}; the published library stays')
         finally:

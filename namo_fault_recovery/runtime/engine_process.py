@@ -104,7 +104,7 @@ def _serve(conn, current, parent_pid=None):
         if request[0] == _REFINE:
             _refine(conn, robot, library, request[1:], current, quantisations)
             continue
-        run_id, faults, settings, seed, start, measured = request
+        run_id, faults, settings, seed, start, measured, learned = request
 
         def cancel(run_id=run_id):
             return current.value != run_id
@@ -113,8 +113,8 @@ def _serve(conn, current, parent_pid=None):
             clock = Clock(settings.deadline_sec, cancel, start=start)
             began = time.monotonic()
             quant = quantisations(settings.vq_distortion_mm, clock)
-            result = recover(robot, library, faults, settings, seed=seed, clock=clock,
-                             measured=measured, quantisations=quant)
+            result = recover(robot.with_learned(learned), library, faults, settings,
+                             seed=seed, clock=clock, measured=measured, quantisations=quant)
             conn.send(('ok', run_id, result, time.monotonic() - began))
         except Exception as exc:  # noqa: B902 - report every failure to the node
             conn.send(('error', run_id, f'{type(exc).__name__}: {exc}'[:500],
@@ -126,7 +126,8 @@ def _refine(conn, robot, library, request, current, quantisations):
     from ..optimize.base import Clock
     from ..recovery.refine import refinements
 
-    run_id, published, settings, budget = request
+    run_id, published, settings, budget, learned = request
+    robot = robot.with_learned(learned)
 
     def cancel():
         return current.value != run_id
@@ -230,9 +231,13 @@ class EngineProcess:
         """Cancel the run under way (it returns soon with its best so far)."""
         self._current.value = -1
 
-    def run(self, run_id, faults, settings, seed, start, measured, hang_margin=5.0):
+    def run(self, run_id, faults, settings, seed, start, measured, learned=(),
+            hang_margin=5.0):
         """
         Run the engine for one request; return ``(LibraryResult, seconds in the child)``.
+
+        ``learned`` are the corrections learned on the robot (``model.structure``'s
+        LearnedArm, compiled in the node): the search runs on that corrected model.
 
         ``start`` is the ``time.monotonic()`` instant the request was made: the deadline
         ``settings.deadline_sec`` counts from there, across the processes.  Raises
@@ -240,13 +245,14 @@ class EngineProcess:
         within the deadline plus ``hang_margin`` (the child is then replaced).
         """
         end = start + settings.deadline_sec + hang_margin
-        answer = self._exchange(run_id, (run_id, faults, settings, seed, start, measured),
-                                end, lambda answer: answer)
+        answer = self._exchange(run_id, (run_id, faults, settings, seed, start, measured,
+                                         tuple(learned)), end, lambda answer: answer)
         if answer[0] == 'ok':
             return answer[2], answer[3]
         raise EngineError(answer[2])
 
-    def refine(self, run_id, published, settings, budget, on_improved, hang_margin=5.0):
+    def refine(self, run_id, published, settings, budget, on_improved, learned=(),
+               hang_margin=5.0):
         """
         Refine ``published`` in the child for ``budget`` seconds; return why it ended.
 
@@ -259,8 +265,8 @@ class EngineProcess:
                 return None
             return answer[2]
         end = time.monotonic() + budget + hang_margin
-        return self._exchange(run_id, (_REFINE, run_id, published, settings, budget), end,
-                              handle)
+        return self._exchange(run_id, (_REFINE, run_id, published, settings, budget,
+                                       tuple(learned)), end, handle)
 
     def _exchange(self, run_id, request, end, handle):
         """

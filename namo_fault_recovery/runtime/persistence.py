@@ -38,6 +38,7 @@ class Persistence:
         self._seq = itertools.count(self.store.newest_seq() + 1)
         self._writer = BackgroundWriter(self._save)
         self.problem = None                # the last write problem, or a set-aside file
+        self.corrections = ()              # ArmCorrection per arm, written with each state
         self._journal_failed = False
 
     def start(self):
@@ -81,6 +82,25 @@ class Persistence:
                 self._writer.submit(faults, result, next(self._seq))
         return published
 
+    def adopt(self, learned, result, publish):
+        """
+        Take corrections measured on the robot (LearnedArm per arm) and their version.
+
+        Under the lock: the run book gets ``learned``; ``result`` (the explored library
+        version, or None) is published unless a run is pending, in which case (or with
+        no result) a run on the corrected model is requested; then the state, the
+        corrections with it, is queued for the file.  Returns True if ``result`` was
+        published.
+        """
+        with self._lock:
+            self.corrections = tuple(a.correction for a in learned)
+            self._book.set_learned(learned)
+            published = result is not None and self._book.publish_explored(result, publish)
+            if not published:
+                self._book.request()
+            self._writer.submit(self._book.faults, self._book.current, next(self._seq))
+        return published
+
     def plan_restart(self, settings):
         """Read the state file and return the RestartPlan (a bad file is set aside)."""
         plan = plan_restart(self.store, self._robot, self._library, self.fingerprint,
@@ -104,7 +124,7 @@ class Persistence:
 
     def _save(self, faults, library, seq=None):
         try:
-            self.store.save(faults, library, self.fingerprint, seq)
+            self.store.save(faults, library, self.fingerprint, seq, self.corrections)
             self.problem = None
         except (OSError, ValueError) as exc:
             if self.problem is None:

@@ -77,7 +77,8 @@ def restore_decision(robot, library, state, fingerprint, settings):
     Return None if ``state.library`` can be republished as it is, else the reason.
 
     ``settings`` are the node's engine settings now; the saved library must have been
-    computed from the same files, for the same fault set, lock strategy and tool.
+    computed from the same files, for the same fault set, lock strategy (with faults:
+    it chose their angles) and tool, on the same measured corrections.
     """
     saved = state.library
     if saved is None:
@@ -86,11 +87,13 @@ def restore_decision(robot, library, state, fingerprint, settings):
         return 'the robot or gesture file changed since it was saved'
     if saved.faults != {j: f.angle for j, f in state.faults.items()}:
         return 'the saved library was computed for another fault set'
-    if saved.settings.get('lock_strategy') != settings.lock_strategy:
+    if saved.faults and saved.settings.get('lock_strategy') != settings.lock_strategy:
         return 'the lock strategy changed since it was saved'
     if (_tool(saved.tool_mm, saved.tool_arm)
             != _tool(settings.tool_length_mm, settings.tool_arm)):
         return 'the tool (tool_length_mm, tool_arm) changed since it was saved'
+    if saved.corrections != {c.side: c.to_dict() for c in state.corrections}:
+        return 'the saved library was computed for other measured corrections'
     return check_result(robot, library, saved, state.faults)
 
 
@@ -102,6 +105,7 @@ class RestartPlan:
     library: object = None        # the saved LibraryResult if it can be republished
     problem: str = None           # an unusable state file (it was set aside)
     message: str = ''
+    corrections: tuple = ()       # ArmCorrection per arm, measured on the robot
 
 
 def plan_restart(store, robot, library, fingerprint, settings):
@@ -112,13 +116,16 @@ def plan_restart(store, robot, library, fingerprint, settings):
         if problem:
             problem = store.set_aside(problem)
             state = None
-    if state is None or not state.faults:
+    if state is None or not (state.faults or state.corrections):
         return RestartPlan(problem=problem)
     reason = restore_decision(robot, library, state, fingerprint, settings)
-    joints = ', '.join(state.faults)
+    what = ', '.join([f'faults {", ".join(state.faults)}'] * bool(state.faults)
+                     + [f'the measured {c.side} arm ({", ".join(c.groups) or "nominal"})'
+                        for c in state.corrections])
     if reason is None:
         return RestartPlan(dict(state.faults), state.library, problem,
-                           f'restored faults {joints} and their library from {store.path}')
+                           f'restored {what} and their library from {store.path}',
+                           state.corrections)
     return RestartPlan(dict(state.faults), None, problem,
-                       f'restored faults {joints} from {store.path}; {reason}: '
-                       f'reconfiguring')
+                       f'restored {what} from {store.path}; {reason}: reconfiguring',
+                       state.corrections)

@@ -22,6 +22,7 @@ class Run:
     generation: int
     faults: dict                 # joint -> Fault
     requested_at: float          # time.monotonic() of the request (the deadline starts)
+    learned: tuple = ()          # corrections learned on the robot (LearnedArm), if any
 
 
 @dataclass(frozen=True)
@@ -42,6 +43,7 @@ class RunBook:
         self._cond = threading.Condition()
         self._on_request = on_request    # e.g. cancel the run under way (cheap, non-blocking)
         self.faults = {}             # joint -> Fault, in arrival order
+        self.learned = ()            # LearnedArm per arm: corrections measured on the robot
         self.fault_version = 0
         self._requested = 0
         self._requested_at = time.monotonic()
@@ -108,6 +110,29 @@ class RunBook:
         if self._on_request is not None and self._running is not None:
             self._on_request()
 
+    def set_learned(self, learned, request=False):
+        """Replace the learned corrections (one LearnedArm per arm); optionally request."""
+        with self._cond:
+            self.learned = tuple(learned)
+            if request:
+                self._request_locked()
+
+    def publish_explored(self, result, publish):
+        """
+        Publish ``result``, a version explored on the robot, unless a run is pending.
+
+        A new library version with nobody to tell (no call waits for it).  Returns
+        False, publishing nothing, while a requested library is still to come (it would
+        supersede this one) or the node is stopping.
+        """
+        with self._cond:
+            if self.stopping or self._pending_locked():
+                return False
+            self.current = result
+            self.version += 1
+            self.stamp_ns = publish(result)
+            return True
+
     def call(self, callback):
         """
         Register ``callback(Outcome)`` for the library of the current state.
@@ -147,7 +172,7 @@ class RunBook:
             if self.stopping:
                 return None
             self._taken = self._running = self._requested
-            return Run(self._requested, dict(self.faults), self._requested_at)
+            return Run(self._requested, dict(self.faults), self._requested_at, self.learned)
 
     def pending(self):
         """Return True while a requested library is neither published nor failed yet."""

@@ -31,6 +31,7 @@ import time
 import zlib
 
 from ..files import fsync_directory, write_text_atomically
+from ..model.structure import ArmCorrection
 from ..recovery.result import finite_number, LibraryResult, MalformedResult
 
 STATE_FILE = 'state.json'
@@ -70,6 +71,7 @@ class PersistedState:
     fingerprint: str = ''
     saved_at: float = 0.0
     seq: int = 0                 # the newest change it holds (journal records are newer)
+    corrections: tuple = ()      # ArmCorrection per arm: learned on the robot
 
 
 def fingerprint(*paths):
@@ -84,13 +86,19 @@ def fingerprint(*paths):
     return digest.hexdigest()
 
 
-def encode_state(faults, library, fingerprint_='', seq=None):
-    """Return the JSON text of a state (faults: joint -> Fault; seq: its change number)."""
+def encode_state(faults, library, fingerprint_='', seq=None, corrections=()):
+    """
+    Return the JSON text of a state (faults: joint -> Fault; seq: its change number).
+
+    ``corrections`` (ArmCorrection per arm) are the structural corrections measured on
+    the robot; absent in files written before they were kept (none).
+    """
     doc = {
         'format': FORMAT, 'version': FORMAT_VERSION, 'saved_at': time.time(),
         'fingerprint': fingerprint_, 'seq': int(seq or 0),
         'faults': {name: f.to_dict() for name, f in faults.items()},
         'library': library.to_dict() if library is not None else None,
+        'corrections': [c.to_dict() for c in corrections],
     }
     return json.dumps(doc, indent=1, allow_nan=False) + '\n'
 
@@ -117,8 +125,12 @@ def decode_state(text):
         library = LibraryResult.from_dict(library) if library is not None else None
     except MalformedResult as exc:
         raise StateFileError(str(exc)) from None
+    try:
+        corrections = tuple(ArmCorrection.from_dict(c) for c in doc.get('corrections') or ())
+    except (ValueError, TypeError, AttributeError) as exc:
+        raise StateFileError(f"'corrections': {exc}") from None
     return PersistedState(faults, library, str(doc.get('fingerprint', '')),
-                          float(doc.get('saved_at', 0.0) or 0.0), seq)
+                          float(doc.get('saved_at', 0.0) or 0.0), seq, corrections)
 
 
 def decode_faults(raw):
@@ -267,7 +279,7 @@ class StateStore:
         if state is None:
             return PersistedState(faults, seq=seq), problem
         return PersistedState(faults, state.library, state.fingerprint, state.saved_at,
-                              seq), problem
+                              seq, state.corrections), problem
 
     def newest_seq(self):
         """Return the newest change number on disk (state file or journal), 0 if none."""
@@ -305,14 +317,14 @@ class StateStore:
             where = f'and could not be set aside ({exc})'
         return f'state file {self.path} is corrupted: {reason}; {where}'
 
-    def save(self, faults, library, fingerprint_='', seq=None):
+    def save(self, faults, library, fingerprint_='', seq=None, corrections=()):
         """
-        Write the state atomically; return True if written.
+        Write the state atomically; return True if written (``corrections``: ArmCorrection).
 
         ``seq`` orders saves made from several threads: a save older than the last one
         written is skipped.  Raises OSError if the directory cannot be written.
         """
-        text = encode_state(faults, library, fingerprint_, seq)
+        text = encode_state(faults, library, fingerprint_, seq, corrections)
         with self._lock:
             if seq is not None and seq < self._written_seq:
                 return False
