@@ -395,9 +395,8 @@ class GesturePlayer(Node):
                           functools.partial(pressed_joints, self._robot, self._joints))
         self._play = (gesture, session, time.monotonic(), future)
         self._send(plan)
-        explored = track is not designed        # watched against its design, not approach
-        self._structure.start(gesture, design, np.ptp(track.times) if explored else None,
-                              plan if explored else None)
+        explored = (np.ptp(track.times), plan) if track is not designed else ()
+        self._structure.start(gesture, design, *explored)    # its design, not its approach
         return await future
 
     def _plan(self, track, played=None):   # timed as ``played`` is (its approach), if given
