@@ -103,12 +103,13 @@ class DeviationWatch:
         self.duration = plan.duration
         self.times = np.asarray(plan.times, dtype=float)
         self.plan, self.played = plan, plan if played is None else played
-        self.waypoint_times = np.asarray(plan.waypoint_times, dtype=float)
-        self.joints, self.designed = {}, {}
+        self.joints, self.designed, self._played_columns = {}, {}, {}
         for side, arm in robot.arms.items():
             if all(j in plan.joint_names for j in arm.joint_names) and \
                     all(j in self.played.joint_names for j in arm.joint_names):
                 self.joints[side] = list(arm.joint_names)
+                self._played_columns[side] = [self.played.joint_names.index(j)
+                                              for j in arm.joint_names]
                 q = plan.columns(arm.joint_names)[0]
                 self.designed[side] = forward_kinematics(robot, q, side).tip
         self._states = deque(maxlen=_JOINT_HISTORY)      # (stamp, {joint: angle})
@@ -158,8 +159,7 @@ class DeviationWatch:
         grid = np.arange(t, max(t - self.thresholds.max_lag_s, 0.0) - 1e-9, -0.01)
         if grid.size < 2:
             return t
-        index = [self.played.joint_names.index(j) for j in self.joints[side]]
-        commanded = self.played.command_at(grid)[:, index]
+        commanded = self.played.command_at(grid)[:, self._played_columns[side]]
         return float(grid[np.argmin(np.linalg.norm(commanded - q, axis=1))])
 
     def design_time(self, t: float) -> float:
@@ -172,7 +172,7 @@ class DeviationWatch:
         keyframe it is the same motion, so the time maps through the keyframe times
         (identity when the two have different keyframes, or are one motion).
         """
-        ours, theirs = self.played.waypoint_times, self.waypoint_times
+        ours, theirs = self.played.waypoint_times, self.plan.waypoint_times
         if self.played is self.plan or len(ours) != len(theirs):
             return t
         u = np.interp(t, ours, np.arange(len(ours)))
