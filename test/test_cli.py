@@ -1,5 +1,6 @@
 """The namo-recovery command line: happy paths and one-line errors with exit code 2."""
 
+import argparse
 import io
 import json
 from pathlib import Path
@@ -92,3 +93,22 @@ def test_node_benchmarks_get_their_node_and_models_as_one_object_each():
     assert ModelFiles.from_args(args) == ModelFiles('r.urdf', 'g.yaml')
     running = NodeTarget.from_args(build_parser().parse_args(['bench', 'latency']))
     assert running.start(out=io.StringIO()) == (None, None)
+
+
+def _parsers(parser, path):
+    """Yield (command path, parser) for ``parser`` and every subcommand under it."""
+    yield ' '.join(path), parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from _parsers(sub, path + [name])
+
+
+def test_every_command_has_a_help_page():
+    # argparse expands '%' in help texts: a bare one ('% of one core') made
+    # 'namo-recovery bench --help' raise TypeError instead of printing the page.
+    pages = dict(_parsers(build_parser(), ['namo-recovery']))
+    assert 'namo-recovery bench idle' in pages
+    for path, parser in pages.items():
+        text = parser.format_help()
+        assert path.split()[-1] in text, path

@@ -115,7 +115,7 @@ def cmd_idle(args, out):
 def _add_idle(bench_subparsers):
     """Add ``idle``: a private node's idle CPU and clean stops (benchmarks.idle)."""
     p = bench_subparsers.add_parser(
-        'idle', help="a private recovery_node's idle CPU (process tree, % of one core), "
+        'idle', help="a private recovery_node's idle CPU (process tree, %% of one core), "
                      'contingency table off and on; --stops: SIGTERM exits')
     p.add_argument('--table', choices=('off', 'on', 'both', 'none'), default='both',
                    help='contingency_table of the measured nodes (default both; none: '
