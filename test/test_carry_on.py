@@ -78,7 +78,8 @@ def test_blend_starts_measured_ends_on_the_target_within_the_limits(offset_deg):
     q0[NAMES.index(ELBOW)] = 0.8
     v0 = target.velocity_at(t0) + 0.3
     v0[NAMES.index(ELBOW)] = 0.0
-    motion, duration = blend(target, t0, q0, v0, LIMITS, {ELBOW: 0.8})
+    result = blend(target, t0, q0, v0, LIMITS, {ELBOW: 0.8})
+    motion, duration = result.motion, result.duration
     assert duration > 0
     assert np.allclose(motion.command_at(0.0), q0) and np.allclose(motion.velocity_at(0.0), v0)
     t, q, v, a = dense(motion)
@@ -98,7 +99,8 @@ def test_blend_onto_a_still_target_is_time_optimal(offset_deg):
     j, x = NAMES.index('right_arm_joint5'), math.radians(offset_deg)
     q0 = target.final.copy()
     q0[j] += x
-    motion, duration = blend(target, target.duration, q0, np.zeros(14), LIMITS)
+    result = blend(target, target.duration, q0, np.zeros(14), LIMITS)
+    motion, duration = result.motion, result.duration
     vmax = VELOCITY[j]
     if ACCEL * math.sqrt(x / ACCEL) <= vmax:
         best = 2 * math.sqrt(x / ACCEL)            # bang-bang
@@ -113,8 +115,8 @@ def test_blend_onto_a_still_target_is_time_optimal(offset_deg):
 
 def test_blend_with_nothing_to_correct_is_the_target_itself():
     target = planner(*arrays('salute'), np.zeros(14), {})
-    motion, duration = blend(target, 1.0, target.command_at(1.0), target.velocity_at(1.0),
-                             LIMITS)
+    result = blend(target, 1.0, target.command_at(1.0), target.velocity_at(1.0), LIMITS)
+    motion, duration = result.motion, result.duration
     assert duration == 0.0
     t = np.linspace(0.0, motion.duration, 300)
     assert np.allclose(motion.command_at(t), target.command_at(1.0 + t), atol=1e-12)

@@ -12,16 +12,18 @@ the reconfigured gesture is another trajectory of the same gesture.  The pieces:
   phase (the same fraction of the same segment between keyframes), so the new gesture
   goes on from where the old one was, not from its beginning;
 - :func:`blend`: from the measured pose and velocity onto a target trajectory at a
-  given instant.  The command is the target plus a correction that takes each joint
-  from its measured offset and speed difference to zero, at rest: per joint the
-  time-optimal one of a double integrator (full acceleration, a coast at the speed
-  cap if reached, full deceleration), with the acceleration and speed the target
-  leaves to spare under the joint's limits, so that the command stays within every
-  joint's velocity limit and acceleration limit (or the target's own acceleration,
-  where the target itself is harder), checked on the command itself.  A joint where it
-  does not gets less, a few times; failing that, one minimum-jerk (quintic) correction
-  for all joints of the shortest duration that fits, found by search.  Held joints
-  stay exactly where they are held throughout.
+  given instant (:class:`Blend`).  Each joint rejoins the target on its own
+  (:class:`Rejoin`): a limit-bound motion (full acceleration to a cruise speed, the
+  cruise, full acceleration to the target's speed) that meets the target's position
+  and speed at the earliest instant it can (:func:`reachable` decides whether a joint
+  can be at a given state at a given time), then follows it.  The target itself may
+  accelerate beyond the limit (a wave), which no longer starves the blend: the blend
+  is bound by the joint's own limits, not by what the target leaves to spare.  The
+  target's timeline may wait at the blend's instant (up to ``max_wait``) where that
+  brings the last joint onto it sooner: a far joint then does not chase a target that
+  moves away.  Where no rejoin fits (not expected), one minimum-jerk (quintic)
+  correction for all joints of the shortest duration that fits, found by search.
+  Held joints stay exactly where they are held throughout.
 
 They return a :class:`~.timing.PlannedMotion` that starts now, sampled so that a
 controller interpolating cubic Hermite splines between its points reproduces it.
@@ -38,11 +40,13 @@ from .timing import MIN_SEGMENT, sampled_motion
 BLEND_STEP = 0.02         # s between the knots of a blend (the quintic, sampled)
 MIN_BLEND = 0.04          # s: the shortest blend
 MAX_BLEND = 10.0          # s: the longest blend searched
+REJOIN_STEP = 0.01        # s: the grid on which each joint's first reachable instant is sought
+REJOIN_SLACK = 3.0        # s searched beyond the target's end (at rest at its last pose)
+WAIT_STEP = 0.05          # s: the phase waits tried
 _GROWTH = 1.15            # the quintic search grows the duration by this factor per try
 _BISECTIONS = 6
-_BANG_TRIES = 8           # bang-bang tries, each with less acceleration where it misfits
-_BANG_SHRINK = 0.8
-_HORIZON_TRIES = 4        # the spare-speed horizon grown to the correction this often
+_BISECT_TIME = 30         # bisections of a joint's first reachable instant within a step
+_BISECT_SPEED = 60        # bisections of a joint's cruise speed
 _LIMIT_MARGIN = 1.0 + 1e-6
 _AT_REST = 1e-9
 
@@ -101,7 +105,7 @@ def stop(plan, t, limits, holds=None, sample_period=0.05):
     still = sampled_motion(plan.joint_names, CubicHermiteSpline(
         [0.0, MIN_SEGMENT], np.vstack([rest, rest]), np.zeros((2, len(q))), axis=0),
         [0.0, MIN_SEGMENT], sample_period, plan.stretch, dict(plan.locks, **(holds or {})))
-    return blend(still, 0.0, q, v, limits, holds, sample_period)[0]
+    return blend(still, 0.0, q, v, limits, holds, sample_period).motion
 
 
 def phase_time(source, target, t):
@@ -119,49 +123,135 @@ def phase_time(source, target, t):
     return float(np.interp(np.interp(t, a, np.arange(len(a))), np.arange(len(b)), b))
 
 
-class _Trapezoid:
-    """
-    Per joint, the minimum-time correction from (e0, ed0) to rest at zero.
+def _covered(speed, v0, v1, accel, duration):
+    """Return the displacement of accelerate / cruise at ``speed`` / match ``v1`` in ``duration``."""
+    return (speed * duration - (speed - v0) * np.abs(speed - v0) / (2 * accel)
+            - (speed - v1) * np.abs(speed - v1) / (2 * accel))
 
-    Under an acceleration ``accel`` and a speed ``cap`` (per joint): full acceleration
-    towards the target, a coast at the cap if it is reached, full deceleration, at rest
-    at zero at ``t_end`` (a joint with nothing to correct has ``t_end`` 0): the double
-    integrator's time-optimal solution.  Each piece is a quadratic, so the command (the
-    target's cubic plus it) is a cubic between knots that include the switches, which a
-    cubic Hermite controller reproduces exactly.
+
+def _cruise_range(v0, v1, accel, cap, duration):
+    """
+    Return (ok, low, high): the cruise speeds that leave time to cruise in ``duration``.
+
+    Reaching a cruise speed and then ``v1`` takes ``(|c - v0| + |c - v1|) / accel``; the
+    speeds for which that fits ``duration`` are an interval, clipped to the speed cap.
+    ``ok`` is False where even going straight from ``v0`` to ``v1`` does not fit.
+    """
+    lo, hi = np.minimum(v0, v1), np.maximum(v0, v1)
+    span = accel * duration
+    low = np.maximum((lo + hi - span) / 2, -cap)
+    high = np.minimum((lo + hi + span) / 2, cap)
+    return (hi - lo <= span * _LIMIT_MARGIN + _AT_REST) & (low <= high), low, high
+
+
+def reachable(q0, v0, q1, v1, duration, accel, cap, slack=_AT_REST):
+    """
+    Return where a joint can go from (q0, v0) to (q1, v1) in exactly ``duration`` seconds.
+
+    Under ``|acceleration| <= accel`` and ``|speed| <= cap`` (arrays broadcast).  Every
+    such motion can be one that accelerates to a cruise speed, cruises, and accelerates
+    to ``v1``, each at full acceleration; its displacement grows with the cruise speed
+    (the derivative is the time left to cruise), so the reachable displacements are the
+    interval between those of the slowest and the fastest cruise that fit (within
+    ``slack`` rad).
+    """
+    ok, low, high = _cruise_range(v0, v1, accel, cap, duration)
+    d = q1 - q0
+    return (ok & (_covered(low, v0, v1, accel, duration) <= d + slack)
+            & (d <= _covered(high, v0, v1, accel, duration) + slack))
+
+
+class Rejoin:
+    """
+    Per joint, the limit-bound motion onto a trajectory at the earliest instant it can.
+
+    Joint ``j`` goes from (``q0``, ``v0``) to the target's state at its time
+    ``t0 + at[j] - wait`` at play time ``at[j]`` (accelerate, cruise, match the target's
+    speed, every part at the joint's acceleration limit and within its speed cap), then
+    follows the target.  The target's own timeline waits ``wait`` seconds at ``t0``
+    first (its phase then goes on), so that a far joint need not chase a target that
+    moves away.  Each piece is a quadratic or the target's cubic, so a cubic Hermite
+    controller reproduces the command exactly between knots that include ``switches``.
     """
 
-    def __init__(self, e0, ed0, accel, cap):
-        a, cap = np.asarray(accel, dtype=float), np.asarray(cap, dtype=float)
-        sigma = e0 + ed0 * np.abs(ed0) / (2 * a)
-        self.sign = np.where(sigma >= 0, 1.0, -1.0)     # solved as if towards -inf
-        x, v = self.sign * e0, self.sign * ed0
-        peak = np.sqrt(np.maximum(v * v / 2 + a * x, 0.0))     # without a cap
-        cap = np.maximum(np.minimum(peak, cap), np.maximum(-v, 0.0))
-        t1 = np.maximum((v + cap) / a, 0.0)
-        x1 = x + v * t1 - a * t1 ** 2 / 2
-        coast = np.maximum(x1 - cap ** 2 / (2 * a), 0.0) / np.maximum(cap, 1e-12)
-        self.breaks = np.stack([t1, t1 + coast, t1 + coast + cap / a])   # (3, J)
-        self.accel, self.x, self.v = a, x, v
-        self.t_end = self.breaks[2]
-        self.duration = float(np.max(self.t_end))
-        self.switches = self.breaks.ravel()
+    def __init__(self, target, t0, q0, v0, at, wait, accel, cap):
+        """Solve each joint's cruise speed (it exists: ``at`` was found reachable)."""
+        self.target, self.t0, self.wait = target, float(t0), float(wait)
+        self.q0, self.v0 = np.asarray(q0, dtype=float), np.asarray(v0, dtype=float)
+        self.at, self.accel = np.asarray(at, dtype=float), np.asarray(accel, dtype=float)
+        joints = np.arange(len(self.q0))
+        s = self.target_time(self.at)
+        self.q1 = target.command_at(s)[joints, joints]
+        self.v1 = target.velocity_at(s)[joints, joints]
+        _, low, high = _cruise_range(self.v0, self.v1, self.accel, cap, self.at)
+        d = self.q1 - self.q0
+        for _ in range(_BISECT_SPEED):      # the displacement is monotone in the cruise
+            middle = 0.5 * (low + high)
+            short = _covered(middle, self.v0, self.v1, self.accel, self.at) < d
+            low, high = np.where(short, middle, low), np.where(short, high, middle)
+        self.cruise = 0.5 * (low + high)
+        t1 = np.abs(self.cruise - self.v0) / self.accel
+        t3 = np.abs(self.v1 - self.cruise) / self.accel
+        self.breaks = np.stack([np.minimum(t1, self.at),
+                                np.maximum(self.at - t3, np.minimum(t1, self.at)), self.at])
+        self.duration = float(np.max(self.at)) if len(self.at) else 0.0
+        self.switches = np.concatenate([self.breaks.ravel(), [self.wait]])
+
+    def target_time(self, tau):
+        """Return the target's time at play time(s) ``tau`` (its timeline waits first)."""
+        return self.t0 + np.maximum(np.asarray(tau, dtype=float) - self.wait, 0.0)
 
     def __call__(self, tau):
-        """Return (e, e', e'') (n, J) at times ``tau`` (n,)."""
-        tau = np.asarray(tau, dtype=float)[:, None]
-        a = self.accel
-        x, v = self.x * np.ones_like(tau), self.v * np.ones_like(tau)
-        e2 = np.zeros_like(x)
-        start = np.zeros_like(self.x)
-        for end, u in zip(self.breaks, (-a, 0.0 * a, a)):     # the three phases in turn
-            d = np.clip(tau - start, 0.0, end - start)
-            inside = (tau >= start) & (tau < end)
-            x, v = x + v * d + u * d ** 2 / 2, v + u * d
-            e2 = np.where(inside, u, e2)
+        """Return the command (q, q', q'') (n, J) at play times ``tau`` (n,)."""
+        tau = np.asarray(tau, dtype=float)
+        on = self.target_time(tau)
+        q, v, a = (self.target.command_at(on), self.target.velocity_at(on),
+                   self.target.acceleration_at(on))
+        t = tau[:, None]
+        x, y = self.q0 + 0.0 * t, self.v0 + 0.0 * t
+        u_now = np.zeros_like(x)
+        start = np.zeros_like(self.q0)
+        pieces = (np.sign(self.cruise - self.v0) * self.accel, 0.0 * self.accel,
+                  np.sign(self.v1 - self.cruise) * self.accel)
+        for end, u in zip(self.breaks, pieces):
+            d = np.clip(t - start, 0.0, end - start)
+            x, y = x + y * d + u * d ** 2 / 2, y + u * d
+            u_now = np.where((t >= start) & (t < end), u, u_now)
             start = end
-        done = tau >= self.t_end
-        return tuple(np.where(done, 0.0, self.sign * y) for y in (x, v, e2))
+        rejoining = t < self.at
+        return np.where(rejoining, x, q), np.where(rejoining, y, v), np.where(rejoining, u_now, a)
+
+
+def _first_feasible(target, t0, q0, v0, accel, cap, waits):
+    """Return (at (J,), wait) of the earliest rejoin over the phase waits tried, or None."""
+    times = np.arange(0.0, max(target.duration - t0, 0.0) + REJOIN_SLACK, REJOIN_STEP)
+    q1, v1 = target.command_at(t0 + times), target.velocity_at(t0 + times)     # (n, J)
+    best = None
+    for wait in waits:
+        ok = reachable(q0, v0, q1, v1, (wait + times)[:, None], accel, cap)    # (n, J)
+        if not np.all(np.any(ok, axis=0)):
+            continue
+        first = np.argmax(ok, axis=0)
+        at = wait + times[first]
+        if best is None or np.max(at) < np.max(best[0]) - 1e-9:
+            best = (at, wait, first)
+    if best is None:
+        return None
+    at, wait, first = best
+    return _refine(target, t0, q0, v0, accel, cap, wait, times, first), wait
+
+
+def _refine(target, t0, q0, v0, accel, cap, wait, times, first):
+    """Bisect each joint's first reachable instant between its grid point and the one before."""
+    joints = np.arange(len(q0))
+    low, high = times[np.maximum(first - 1, 0)], times[first]
+    for _ in range(_BISECT_TIME if np.any(first > 0) else 0):
+        middle = np.where(first > 0, 0.5 * (low + high), high)
+        s = t0 + middle
+        ok = reachable(q0, v0, target.command_at(s)[joints, joints],
+                       target.velocity_at(s)[joints, joints], wait + middle, accel, cap, 0.0)
+        low, high = np.where(ok, low, middle), np.where(ok, middle, high)
+    return wait + high
 
 
 class _Quintic:
@@ -190,108 +280,124 @@ class _Quintic:
         return e0 * g + ed0 * h, e0 * g1 + ed0 * h1, e0 * g2 + ed0 * h2
 
 
-def _knots(target, t0, correction):
+class _Corrected:
+    """The target from ``t0`` plus a correction (the quintic fallback), as a command."""
+
+    def __init__(self, target, t0, correction):
+        """Keep the target and the correction; the target does not wait."""
+        self.target, self.t0, self.correction, self.wait = target, float(t0), correction, 0.0
+        self.duration, self.switches = correction.duration, correction.switches
+
+    def target_time(self, tau):
+        """Return the target's time at play time(s) ``tau``."""
+        return self.t0 + np.asarray(tau, dtype=float)
+
+    def __call__(self, tau):
+        """Return the command (q, q', q'') (n, J) at play times ``tau`` (n,)."""
+        on = self.target_time(tau)
+        e, e1, e2 = self.correction(tau)
+        return (self.target.command_at(on) + e, self.target.velocity_at(on) + e1,
+                self.target.acceleration_at(on) + e2)
+
+
+def _knots(command):
     """Knots of a blend: a BLEND_STEP grid, the target's own knots and the switches."""
-    duration = correction.duration
+    duration = command.duration
     n = max(2, int(math.ceil(duration / BLEND_STEP)) + 1)
-    inner = np.concatenate([target.waypoint_times - t0, correction.switches])
+    shifted = command.wait + command.target.waypoint_times - command.t0
+    inner = np.concatenate([shifted, command.switches])
     inner = inner[(inner > 1e-6) & (inner < duration - 1e-6)]
     return np.union1d(np.linspace(0.0, duration, n), inner)
 
 
-def _excess(target, t0, correction, limits):
-    """Return per joint whether the blend leaves the limits anywhere (checked densely)."""
-    knots = _knots(target, t0, correction)
+def _excess(command, limits, cap):
+    """Return per joint whether a command leaves the limits anywhere (checked densely)."""
+    knots = _knots(command)
     tau = np.union1d(knots, (knots[:-1] + knots[1:]) / 2)
     tau = np.union1d(tau, np.maximum(knots - 1e-7, 0.0))    # both sides of each knot
-    _, e1, e2 = correction(tau)
-    speed = np.abs(target.velocity_at(t0 + tau) + e1)
-    own = target.acceleration_at(t0 + tau)
-    accel = np.abs(own + e2)
-    return (np.any(speed > limits.velocity * _LIMIT_MARGIN, axis=0)
-            | np.any(accel > np.maximum(limits.acceleration, np.abs(own)) * _LIMIT_MARGIN,
+    _, speed, accel = command(tau)
+    own = np.abs(command.target.acceleration_at(command.target_time(tau)))
+    return (np.any(np.abs(speed) > cap * _LIMIT_MARGIN, axis=0)
+            | np.any(np.abs(accel) > np.maximum(limits.acceleration, own) * _LIMIT_MARGIN,
                      axis=0))
 
 
-def blend(target, t0, q0, v0, limits, holds=None, sample_period=0.05):
+@dataclass(frozen=True)
+class Blend:
     """
-    Return (motion, duration): from ``q0`` at ``v0`` onto ``target`` at its time ``t0``.
+    A blend onto a trajectory: the ``motion`` to command from now on, and its timing.
 
-    ``motion`` starts now at the measured pose and velocity, follows ``target`` from
-    ``t0 + duration`` on (time ``duration`` of ``motion``), and ends where ``target``
-    ends; ``holds`` (joint -> angle) are commanded at their angle throughout.  When no
-    duration up to MAX_BLEND fits the limits, MAX_BLEND is used and ``duration`` is
-    returned negative (so that a caller can say so).
+    ``duration`` (s) is when the last joint is on the target (negative when no blend
+    within the limits was found up to MAX_BLEND, so that a caller can say so); the
+    target's timeline waited ``wait`` seconds at the blend's instant first, so its time
+    at play time ``tau`` is ``t0 + max(tau - wait, 0)``.
+    """
+
+    motion: object
+    duration: float
+    wait: float = 0.0
+
+
+def blend(target, t0, q0, v0, limits, holds=None, sample_period=0.05, max_wait=0.0):
+    """
+    Return the :class:`Blend` from ``q0`` at ``v0`` onto ``target`` at its time ``t0``.
+
+    Its motion starts now at the measured pose and velocity; each joint rejoins the
+    target at the earliest instant it can (:class:`Rejoin`), the target's timeline
+    waiting up to ``max_wait`` seconds at ``t0`` where that brings the last joint on it
+    sooner; then the target to its end.  ``holds`` (joint -> angle) are commanded at their
+    angle throughout.
     """
     names = target.joint_names
     t0 = float(np.clip(t0, 0.0, target.duration))
-    r0, rd0 = target.command_at(t0), target.velocity_at(t0)
-    e0, ed0 = np.asarray(q0, dtype=float) - r0, np.asarray(v0, dtype=float) - rd0
-    e0, ed0 = _hold(e0, ed0, names, dict.fromkeys(holds or {}, 0.0))
+    q0, v0 = _hold(np.array(q0, dtype=float), np.array(v0, dtype=float), names, holds)
+    e0, ed0 = q0 - target.command_at(t0), v0 - target.velocity_at(t0)
     if np.all(np.abs(e0) < _AT_REST) and np.all(np.abs(ed0) < _AT_REST):
-        return resume(target, t0, holds, sample_period), 0.0
+        return Blend(resume(target, t0, holds, sample_period), 0.0)
     # A joint measured faster than its limit (a controller's overshoot at the limit)
-    # cannot start slower: its limit is where it starts, and the correction slows it.
-    limits = BlendLimits(np.maximum(limits.velocity, np.abs(np.asarray(v0, dtype=float))),
-                         limits.acceleration)
-    correction, fits = _correction(target, t0, e0, ed0, limits)
-    duration = correction.duration
-    knots = _knots(target, t0, correction)
-    e, e1, _ = correction(knots)
-    q, v = _hold(target.command_at(t0 + knots) + e, target.velocity_at(t0 + knots) + e1,
-                 names, holds)
-    later = target.waypoint_times[target.waypoint_times > t0 + duration + 1e-6]
+    # cannot start slower: its limit is where it starts, and the blend slows it.
+    cap = np.maximum(limits.velocity, np.abs(v0))
+    waits = np.arange(0.0, max(max_wait, 0.0) + 1e-9, WAIT_STEP)
+    found = _first_feasible(target, t0, q0, v0, limits.acceleration, cap, waits)
+    command = fits = None
+    if found is not None:
+        command = Rejoin(target, t0, q0, v0, found[0], found[1], limits.acceleration, cap)
+        fits = not np.any(_excess(command, limits, cap))
+    if not fits:
+        correction, fits = _quintic(target, t0, e0, ed0, limits, cap)
+        command = _Corrected(target, t0, correction)
+    return Blend(_motion(command, names, holds, sample_period),
+                 command.duration if fits else -command.duration, command.wait)
+
+
+def _motion(command, names, holds, sample_period):
+    """Return the PlannedMotion of ``command`` and then the rest of its target."""
+    target = command.target
+    knots = _knots(command)
+    q, v, _ = command(knots)
+    q, v = _hold(q, v, names, holds)
+    rejoined = command.target_time(command.duration)
+    later = target.waypoint_times[target.waypoint_times > rejoined + 1e-6]
     if len(later):       # then the target itself: its pieces are cubics, kept as they are
         q_later, v_later = _hold(target.command_at(later), target.velocity_at(later),
                                  names, holds)
         q, v = np.vstack([q, q_later]), np.vstack([v, v_later])
-        knots = np.concatenate([knots, later - t0])
+        knots = np.concatenate([knots, command.wait + later - command.t0])
     spline = CubicHermiteSpline(knots, q, v, axis=0)
-    motion = sampled_motion(names, spline, knots, sample_period, target.stretch,
-                            dict(target.locks, **(holds or {})))
-    return motion, duration if fits else -duration
+    return sampled_motion(names, spline, knots, sample_period, target.stretch,
+                          dict(target.locks, **(holds or {})))
 
 
-def _spare(target, t0, limits, horizon):
-    """Return (acceleration, speed) per joint the target leaves to spare over ``horizon``."""
-    ahead = np.linspace(t0, min(target.duration, t0 + horizon), 50)
-    accel = np.maximum(limits.acceleration - np.max(np.abs(target.acceleration_at(ahead)),
-                                                    axis=0), 0.05 * limits.acceleration)
-    cap = np.maximum(limits.velocity - np.max(np.abs(target.velocity_at(ahead)), axis=0),
-                     0.05 * limits.velocity)
-    return accel, cap
-
-
-def _correction(target, t0, e0, ed0, limits):
+def _quintic(target, t0, e0, ed0, limits, cap):
     """
-    Return (correction, fits): the fastest correction found within the limits.
+    Return (correction, fits): the shortest minimum-jerk correction within the limits.
 
-    First the bang-bang one at each joint's acceleration limit; a joint whose blend
-    leaves a limit (its speed, or the target's own acceleration adding up) gets a
-    smaller acceleration, a few times.  If none fits, the quintic one of the shortest
-    duration that fits (growing it from MIN_BLEND, then bisecting); MAX_BLEND and
+    The fallback where no rejoin fits: grown from MIN_BLEND, then bisected; MAX_BLEND and
     ``fits`` False if none does.
     """
-    # What the target leaves to spare while the correction runs (not over the rest of
-    # the gesture: a wave near the speed limit later would leave a crawl now): found
-    # over a horizon grown to the correction's own duration.
-    horizon = MIN_BLEND
-    for _ in range(_HORIZON_TRIES):
-        accel, cap = _spare(target, t0, limits, horizon)
-        correction = _Trapezoid(e0, ed0, accel, cap)
-        if correction.duration <= horizon:
-            break
-        horizon = correction.duration * 1.25
-    for _ in range(_BANG_TRIES):
-        correction = _Trapezoid(e0, ed0, accel, cap)
-        bad = _excess(target, t0, correction, limits)
-        if not np.any(bad):
-            return correction, True
-        accel = np.where(bad, accel * _BANG_SHRINK, accel)
-        cap = np.where(bad, cap * _BANG_SHRINK, cap)
-
     def fits(duration):
-        return not np.any(_excess(target, t0, _Quintic(e0, ed0, duration), limits))
+        command = _Corrected(target, t0, _Quintic(e0, ed0, duration))
+        return not np.any(_excess(command, limits, cap))
     low = high = MIN_BLEND
     while not fits(high):
         if high >= MAX_BLEND:

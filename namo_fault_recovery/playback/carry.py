@@ -22,7 +22,9 @@ anyone reports one):
    (``planner``, from the play's start pose, the stuck joints at their angles), its
    instant at the phase where the arm stopped found (:func:`~.blend.phase_time`), and the arm
    blended from its measured pose and velocity onto it within the velocity and
-   acceleration limits (:func:`~.blend.blend`);
+   acceleration limits (:func:`~.blend.blend`: each joint rejoins it at the earliest
+   instant it can; the gesture's phase waits up to ``REJOIN_WAIT`` where that brings
+   the last joint onto it sooner, and then goes on);
 4. **go on** to the end of the reconfigured gesture, watched as any play (a second
    fault starts again at 1).
 
@@ -41,6 +43,8 @@ import numpy as np
 
 from .blend import blend, phase_time, stop
 from .monitor import Outcome, Playback
+
+REJOIN_WAIT = 1.0       # s: the longest the gesture's phase may wait while the arm rejoins it
 
 
 @dataclass(frozen=True)
@@ -91,6 +95,7 @@ class CarryOn:
         self.events = []                        # (play time, kind, text)
         self.back_at = None                     # play time back on the reconfigured path
         self.blend_duration = None
+        self.rejoin_wait = 0.0                  # s the blend's target waited at its phase
         self._blend_unsent = False              # a blend waits for :meth:`sent`
 
     @property
@@ -107,7 +112,7 @@ class CarryOn:
         """Return the time on the gesture's timeline (``self.base``) at play time ``t``."""
         if self.waiting:
             return self.base_time         # stopped: the gesture waits where it was
-        return self.base_time + (t - self.segment_start)
+        return self.base_time + max(t - self.segment_start - self.rejoin_wait, 0.0)
 
     def sent(self, t):
         """
@@ -193,6 +198,7 @@ class CarryOn:
         self.holds.update(new)
         tau = t - self.segment_start
         self.base_time, self.segment_start = self.phase(t), t
+        self.rejoin_wait = 0.0
         self.motion = stop(self.motion, tau, self.limits, self.holds, self.sample_period)
         self.playback = Playback(self.motion, self.groups, self.thresholds, self.pressed)
         self.waiting_since, self.candidate = t, None
@@ -209,18 +215,19 @@ class CarryOn:
         t_target = phase_time(self.base, target, self.phase(t))
         if velocity is None:
             velocity = self.motion.velocity_at(t - self.segment_start)
-        motion, duration = blend(target, t_target, q, velocity, self.limits, self.holds,
-                                 self.sample_period)
+        joined = blend(target, t_target, q, velocity, self.limits, self.holds,
+                       self.sample_period, REJOIN_WAIT)
+        motion, duration = joined.motion, joined.duration
         self.base, self.base_time, self.segment_start = target, t_target, t
-        self.motion, self.target = motion, target
+        self.motion, self.target, self.rejoin_wait = motion, target, joined.wait
         self.playback = Playback(motion, self.groups, self.thresholds, self.pressed)
         self.waiting_since = None
         self._blend_unsent = True
         self.blend_duration = abs(duration)
         note = '' if duration >= 0 else ' (beyond the limits: no shorter blend fits)'
         self.events.append((t, 'switch', f'reconfigured {label or "gesture"} at phase '
-                                         f'{t_target:.2f} s, blend {abs(duration):.2f} s'
-                                         + note))
+                                         f'{t_target:.2f} s (waited {joined.wait:.2f} s), '
+                                         f'blend {abs(duration):.2f} s' + note))
         return Step(send=motion)
 
     def _watch_return(self, t, q):
