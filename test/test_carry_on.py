@@ -3,7 +3,8 @@
 import math
 
 from namo_fault_recovery import load_library, load_robot
-from namo_fault_recovery.playback.blend import blend, BlendLimits, phase_time, resume
+from namo_fault_recovery.playback.blend import (blend, BlendLimits, phase_time, reachable,
+                                                resume)
 from namo_fault_recovery.playback.carry import CarryOn
 from namo_fault_recovery.playback.monitor import MonitorThresholds
 from namo_fault_recovery.playback.timing import plan_motion
@@ -120,6 +121,67 @@ def test_blend_with_nothing_to_correct_is_the_target_itself():
     assert duration == 0.0
     t = np.linspace(0.0, motion.duration, 300)
     assert np.allclose(motion.command_at(t), target.command_at(1.0 + t), atol=1e-12)
+
+
+def test_reachable_is_exact_for_a_rest_to_rest_move():
+    """From rest to rest over x: reachable in exactly T iff T >= the time-optimal move."""
+    vmax, x = 1.5, np.array([0.01, 0.3, 2.0])
+    best = np.where(np.sqrt(x * ACCEL) <= vmax, 2 * np.sqrt(x / ACCEL), x / vmax + vmax / ACCEL)
+    zero = np.zeros(3)
+    assert np.all(reachable(zero, zero, x, zero, best * 1.001, ACCEL, vmax))
+    assert not np.any(reachable(zero, zero, x, zero, best * 0.999, ACCEL, vmax))
+    assert not np.any(reachable(zero, zero, -x, zero, best * 0.999, ACCEL, vmax))
+
+
+def test_each_joint_rejoins_at_a_reachable_state_within_its_limits():
+    """Random starts onto bye: every joint meets the target's position and speed, in limits."""
+    target = planner(*arrays('bye'), np.zeros(14), {})
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        t0 = rng.uniform(0.0, target.duration)
+        q0 = target.command_at(t0) + rng.uniform(-0.6, 0.6, 14)
+        v0 = rng.uniform(-1.0, 1.0, 14) * VELOCITY
+        result = blend(target, t0, q0, v0, LIMITS, max_wait=1.0)
+        assert result.duration > 0 and 0.0 <= result.wait <= 1.0
+        t, q, v, a = dense(result.motion, 4000)
+        assert np.allclose(q[0], q0) and np.allclose(v[0], v0)
+        after = t >= result.duration
+        on = t0 + np.maximum(t[after] - result.wait, 0.0)
+        assert np.allclose(q[after], target.command_at(on), atol=1e-7)
+        assert np.all(np.abs(v) <= np.maximum(VELOCITY, np.abs(v0)) * 1.001)
+        own = np.abs(target.acceleration_at(t0 + np.maximum(t - result.wait, 0.0)))
+        assert np.all(np.abs(a) <= np.maximum(ACCEL, own) * 1.01 + 1e-6)
+
+
+def test_a_target_accelerating_beyond_the_limit_does_not_starve_the_blend():
+    """
+    Bye's wave accelerates past 600 deg/s^2: 10 deg off, the arm is back within 1 s.
+
+    The blend that sized its correction by what the target left to spare found none
+    within 10 s there.
+    """
+    target = planner(*arrays('bye'), np.zeros(14), {})
+    t = np.linspace(0.0, target.duration, 2000)
+    wave = np.max(np.abs(target.acceleration_at(t)), axis=1) > ACCEL
+    t0 = float(t[np.argmax(wave)])
+    assert np.any(wave)
+    q0 = target.command_at(t0) + math.radians(10.0)
+    result = blend(target, t0, q0, target.velocity_at(t0), LIMITS)
+    assert 0.0 < result.duration < 1.0
+
+
+def test_the_phase_waits_when_the_target_moves_away():
+    """A joint far behind a target that runs away: waiting at the phase is back sooner."""
+    target = planner(*arrays('salute'), np.zeros(14), {})
+    t = np.linspace(0.0, target.duration, 2000)
+    j = NAMES.index('right_arm_joint1')
+    t0 = float(t[np.argmax(np.abs(target.velocity_at(t)[:, j]))])
+    q0 = target.command_at(t0)
+    q0[j] -= np.sign(target.velocity_at(t0)[j]) * 0.5        # behind it, at rest
+    chase = blend(target, t0, q0, np.zeros(14), LIMITS)
+    waited = blend(target, t0, q0, np.zeros(14), LIMITS, max_wait=1.0)
+    assert chase.wait == 0.0 and waited.wait > 0.0
+    assert waited.duration < chase.duration - 0.05
 
 
 class Arm:

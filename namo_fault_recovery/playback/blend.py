@@ -124,7 +124,7 @@ def phase_time(source, target, t):
 
 
 def _covered(speed, v0, v1, accel, duration):
-    """Return the displacement of accelerate / cruise at ``speed`` / match ``v1`` in ``duration``."""
+    """Return the distance of: accelerate, cruise at ``speed``, match ``v1`` (``duration``)."""
     return (speed * duration - (speed - v0) * np.abs(speed - v0) / (2 * accel)
             - (speed - v1) * np.abs(speed - v1) / (2 * accel))
 
