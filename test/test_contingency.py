@@ -5,6 +5,7 @@ import io
 import json
 import math
 import os
+import time
 
 from namo_fault_recovery.cli.main import main
 from namo_fault_recovery.model.gestures import load_library
@@ -238,3 +239,38 @@ def test_precompute_usage_errors(argv, words, capsys, tmp_path):
     assert main(['precompute', '--out', str(tmp_path / 't.json')] + argv, io.StringIO()) == 2
     assert words in capsys.readouterr().err
     assert not (tmp_path / 't.json').exists()
+
+
+def test_a_hit_is_served_within_the_node_deadline_not_the_budget_it_was_built_with(tmp_path):
+    """An entry built under a 0.3 s budget that cut it reads as served now, its search kept."""
+    from namo_fault_recovery.recovery.result import summary
+    from namo_fault_recovery.runtime.contingency_keeper import ContingencyKeeper
+    table = ct.ContingencyTable(ct.table_fingerprint(ROBOT, LIBRARY, SETTINGS))
+    for faults in ct.fault_sets(ROBOT, LIBRARY, SETTINGS):
+        locks = ct.table_locks(ROBOT, LIBRARY, faults, SETTINGS)
+        cut = replace(fake_result(20.0, locks=locks), faults=dict(faults), deadline=0.3,
+                      deadline_met=False, success=False, wall_time=0.263,
+                      gestures=(replace(fake_result(20.0).gestures[0], status='deadline',
+                                        wall_time=0.263),))
+        table.add(cut)
+    path = tmp_path / 'offline.json'
+    table.save(path)
+    logs = []
+    keeper = ContingencyKeeper(ROBOT, LIBRARY, tmp_path / 'state', lambda *a: logs.append(a),
+                               offline_file=str(path))
+    try:
+        keeper.configure(SETTINGS)
+        for _ in range(200):
+            if keeper.entries == len(table):
+                break
+            time.sleep(0.05)
+        hit = keeper.lookup({'right_arm_joint2': None}, SETTINGS)
+    finally:
+        keeper.stop()
+    assert hit is not None, logs
+    assert (hit.origin, hit.deadline, hit.deadline_met, hit.success) == ('table', 1.0, True, True)
+    assert hit.wall_time == 0.263 and hit.gestures[0].status == 'deadline'   # its search kept
+    text = summary(hit)
+    assert text.startswith('reconfigured 1/1 gestures from a search of 0.263 s made in '
+                           'advance (deadline 1.000 s met) for right_arm_joint2'), text
+    assert 'MISSED' not in text and 'from the contingency table' in text, text

@@ -21,6 +21,7 @@ intake and publication need more.
 """
 
 from dataclasses import replace
+import math
 import multiprocessing
 import os
 import signal
@@ -85,7 +86,14 @@ class ContingencyKeeper:
     # --- lookup ---------------------------------------------------------------------
 
     def lookup(self, faults, settings, measured=None):
-        """Return the table's library for ``faults`` (origin ``table``), or None."""
+        """
+        Return the table's library for ``faults`` (origin ``table``), or None.
+
+        The hit is served now, within the node's deadline (``settings.deadline_sec``):
+        that is its deadline, met.  The search that made the entry in advance keeps its
+        own time and statuses (the library's ``wall_time``, each gesture's), so an
+        entry built under a small budget does not read as a deadline missed now.
+        """
         with self._lock:
             table = self._table
             if table is None or table.fingerprint != self._fingerprint(settings):
@@ -97,7 +105,10 @@ class ContingencyKeeper:
         hit = table.lookup(locks)
         if hit is None:
             return None
-        return replace(hit, faults=dict(faults), origin='table')
+        return replace(hit, faults=dict(faults), origin='table',
+                       deadline=settings.deadline_sec or None, deadline_met=True,
+                       success=not hit.cancelled and all(
+                           math.isfinite(g.score_after) for g in hit.gestures))
 
     @property
     def entries(self):
