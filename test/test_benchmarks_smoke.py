@@ -311,3 +311,17 @@ def test_a_wave_that_flips_the_wrist_too_fast_is_not_playable(robot, product_lib
     positions = [list(q) for q in bye.positions]
     positions[1][5] -= 3.0                           # right joint 6 swings 172 deg and back
     assert not playable(robot, replace(bye, positions=tuple(map(tuple, positions))))
+
+
+def test_playability_counts_played_paths_that_touch_beyond_their_design():
+    """Left joint 3 locked: Wai's keyframes are clear, its path from rest presses the palms."""
+    from namo_fault_recovery.benchmarks.playability import run_playability
+    out = io.StringIO()
+    summary = run_playability(out, seeds=1, joints=['left_arm_joint3'], jobs=1,
+                              progress=False)
+    part = summary['parts']['budget']
+    assert part['unplayable'] == 0 and part['gestures'] == 4
+    assert part['path_contacts'] >= 1 and part['max_path_depth_mm'] > 1.0
+    worst = part['worst_paths'][0]
+    assert worst['gesture'] == 'wai' and not worst['keyframes_collide']
+    assert 'played paths touch beyond their design' in out.getvalue()

@@ -168,3 +168,32 @@ def test_a_graze_loads_with_a_one_line_warning(robot, tmp_path):
     for part in (str(path), "'wave'", 'keyframe 1', _deepest_pair(robot, angle), '2.5 mm'):
         assert part in said[0], (part, said[0])
     assert 2.5 < REFUSE_MM
+
+
+def test_a_played_path_is_checked_beyond_its_design_as_the_simulator_counts(robot,
+                                                                            product_library):
+    """
+    The path between keyframes is checked, not only the keyframes.
+
+    Wai from rest is within its design; palms pressed deeper along the way count, as
+    deep as the simulator's contact says.
+    """
+    from namo_fault_recovery.model.self_contact import undesigned_depth
+    wai = product_library['wai']
+    key = wai.joint_matrix()[-1]
+    path = np.linspace(0.0, 1.0, 60)[:, None] * key[None, :]    # from rest, as played
+    assert undesigned_depth(robot, wai, path) <= TOLERANCE_MM
+    sim = NamoSim(robot, gravity=False, allowances=designed_allowances(robot, product_library))
+    hands = PAIRS.index(('right', 2, 'left', 2))
+    for step in np.radians(np.arange(0.5, 10.0, 0.5)):
+        pressed = key.copy()
+        pressed[[1, 8]] += step              # both shoulders bring the hands further in
+        depth = undesigned_depth(robot, wai, pressed[None, :])
+        _place(sim, pressed)
+        counted = {(c.geom1, c.geom2): c.depth * 1e3 for c in sim.contacts()}
+        if depth > TOLERANCE_MM + 0.5:
+            assert GEOM_PAIRS[hands] in counted, (np.degrees(step), depth, counted)
+            assert max(counted.values()) == pytest.approx(depth, abs=0.05)
+            break
+    else:
+        pytest.fail('no pressed pose went beyond the design')

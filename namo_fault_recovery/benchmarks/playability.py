@@ -19,6 +19,11 @@ rest pose, as the player's first play after a fault; the approach is the player'
 Per part: gestures planned, unplayable ones, the largest stretch, the largest peak
 speed over the limit of the player's unstretched plan, and the largest ``speed_ratio``
 the engine reported (its bound on that peak), with the runs the engine had to repair.
+Also the self-contact of the played path by the capsule model
+(:func:`~..model.self_contact.undesigned_depth`, every :data:`PATH_STEP` of the plan
+from rest): the engine checks its keyframes, the player plays the path between them,
+so a gesture whose path goes deeper than its design (:data:`~..model.self_contact.
+TOLERANCE_MM`) is counted (``path_contacts``) with the engine's own verdict beside.
 """
 
 import multiprocessing
@@ -28,6 +33,7 @@ import numpy as np
 
 from . import common
 from .product import load_models, node_settings
+from ..model.self_contact import TOLERANCE_MM, undesigned_depth
 from ..optimize.base import Clock
 from ..playback.timing import plan_motion, PlayTiming
 from ..recovery.engine import recover
@@ -40,17 +46,20 @@ BUDGET_OVERRIDES = {'max_cycles': 1, 'polish_maxiter': 5}
 _GRID = 400            # samples of a plan when looking for its peak speed
 _NO_LIMIT = 1e6        # speed limits that never stretch: the plan as timed
 STRETCHED = 1.0 + 1e-9
+PATH_STEP = 0.02       # s between the checked poses of a played path
 
 _WORKER = {}
 
 
-def play_figures(robot, gesture, locks, timing=PlayTiming()):
+def play_figures(robot, gesture, locks, timing=PlayTiming(), reference=None):
     """
-    Return (stretch, peak speed over the limit) of the player's plan of a GestureResult.
+    Return (stretch, peak speed over the limit, path depth mm) of the player's plan.
 
-    The plan starts at the rest pose (all zeros), holds ``locks`` (joint -> rad) and
-    clips into the joint limits, as the player does.  The peak is read off the plan
-    timed as designed (limits so high that nothing is stretched), on a fine grid.
+    The plan of the GestureResult starts at the rest pose (all zeros), holds ``locks``
+    (joint -> rad) and clips into the joint limits, as the player does.  The peak is
+    read off the plan timed as designed (limits so high that nothing is stretched), on
+    a fine grid; the depth is the played path's deepest contact beyond ``reference``'s
+    design (0 without a reference).
     """
     names = robot.joint_names
     limits = np.tile(np.asarray(robot.velocity_limits, dtype=float), 2)
@@ -62,7 +71,11 @@ def play_figures(robot, gesture, locks, timing=PlayTiming()):
                         timing=timing)
     t = np.linspace(0.0, timed.duration, _GRID)
     peak = float(np.max(np.abs(timed.velocity_at(t)) / limits))
-    return float(played.stretch), peak
+    depth = 0.0
+    if reference is not None:
+        path = np.arange(0.0, played.duration + PATH_STEP, PATH_STEP)
+        depth = undesigned_depth(robot, reference, played.command_at(path))
+    return float(played.stretch), peak, depth
 
 
 def _init_worker(which):
@@ -81,9 +94,10 @@ def _run_one(task):
                   quantisations=_WORKER['quant'], optimizer_overrides=overrides)
     gestures = []
     for g in res.gestures:
-        stretch, peak = play_figures(robot, g, res.locks)
+        stretch, peak, depth = play_figures(robot, g, res.locks, reference=lib[g.name])
         gestures.append({'gesture': g.name, 'stretch': stretch, 'peak_ratio': peak,
-                         'speed_ratio': g.speed_ratio})
+                         'speed_ratio': g.speed_ratio, 'path_depth_mm': depth,
+                         'keyframes_collide': bool(g.collides)})
     return {'fault': joint, 'seed': seed, 'gestures': gestures,
             'repaired': sum(PACED_NOTE in n for n in res.notes),
             'deadline_met': res.deadline_met}
@@ -93,6 +107,8 @@ def _summary(runs):
     rows = [g for r in runs for g in r['gestures']]
     bad = [dict(g, fault=r['fault'], seed=r['seed']) for r in runs for g in r['gestures']
            if g['stretch'] > STRETCHED]
+    touching = [dict(g, fault=r['fault'], seed=r['seed']) for r in runs
+                for g in r['gestures'] if g['path_depth_mm'] > TOLERANCE_MM]
     return {'runs': len(runs), 'gestures': len(rows), 'unplayable': len(bad),
             'unplayable_runs': sum(any(g['stretch'] > STRETCHED for g in r['gestures'])
                                    for r in runs),
@@ -101,7 +117,11 @@ def _summary(runs):
             'max_speed_ratio': max(g['speed_ratio'] for g in rows),
             'repaired_runs': sum(r['repaired'] > 0 for r in runs),
             'deadline_met_share': float(np.mean([r['deadline_met'] for r in runs])),
-            'worst': sorted(bad, key=lambda g: -g['stretch'])[:5]}
+            'worst': sorted(bad, key=lambda g: -g['stretch'])[:5],
+            'path_contacts': len(touching),
+            'path_contacts_clear_keyframes': sum(not g['keyframes_collide'] for g in touching),
+            'max_path_depth_mm': max(g['path_depth_mm'] for g in rows),
+            'worst_paths': sorted(touching, key=lambda g: -g['path_depth_mm'])[:5]}
 
 
 def _part(out, which, tasks, jobs, label, progress):
@@ -166,3 +186,10 @@ def print_playability(out, s, deadline):
         verdict = 'met' if p['unplayable'] == 0 else 'MISSED'
         out.write(f"{k}: {p['unplayable']} unplayable of {p['gestures']} gestures "
                   f'(target 0): {verdict}\n')
+        for g in p['worst_paths']:
+            out.write(f"  {k}: {g['gesture']} (fault {g['fault']}, seed {g['seed']}): the "
+                      f"played path {g['path_depth_mm']:.1f} mm beyond the design"
+                      f"{'' if g['keyframes_collide'] else ' (keyframes clear)'}\n")
+        out.write(f"{k}: {p['path_contacts']} of {p['gestures']} played paths touch beyond "
+                  f"their design ({p['path_contacts_clear_keyframes']} of them with every "
+                  f"keyframe clear), deepest {p['max_path_depth_mm']:.1f} mm (target 0)\n")

@@ -183,6 +183,22 @@ class ReferenceContact(NamedTuple):
                 f"robot's own body blocks this reference ({verdict})")
 
 
+def undesigned_depth(robot, reference, poses) -> float:
+    """
+    Return how deep (mm, >= 0) poses (N, 14) press any pair beyond ``reference``'s design.
+
+    A played motion is checked along its whole path, not only at its keyframes: a
+    two-handed gesture's designed pairs may go as deep as its reference keyframes do
+    (the deepest of them, as the simulator allows), every other pair not at all.
+    """
+    pen = penetrations(robot, poses)
+    allowed = np.zeros(pen.shape[1])
+    designed = designed_pairs(reference.two_handed)
+    if np.any(designed):
+        allowed[designed] = penetrations(robot, reference.joint_matrix()).max(axis=0)[designed]
+    return float(max(np.max(pen - allowed[None, :]), 0.0))
+
+
 def reference_contact(robot, gesture):
     """Return the deepest undesigned contact of ``gesture`` beyond the tolerance, or None."""
     pen = penetrations(robot, gesture.joint_matrix())
