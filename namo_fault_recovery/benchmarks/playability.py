@@ -121,7 +121,18 @@ def _summary(runs):
             'path_contacts': len(touching),
             'path_contacts_clear_keyframes': sum(not g['keyframes_collide'] for g in touching),
             'max_path_depth_mm': max(g['path_depth_mm'] for g in rows),
-            'worst_paths': sorted(touching, key=lambda g: -g['path_depth_mm'])[:5]}
+            'worst_paths': sorted(touching, key=lambda g: -g['path_depth_mm'])[:5],
+            'path_contacts_by': _count_by(touching)}
+
+
+def _count_by(rows):
+    """Return ``{'gesture fault': [paths touching, of them with clear keyframes]}``."""
+    counts = {}
+    for g in rows:
+        entry = counts.setdefault(f"{g['gesture']} {g['fault']}", [0, 0])
+        entry[0] += 1
+        entry[1] += not g['keyframes_collide']
+    return dict(sorted(counts.items()))
 
 
 def _part(out, which, tasks, jobs, label, progress):
