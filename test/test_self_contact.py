@@ -188,7 +188,7 @@ def test_a_played_path_is_checked_beyond_its_design_as_the_simulator_counts(robo
     for step in np.radians(np.arange(0.5, 10.0, 0.5)):
         pressed = key.copy()
         pressed[[1, 8]] += step              # both shoulders bring the hands further in
-        depth = undesigned_depth(robot, wai, pressed[None, :])
+        depth = undesigned_depth(robot, wai, np.vstack([np.zeros(14), pressed]))
         _place(sim, pressed)
         counted = {(c.geom1, c.geom2): c.depth * 1e3 for c in sim.contacts()}
         if depth > TOLERANCE_MM + 0.5:

@@ -189,13 +189,16 @@ def undesigned_depth(robot, reference, poses) -> float:
 
     A played motion is checked along its whole path, not only at its keyframes: a
     two-handed gesture's designed pairs may go as deep as its reference keyframes do
-    (the deepest of them, as the simulator allows), every other pair not at all.
+    (the deepest of them, as the simulator allows), every other pair not at all; nor
+    deeper than the first pose already does (where a motion starts is not its doing:
+    a locked arm at rest may lie on the torso).
     """
     pen = penetrations(robot, poses)
-    allowed = np.zeros(pen.shape[1])
+    allowed = pen[0].copy()
     designed = designed_pairs(reference.two_handed)
     if np.any(designed):
-        allowed[designed] = penetrations(robot, reference.joint_matrix()).max(axis=0)[designed]
+        ref = penetrations(robot, reference.joint_matrix()).max(axis=0)
+        allowed[designed] = np.maximum(allowed[designed], ref[designed])
     return float(max(np.max(pen - allowed[None, :]), 0.0))
 
 
