@@ -88,7 +88,11 @@ def _urdf_of(data, path):
     """Return the path of the profile's URDF (relative to the profile, or in a package)."""
     spec = chk.require(data, 'urdf', path)
     if isinstance(spec, str):
-        return (Path(path).parent / spec).resolve()
+        found = (Path(path).parent / spec).resolve()
+        if not found.is_file():
+            raise ConfigError(path, 'urdf', f'no URDF file {found}; expected a readable file '
+                              '(a path relative to the profile)')
+        return found
     if isinstance(spec, dict):
         _check_keys(spec, ('file', 'distribution'), path, 'urdf.')
         name = chk.require(spec, 'file', path, 'urdf')

@@ -40,8 +40,6 @@ from .input_monitor import InputMonitor
 from .parameters import (check_parameter, declare_parameters, DEFAULT_STATE_DIR, MARKER_PARAMS,
                          node_config, one_line, parameter_specs, RERUN_PARAMS, StartupError)
 from ..errors import ConfigError, shorten
-from ..model.gestures import load_library
-from ..model.robot import load_robot
 from ..recovery.result import reference_result, summary
 from ..runtime import diagnostic_keys as dk
 from ..runtime.answer_pacer import AnswerPacer
@@ -53,6 +51,7 @@ from ..runtime.fault_intake import After, Clear, FaultIntake, Report
 from ..runtime.inputs import BadInput, parse_fault
 from ..runtime.latest_worker import LatestWorker
 from ..runtime.persistence import Persistence
+from ..runtime.robot_source import load_models, robot_source
 from ..runtime.run_book import Outcome, RunBook
 
 NODE_NAME = 'recovery_node'
@@ -116,9 +115,12 @@ class RecoveryNode(Node):
         values = declare_parameters(self, lambda: self._last_param_reason)
         self._config = node_config(values)
         try:
-            self._robot = load_robot(values['robot_file'] or None)
-            self._library = load_library(self._robot, values['gesture_file'] or None,
-                                         on_warning=self.get_logger().warning)
+            self._source = robot_source(values)
+        except ValueError as exc:
+            raise StartupError(f'invalid parameter {one_line(exc)}') from None
+        try:
+            self._robot, self._library = load_models(
+                self._source, values['gesture_file'] or None, self.get_logger().warning)
         except (ConfigError, FileNotFoundError) as exc:
             raise StartupError(f'invalid configuration: {one_line(exc)}') from None
         self._prefix = diagnostics.status_prefix(self.get_fully_qualified_name())
@@ -142,7 +144,8 @@ class RecoveryNode(Node):
                                      hold=self._intake.busy)
         self._explored = ExploredIntake(self, (self._robot, self._library), self._book,
                                         self._state, self._publish_library, self._log,
-                                        values['profile_file'], values['explored_topic'])
+                                        values['profile_file'] or self._robot_profile(),
+                                        values['explored_topic'])
         try:
             self._create_interfaces()
             self._restore()
@@ -162,9 +165,13 @@ class RecoveryNode(Node):
             f'({self._library.source}); state in {self._state.store.directory}; engine process '
             f'started')
 
+    def _robot_profile(self):
+        """Return the robot's RobotProfile if it was built from one (robot_profile), else ''."""
+        return getattr(self._robot, 'profile', None) or ''
+
     def _start_engine(self, engine, values):
         """Give ``engine`` its files and wait until it is ready (StartupError if not)."""
-        engine.load(values['robot_file'] or None, values['gesture_file'] or None,
+        engine.load(self._source, values['gesture_file'] or None,
                     values['engine_start_timeout_sec'])
         # The engine process imports, loads and warms up (about a second): the node is
         # not ready to meet its deadline before, so it waits here (a signal still ends it).
