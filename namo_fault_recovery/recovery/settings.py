@@ -190,7 +190,7 @@ def _rows(engine_rows, weight_rows):
     """Return the table: the node's own settings around the engine's, in parameter order."""
     return (
         Setting('robot_file', str, '', 'arm model YAML (DH, joint names, limits); empty = '
-                'the packaged Namo model (or robot_profile\'s robot)', read_only=True),
+                'the packaged Namo model (unless robot_profile is given)', read_only=True),
         Setting('robot_profile', str, '', 'recovery profile YAML of any robot (arms, '
                 'landmark links, recovery joints; config/robots/talos.yaml): the robot is '
                 'built from it and its URDF instead of robot_file; empty = robot_file',

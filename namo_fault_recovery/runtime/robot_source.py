@@ -86,6 +86,6 @@ def load_models(source, gesture_file=None, on_warning=None):
     except ConfigError as exc:
         if gesture_file is not None or source.profile is None:
             raise
-        raise ConfigError(source.profile, None, f"gesture_file is empty and the packaged "
+        raise ConfigError(source.profile, None, 'gesture_file is empty and the packaged '
                           f"library (Namo's) does not fit robot {robot.name!r} ({exc}); "
-                          f"expected gesture_file set to a library of {robot.name!r}") from None
+                          f'expected gesture_file set to a library of {robot.name!r}') from None
