@@ -119,7 +119,7 @@ def test_the_packaged_namo_library_on_talos_says_to_give_talos_library(talos):
     with pytest.raises(ConfigError) as exc:
         load_models(robot_source({'robot_profile': str(TALOS)}))
     text = one_line(exc)
-    assert text.startswith(f"{TALOS}: gesture_file is empty and the packaged library "
+    assert text.startswith(f'{TALOS}: gesture_file is empty and the packaged library '
                            "(Namo's) does not fit robot 'talos'")
     assert text.endswith("expected gesture_file set to a library of 'talos'")
 
