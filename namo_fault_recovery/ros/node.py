@@ -103,6 +103,23 @@ def describe_reports(reports, lock_strategy):
                      for j, a in joints.items())
 
 
+def node_models(values, warning):
+    """Return ``(RobotSource, robot, library)`` of the node's parameters (StartupError)."""
+    try:
+        source = robot_source(values)
+    except ValueError as exc:
+        raise StartupError(f'invalid parameter {one_line(exc)}') from None
+    try:
+        return (source, *load_models(source, values['gesture_file'] or None, warning))
+    except (ConfigError, FileNotFoundError) as exc:
+        raise StartupError(f'invalid configuration: {one_line(exc)}') from None
+
+
+def own_profile(robot):
+    """Return the RobotProfile a robot was built from (robot_profile), else ''."""
+    return getattr(robot, 'profile', None) or ''
+
+
 class RecoveryNode(Node):
     """The fault-recovery node; see the module docstring and ``msg_docs/``."""
 
@@ -114,15 +131,8 @@ class RecoveryNode(Node):
         self.add_post_set_parameters_callback(self._after_set_parameters)
         values = declare_parameters(self, lambda: self._last_param_reason)
         self._config = node_config(values)
-        try:
-            self._source = robot_source(values)
-        except ValueError as exc:
-            raise StartupError(f'invalid parameter {one_line(exc)}') from None
-        try:
-            self._robot, self._library = load_models(
-                self._source, values['gesture_file'] or None, self.get_logger().warning)
-        except (ConfigError, FileNotFoundError) as exc:
-            raise StartupError(f'invalid configuration: {one_line(exc)}') from None
+        self._source, self._robot, self._library = node_models(values,
+                                                               self.get_logger().warning)
         self._prefix = diagnostics.status_prefix(self.get_fully_qualified_name())
         self._tick = DemandTick(self._tick_work, lambda: (self._inputs.pending_state()
                                                           or self._inputs.log_pending()))
@@ -144,7 +154,7 @@ class RecoveryNode(Node):
                                      hold=self._intake.busy)
         self._explored = ExploredIntake(self, (self._robot, self._library), self._book,
                                         self._state, self._publish_library, self._log,
-                                        values['profile_file'] or self._robot_profile(),
+                                        values['profile_file'] or own_profile(self._robot),
                                         values['explored_topic'])
         try:
             self._create_interfaces()
@@ -164,10 +174,6 @@ class RecoveryNode(Node):
             f'robot {self._robot.name} ({self._robot.source}), {len(self._library)} gestures '
             f'({self._library.source}); state in {self._state.store.directory}; engine process '
             f'started')
-
-    def _robot_profile(self):
-        """Return the robot's RobotProfile if it was built from one (robot_profile), else ''."""
-        return getattr(self._robot, 'profile', None) or ''
 
     def _start_engine(self, engine, values):
         """Give ``engine`` its files and wait until it is ready (StartupError if not)."""
