@@ -6,13 +6,19 @@ example-robot-data) with Talos's packaged library, over DDS in a domain of its o
 fault on one of Talos's arm joints is published on ``/actuator_fault`` and the
 reconfigured library on ``/gesture_library`` must carry Talos's joint names and hold that
 joint at its lock.  The contingency table and the refinement are off: one live search.
+A profile that names no URDF makes the node wait for the ``/robot_description`` topic
+(as ``robot_state_publisher`` publishes it) and say so on ``/diagnostics``.
 """
 
 from pathlib import Path
 
+from diagnostic_msgs.msg import DiagnosticStatus
+from namo_fault_recovery.resources import distribution_file
+from namo_fault_recovery.ros.description_wait import QOS as DESCRIPTION_QOS
 from namo_fault_recovery.runtime.robot_source import load_models, robot_source
-from node_harness import NodeProcess, RosClient, session_domain, statuses_values
+from node_harness import NodeProcess, ros_env, RosClient, session_domain, statuses_values
 import pytest
+from std_msgs.msg import String
 
 pytestmark = pytest.mark.slow
 
@@ -20,6 +26,7 @@ DOMAIN = session_domain(1)      # modules run one after the other: the ids are r
 ROBOTS = Path(__file__).resolve().parent.parent / 'config' / 'robots'
 PROFILE = ROBOTS / 'talos.yaml'
 LIBRARY = ROBOTS / 'talos_gestures.yaml'
+TALOS_URDF = 'talos_data/robots/talos_reduced.urdf'
 FAULTED = 'arm_left_4_joint'          # Talos's left elbow
 LOCK = -1.2                           # rad, inside its limits [-2.356, 0]
 START = 60.0                          # s: interpreter, URDF and capsule fit, engine warm-up
@@ -69,3 +76,44 @@ def test_a_fault_on_talos_is_reconfigured_with_talos_joint_names(tmp_path, talos
     assert code == 0, node.describe()
     assert 'Traceback' not in node.stderr + node.stdout, node.describe()
     assert f'robot talos ({PROFILE})' in node.stderr, node.describe()
+
+
+def test_a_profile_without_urdf_waits_for_the_robot_description_topic(tmp_path, talos):
+    robot, library = talos
+    urdf = Path(distribution_file('example-robot-data', TALOS_URDF))
+    prefix = next(p for p in urdf.parents if (p / 'share' / 'example-robot-data').is_dir())
+    profile = tmp_path / 'talos_no_urdf.yaml'
+    profile.write_text('\n'.join(line for line in PROFILE.read_text().splitlines()
+                                 if not line.startswith('urdf:')) + '\n')
+    # The document's package:// meshes are found as ROS finds them: AMENT_PREFIX_PATH.
+    node = NodeProcess(DOMAIN, state_dir=tmp_path / 'state', args=[
+        '-p', f'robot_profile:={profile}', '-p', f'gesture_file:={LIBRARY}',
+        '-p', 'contingency_table:=false', '-p', 'refine_budget_sec:=0.0',
+        '-p', 'diagnostics_period_sec:=0.2'],
+        env=ros_env(DOMAIN, {'AMENT_PREFIX_PATH': str(prefix)}))
+    client = RosClient(DOMAIN, gestures=len(library))
+    try:
+        statuses = client.wait_diag(lambda st: 'robot_description' in st, timeout=START,
+                                    what='the node saying it waits for /robot_description')
+        waiting = statuses['robot_description']
+        assert waiting.level == DiagnosticStatus.WARN
+        assert waiting.message.startswith('waiting for the URDF on /robot_description')
+        assert statuses_values(waiting)['robot_profile'] == str(profile)
+        assert client.latest() is None and node.alive()
+
+        # Published as robot_state_publisher does: latched, so the order does not matter.
+        publisher = client.node.create_publisher(String, '/robot_description', DESCRIPTION_QOS)
+        publisher.publish(String(data=urdf.read_text()))
+        reference = client.wait_library(timeout=START, what='the library once the URDF came')
+        for msg in reference.msgs.values():
+            assert list(msg.joint_names) == list(robot.joint_names)
+        client.publish_fault([FAULTED], [LOCK])
+        adapted = client.wait_library(after=reference.stamp, timeout=30.0,
+                                      what=f'the library for {FAULTED}')
+        assert all(abs(a - LOCK) < 1e-9 for a in adapted.column(FAULTED))
+    finally:
+        client.close()
+        code = node.stop()
+    assert code == 0, node.describe()
+    assert 'Traceback' not in node.stderr + node.stdout, node.describe()
+    assert 'robot_description received on /robot_description' in node.stderr, node.describe()

@@ -197,7 +197,8 @@ def _rows(engine_rows, weight_rows):
                 read_only=True),
         Setting('robot_description', str, '', "the robot's URDF document (the XML text "
                 'robot_state_publisher takes): it replaces the URDF that robot_profile names; '
-                "empty = the profile's urdf", read_only=True),
+                "empty = the profile's urdf, or if it names none the robot_description topic "
+                '(transient local, waited for)', read_only=True),
         Setting('gesture_file', str, '', 'reference gesture library YAML; empty = the '
                 "packaged library (Namo's 4 paper gestures as motions); "
                 'config/demo_motions.yaml adds the dense 100-point circle; with '

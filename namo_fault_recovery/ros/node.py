@@ -35,6 +35,7 @@ from visualization_msgs.msg import MarkerArray
 
 from . import diagnostics
 from . import messages as conv
+from .description_wait import wait_for_description
 from .explored_intake import ExploredIntake
 from .input_monitor import InputMonitor
 from .parameters import (check_parameter, declare_parameters, DEFAULT_STATE_DIR, MARKER_PARAMS,
@@ -103,10 +104,17 @@ def describe_reports(reports, lock_strategy):
                      for j, a in joints.items())
 
 
-def node_models(values, warning):
-    """Return ``(RobotSource, robot, library)`` of the node's parameters (StartupError)."""
+def node_models(values, warning, wait):
+    """
+    Return ``(RobotSource, robot, library)`` of the node's parameters (StartupError).
+
+    A profile that names no URDF, without ``robot_description``: ``wait(profile)``
+    returns the URDF document (from the topic, :mod:`.description_wait`).
+    """
     try:
         source = robot_source(values)
+        if source.needs_description():
+            source = robot_source(dict(values, robot_description=wait(source.profile)))
     except ValueError as exc:
         raise StartupError(f'invalid parameter {one_line(exc)}') from None
     try:
@@ -131,8 +139,9 @@ class RecoveryNode(Node):
         self.add_post_set_parameters_callback(self._after_set_parameters)
         values = declare_parameters(self, lambda: self._last_param_reason)
         self._config = node_config(values)
-        self._source, self._robot, self._library = node_models(values,
-                                                               self.get_logger().warning)
+        self._source, self._robot, self._library = node_models(
+            values, self.get_logger().warning, lambda profile: wait_for_description(
+                self, profile, values['diagnostics_period_sec']))
         self._prefix = diagnostics.status_prefix(self.get_fully_qualified_name())
         self._tick = DemandTick(self._tick_work, lambda: (self._inputs.pending_state()
                                                           or self._inputs.log_pending()))

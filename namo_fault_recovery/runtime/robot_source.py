@@ -38,6 +38,21 @@ class RobotSource:
         from ..model.robot_profile import load_profile
         return robot_from_profile(load_profile(self.profile, urdf=self.description))
 
+    def needs_description(self):
+        """
+        Return True if only a URDF document can complete it: a profile without ``urdf``.
+
+        Then the node waits for the ``robot_description`` topic.  A profile that cannot
+        be read returns False: loading it reports why.
+        """
+        if self.profile is None or self.description is not None:
+            return False
+        from ..model.yaml_checks import load_yaml
+        try:
+            return 'urdf' not in load_yaml(self.profile)
+        except ConfigError:
+            return False
+
     def describe(self):
         """Return where the robot comes from, for a log line."""
         if self.profile is None:
