@@ -7,6 +7,7 @@ is one line naming the parameter or file, the value and what was expected.  Talo
 from example-robot-data (the tests' extra, as in test_profile.py).
 """
 
+import io
 from pathlib import Path
 
 from namo_fault_recovery.errors import ConfigError
@@ -135,3 +136,18 @@ def test_a_library_made_for_another_robot_is_refused(talos):
         load_library(load_robot(), TALOS_LIBRARY)
     assert one_line(exc).startswith(f"{TALOS_LIBRARY}: key 'robot': a library for robot "
                                     "'talos', whose joints are not those of robot 'namo'")
+
+
+def test_namo_recovery_library_prints_talos_arms_by_their_joint_names(talos):
+    from namo_fault_recovery.cli.node_commands import arm_of, format_library
+    from namo_fault_recovery.recovery.result import reference_result
+    from namo_fault_recovery.ros.client import PublishedLibrary
+    robot, library = talos
+    assert [arm_of(j) for j in ('right_arm_joint2', 'arm_left_4_joint', 'torso_1_joint',
+                                'upright_joint')] == ['right', 'left', None, None]
+    out = io.StringIO()
+    format_library(PublishedLibrary(1, tuple(robot.joint_names), reference_result(library),
+                                    0.0, True), out)
+    wai = out.getvalue().split('\nwai\n')[1].split('\nbye\n')[0].splitlines()
+    assert [row.split()[0] for row in wai] == ['t', 'right', 'left'], out.getvalue()
+    assert len(wai[1].split()) == len(wai[2].split()) == 8       # the side + 7 angles
