@@ -75,7 +75,8 @@ def test_a_fault_on_talos_is_reconfigured_with_talos_joint_names(tmp_path, talos
         code = node.stop()
     assert code == 0, node.describe()
     assert 'Traceback' not in node.stderr + node.stdout, node.describe()
-    assert f'robot talos ({PROFILE})' in node.stderr, node.describe()
+    assert f"robot talos (profile {PROFILE} with the profile's urdf)" in node.stderr, \
+        node.describe()
 
 
 def test_a_profile_without_urdf_waits_for_the_robot_description_topic(tmp_path, talos):
@@ -117,3 +118,5 @@ def test_a_profile_without_urdf_waits_for_the_robot_description_topic(tmp_path, 
     assert code == 0, node.describe()
     assert 'Traceback' not in node.stderr + node.stdout, node.describe()
     assert 'robot_description received on /robot_description' in node.stderr, node.describe()
+    assert f'robot talos (profile {profile} with robot_description)' in node.stderr, \
+        node.describe()

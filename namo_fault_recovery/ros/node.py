@@ -179,8 +179,9 @@ class RecoveryNode(Node):
             self._table.configure(self._config.settings,
                                   active={j: f.angle for j, f in self._book.faults.items()})
         self._ready = True
+        where = self._source.describe() if self._source.profile else self._robot.source
         self.get_logger().info(
-            f'robot {self._robot.name} ({self._robot.source}), {len(self._library)} gestures '
+            f'robot {self._robot.name} ({where}), {len(self._library)} gestures '
             f'({self._library.source}); state in {self._state.store.directory}; engine process '
             f'started')
 
