@@ -120,3 +120,54 @@ def test_a_profile_without_urdf_waits_for_the_robot_description_topic(tmp_path, 
     assert 'robot_description received on /robot_description' in node.stderr, node.describe()
     assert f'robot talos (profile {profile} with robot_description)' in node.stderr, \
         node.describe()
+
+
+def test_the_gesture_player_runs_on_talos_and_commands_its_arm_joints(tmp_path, talos):
+    """gesture_player on the same profile: Talos's library in, Talos's joints out."""
+    import threading
+    import time
+
+    from namo_fault_recovery.runtime.private_node import player_command
+    from sensor_msgs.msg import JointState
+    from std_srvs.srv import Trigger
+    from trajectory_msgs.msg import JointTrajectory
+    robot, library = talos
+    robot_args = ['-p', f'robot_profile:={PROFILE}', '-p', f'gesture_file:={LIBRARY}']
+    node = NodeProcess(DOMAIN, state_dir=tmp_path / 'state', args=robot_args + [
+        '-p', 'contingency_table:=false', '-p', 'refine_budget_sec:=0.0'])
+    player = NodeProcess(DOMAIN, command=player_command(), env=ros_env(DOMAIN),
+                         args=robot_args + ['-p', 'carry_on_wait_sec:=0.0'])
+    client = RosClient(DOMAIN, gestures=len(library))
+    commands = []
+    client.node.create_subscription(JointTrajectory, 'right_arm_controller/joint_trajectory',
+                                    commands.append, 10)
+    client.node.create_subscription(JointTrajectory, 'left_arm_controller/joint_trajectory',
+                                    commands.append, 10)
+    stop = threading.Event()
+
+    def stream():                       # Talos at rest, as its joint_state_broadcaster
+        while not stop.wait(0.02):
+            client.state_pub.publish(JointState(name=list(robot.joint_names),
+                                                position=[0.0] * len(robot.joint_names)))
+    streamer = threading.Thread(target=stream, daemon=True)
+    streamer.start()
+    try:
+        client.wait_library(timeout=START, what="Talos's reference library")
+        play = client.node.create_client(Trigger, '/gesture_player/play/salute')
+        assert play.wait_for_service(timeout_sec=START), player.describe()
+        play.call_async(Trigger.Request())
+        end = time.monotonic() + 20.0
+        while len(commands) < 2 and time.monotonic() < end:
+            time.sleep(0.05)
+        assert len(commands) == 2, player.describe()
+        sent = {tuple(msg.joint_names) for msg in commands}
+        assert sent == {tuple(robot.arms['right'].joint_names),
+                        tuple(robot.arms['left'].joint_names)}
+        assert all(msg.points for msg in commands)
+    finally:
+        stop.set()
+        streamer.join()
+        client.close()
+        codes = [proc.stop() for proc in (player, node)]
+    assert codes == [0, 0], player.describe() + node.describe()
+    assert 'Traceback' not in player.stderr + player.stdout, player.describe()

@@ -50,7 +50,7 @@ from ..explore.motion import explore_motion, METHODS, motion_layouts, MotionSpec
 from ..explore.safety import capsule_clearance
 from ..explore.trial import SafetyCheck, TrialSession
 from ..model.gestures import load_library
-from ..model.robot_profile import load_profile
+from ..model.robot_profile import load_profile, RobotProfile
 from ..model.structure import ArmCorrection, corrected_arm
 from ..playback.book import GestureTrack
 from ..recovery.motion import DEFAULT_DISTORTION_MM, typical_points
@@ -275,7 +275,9 @@ class Exploration:
         self.params = declare_exploration(node)
         try:
             self.library = load_library(robot, self.params['gesture_file'] or None)
-            profile = load_profile(self.params['profile_file'] or config_path(NAMO_PROFILE_FILE))
+            profile = (self.params['profile_file'] or getattr(robot, 'profile', None)
+                       or config_path(NAMO_PROFILE_FILE))      # a profile robot: its own
+            profile = profile if isinstance(profile, RobotProfile) else load_profile(profile)
         except (ConfigError, FileNotFoundError) as exc:
             raise ValueError(str(exc).splitlines()[0]) from None
         self.profile = profile

@@ -53,7 +53,6 @@ from .exploration import attach_watch, Exploration, PlayerHooks
 from .messages import duration_msg, stamp_key, status_values, trajectory_angles
 from .spin import run_node
 from .structure_watch import StructureWatch
-from ..model.robot import load_robot
 from ..model.self_contact import pressed_joints
 from ..playback import monitor as detector
 from ..playback.blend import BlendLimits
@@ -61,6 +60,7 @@ from ..playback.book import GestureTrack, parse_lock_angle, PlayerBook
 from ..playback.carry import CarryOn
 from ..playback.monitor import MonitorThresholds, Outcome
 from ..playback.timing import plan_motion, PlayTiming
+from ..runtime.robot_source import robot_source
 
 NODE_NAME = 'gesture_player'
 RECOVERY_PREFIX = 'recovery_node: '
@@ -94,10 +94,29 @@ def _detector(node, name):
         description=text, type=ParameterType.PARAMETER_DOUBLE, read_only=True)).value
 
 
+ROBOT_PARAMETERS = {
+    'robot_file': "arm model YAML (DH); empty = Namo's, or robot_profile",
+    'robot_profile': 'recovery profile YAML: the robot from its URDF (as recovery_node)',
+    'robot_description': "URDF document replacing the profile's urdf (as recovery_node)",
+}
+
+
+def _robot(node):
+    """Return the robot of the robot parameters, as ``recovery_node`` reads them."""
+    values = {name: node.declare_parameter(name, '', ParameterDescriptor(
+        description=text, type=ParameterType.PARAMETER_STRING, read_only=True)).value
+        for name, text in ROBOT_PARAMETERS.items()}
+    source = robot_source(values)           # ValueError: one line naming the parameter
+    if source.needs_description():
+        raise ValueError(f'robot_profile: {source.profile} names no urdf; expected '
+                         'robot_description set (the player does not wait for the '
+                         '/robot_description topic)')
+    return source.load()
+
+
 def _declare(node):
     """Declare the parameters; return (robot, controllers, timing, monitor, waits)."""
-    robot_file = node.declare_parameter('robot_file', '').value or None
-    robot = load_robot(robot_file)
+    robot = _robot(node)
     controllers = list(node.declare_parameter(
         'controllers', ['right_arm_controller', 'left_arm_controller']).value)
     groups = {}
