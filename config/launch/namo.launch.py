@@ -13,7 +13,20 @@ Arguments (all 'true' or 'false'):
 - ``robot_state_publisher``: TF of the URDF from /joint_states (default: as ``sim``).
 - ``rviz``: RViz with the packaged view (robot model, /gesture_markers, TF).
 
-The URDF is the packaged ``config/namo.urdf``, generated from the robot file by
+Another robot (strings; empty: Namo):
+
+- ``robot_profile``: its recovery profile YAML, for ``recovery_node`` and
+  ``gesture_player`` (the robot from its URDF instead of Namo's model);
+- ``gesture_file``: its gesture library (``namo-recovery retarget`` makes one);
+- ``urdf``: the URDF that ``robot_state_publisher`` (and so RViz) shows and publishes
+  on ``/robot_description``; a profile without a ``urdf`` key makes ``recovery_node``
+  wait for that topic.
+
+    ros2 launch namo_fault_recovery namo.launch.py player:=true \
+        robot_profile:=/path/to/talos.yaml gesture_file:=/path/to/talos_gestures.yaml \
+        urdf:=/path/to/talos_reduced.urdf robot_state_publisher:=true
+
+The default URDF is the packaged ``config/namo.urdf``, generated from the robot file by
 ``namo-recovery urdf``; its root ``base_link`` is the frame of /gesture_markers.
 """
 
@@ -23,8 +36,9 @@ from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.conditions import IfCondition
-from launch.substitutions import LaunchConfiguration
+from launch.substitutions import Command, LaunchConfiguration
 from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
 
 PACKAGE = 'namo_fault_recovery'
 
@@ -33,8 +47,12 @@ def generate_launch_description():
     """Return the launch description (see the module docstring for the arguments)."""
     share = get_package_share_directory(PACKAGE)
     config = os.path.join(share, 'config')
-    with open(os.path.join(config, 'namo.urdf'), encoding='utf-8') as f:
-        robot_description = f.read()
+    robot_description = ParameterValue(Command(['cat ', LaunchConfiguration('urdf')]),
+                                       value_type=str)
+    # Strings, even when empty (launch_ros would otherwise read '' as YAML: no value).
+    robot = {'robot_profile': ParameterValue(LaunchConfiguration('robot_profile'),
+                                             value_type=str),
+             'gesture_file': ParameterValue(LaunchConfiguration('gesture_file'), value_type=str)}
 
     arguments = [
         DeclareLaunchArgument('player', default_value='false',
@@ -45,13 +63,20 @@ def generate_launch_description():
                               description='start robot_state_publisher with the URDF'),
         DeclareLaunchArgument('rviz', default_value='false',
                               description='start RViz with the packaged view'),
+        DeclareLaunchArgument('robot_profile', default_value='',
+                              description="another robot's recovery profile (empty: Namo)"),
+        DeclareLaunchArgument('gesture_file', default_value='',
+                              description="that robot's gesture library (empty: Namo's)"),
+        DeclareLaunchArgument('urdf', default_value=os.path.join(config, 'namo.urdf'),
+                              description='URDF for robot_state_publisher and RViz'),
     ]
     nodes = [
         Node(package=PACKAGE, executable='recovery_node', name='recovery_node',
              output='screen',
-             parameters=[os.path.join(config, 'recovery_node.yaml')]),
+             parameters=[os.path.join(config, 'recovery_node.yaml'), robot]),
         Node(package=PACKAGE, executable='gesture_player', name='gesture_player',
-             output='screen', condition=IfCondition(LaunchConfiguration('player'))),
+             output='screen', parameters=[robot],
+             condition=IfCondition(LaunchConfiguration('player'))),
         Node(package=PACKAGE, executable='namo_sim', name='namo_sim', output='screen',
              condition=IfCondition(LaunchConfiguration('sim'))),
         Node(package='robot_state_publisher', executable='robot_state_publisher',
