@@ -39,9 +39,10 @@ DEFAULT_STEP_PENALTY = 1.0    # per deg^2 of a joint step beyond the cap
 DEFAULT_SMOOTH = 0.01         # mm / deg: rounding of the score's kinks (as the polish)
 # The whole-motion pass's roundings, coarse to fine (the last is the polish's): at 0.01
 # alone the points that reach their target are 10^5 times stiffer than the rest, so that
-# Newton's model holds only within 0.01 mm of them and it crawls; from 1 mm it converges
-# in ~35 steps, and each finer rounding then takes ~10 more.
-MOTION_SMOOTHING = (1.0, 0.1, DEFAULT_SMOOTH)
+# Newton's model holds only within 0.01 mm of them and it crawls.  From 3 mm the circle
+# (right joints 1-7, no deadline) took 42-79 Newton steps in all, against 57-118 from
+# 1 mm (then 0.1), to the same optimum.
+MOTION_SMOOTHING = (3.0, 0.3, DEFAULT_SMOOTH)
 COARSE_FTOL = 1e-6            # relative decrease that ends a coarser rounding's pass
 MOTION_FTOL = 1e-9            # ... and the last one's
 # Iterations of one pass.  300 left the circle 1-95 % above its best-known at 1 s
@@ -420,59 +421,70 @@ def banded_newton(problem, fun, x0, maxiter=DEFAULT_NEWTON_MAXITER, ftol=1e-9, g
     Where L-BFGS needed thousands of iterations on the circle (the rounded kinks of the
     points that reach their target exactly are 10^5 times stiffer than the posture
     terms of the others), this converges in tens.  Each block is made positive definite
-    (absolute eigenvalues, floored) and damped by ``lam`` times the mean diagonal,
-    which grows when a step fails the Armijo test and shrinks when a full step passes;
-    variables at a bound that the gradient pushes outwards are held.  ``fun(x) -> (f,
-    g)`` evaluates (and may raise to stop the run, as ``check()`` may before the
-    Hessian's evaluations); ``done`` is False when ``maxiter`` ran out.
+    (absolute eigenvalues, floored) and the diagonal is scaled by 1 + ``lam``
+    (Levenberg-Marquardt), which grows when a step fails the Armijo test (the Hessian
+    is then kept) and shrinks when a full step passes; variables at a bound that the
+    gradient pushes outwards are held.  ``fun(x) -> (f, g)`` evaluates (and may raise to
+    stop the run, as ``check()`` may before the Hessian's evaluations); ``done`` is
+    False when ``maxiter`` ran out.
     """
     lower, upper = problem.lower, problem.upper
     x = np.clip(np.asarray(x0, dtype=float), lower, upper)
     f, g = fun(x)
-    lam, calm = _DAMPING, 0
+    lam, calm, blocks = _DAMPING, 0, None
     for nit in range(1, maxiter + 1):
         free = ~(((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0)))
         pg = np.where(free, g, 0.0)
         if np.abs(pg).max(initial=0.0) <= gtol:
             return nit - 1, True
-        if check is not None:
-            check()
-        d = -_newton_direction(problem, x, g, free, lam)
-        slope = float(g @ d)
-        if not slope < 0:
-            d, slope = -pg, -float(pg @ pg)
-        step, moved = 1.0, False
-        for _ in range(20):
-            xn = np.clip(x + step * d, lower, upper)
-            fn, gn = fun(xn)
-            if fn <= f + 1e-4 * float(g @ (xn - x)):
-                moved = True
-                break
-            step *= 0.5
-        if not moved:
+        if blocks is None:
+            if check is not None:
+                check()
+            blocks = _psd_blocks(problem, x)
+        d = -_newton_direction(problem, x, blocks, g, free, lam)
+        if not float(g @ d) < 0:
+            d = -pg
+        step = _armijo(fun, x, f, g, d, lower, upper)
+        if step is None:
             if lam >= _MAX_DAMPING:
                 return nit, True     # no descent left at machine precision
             lam *= 10.0
             continue
-        lam = max(lam / 3.0, _MIN_DAMPING) if step == 1.0 else min(lam * 4.0, _MAX_DAMPING)
+        lam = max(lam / 3.0, _MIN_DAMPING) if step[0] == 1.0 else min(lam * 4.0, _MAX_DAMPING)
+        _, xn, fn, gn = step
         small = f - fn <= ftol * max(abs(f), abs(fn), 1.0)
-        x, f, g = xn, fn, gn
+        x, f, g, blocks = xn, fn, gn, None
         calm = calm + 1 if small else 0
         if calm >= 2:
             return nit, True
     return maxiter, False
 
 
-def _newton_direction(problem, x, g, free, lam):
-    """Return H^-1 g on the ``free`` variables for the banded Hessian H at ``x``."""
-    n, dim = problem.n_points, problem.dim
-    xs = x.reshape(n, dim)
-    blocks = problem.point_hessians(xs)
+def _armijo(fun, x, f, g, d, lower, upper, tries=10):
+    """Return (step, x, f, g) of a backtracking Armijo search along ``d``, or None."""
+    step = 1.0
+    for _ in range(tries):
+        xn = np.clip(x + step * d, lower, upper)
+        fn, gn = fun(xn)
+        if fn <= f + 1e-4 * float(g @ (xn - x)):
+            return step, xn, fn, gn
+        step *= 0.5
+    return None
+
+
+def _psd_blocks(problem, x):
+    """Return the point Hessian blocks at ``x``, made positive definite (|eigenvalues|)."""
+    blocks = problem.point_hessians(x.reshape(problem.n_points, problem.dim))
     w, v = np.linalg.eigh(blocks)
     scale = max(float(np.abs(w).max(initial=0.0)), 1e-12)
     w = np.maximum(np.abs(w), 1e-9 * scale)
-    blocks = np.einsum('tik,tk,tjk->tij', v, w, v)
-    diag, off = problem.step_hessian(xs)
+    return np.einsum('tik,tk,tjk->tij', v, w, v)
+
+
+def _newton_direction(problem, x, blocks, g, free, lam):
+    """Return H^-1 g on the ``free`` variables for the banded Hessian H at ``x``."""
+    n, dim = problem.n_points, problem.dim
+    diag, off = problem.step_hessian(x.reshape(n, dim))
     band = np.zeros((dim + 1, n * dim))
     for o in range(dim):
         rows = np.zeros((n, dim))
@@ -527,7 +539,7 @@ def optimise_motion(robot, scorer, target_ids, start_right, start_left, layout, 
     polish's), and the warm start is returned if the result is not lower there.
     L-BFGS at the polish's rounding alone stopped on its iteration cap (the circle with
     right joint 2 locked 10-40 % above the optimum, by the seed) and needed ~10,000
-    iterations to converge; this takes ~70 Newton steps.
+    iterations to converge; this takes 40-80 Newton steps.
     """
     kw = {'step_cap_deg': designed_step_deg(design), 'collision': collision}
     q, nfev, nit, status = (start_right, start_left), 0, 0, 'converged'
