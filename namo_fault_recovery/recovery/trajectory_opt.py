@@ -4,9 +4,10 @@ Whole-trajectory optimisation of a dense motion: every point at once, batched.
 Kriging from typical points (:mod:`.motion`) is fast but leaves the fingertip off the
 path between the typical points; exploring every point in order (``per_point``) reaches
 the path but takes seconds per motion.  Here the free joints of all T points of one
-motion are stacked into one vector of T x D variables and minimised together by
-projected L-BFGS (:func:`projected_lbfgs`, numpy; or scipy's L-BFGS-B), warm-started
-from the Kriging result.  Every objective call runs one
+motion are stacked into one vector of T x D variables and minimised together,
+warm-started from the Kriging result: by a banded Newton method (:func:`banded_newton`,
+the whole-motion pass, :func:`optimise_motion`) or projected L-BFGS
+(:func:`projected_lbfgs`, numpy; or scipy's L-BFGS-B).  Every objective call runs one
 batched forward-kinematics-and-Jacobian pass over all points
 (:func:`~namo_fault_recovery.model.kinematics.batch_forward_jacobian`), so the gradient is
 analytic and there is no Python loop over the points.
@@ -18,7 +19,8 @@ The objective is
                    [+ the capsule collision penalty of every point]
 
 (steps in degrees): the score is the similarity score of each point against its own
-designed pose (with the kink-free ``smooth`` rounding of the polish), the quadratic term
+designed pose (with the kinks rounded by ``smooth``, coarse to fine in the whole-motion
+pass), the quadratic term
 couples neighbouring points so that the motion stays on one redundant branch, and the
 hinge keeps each joint's step near ``cap``, the motion's designed largest step.  The
 locked joints are not variables, so they stay at their lock; the bounds are the joint
