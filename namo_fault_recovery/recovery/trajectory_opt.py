@@ -53,7 +53,8 @@ MOTION_FTOL = 1e-9            # ... and the last one's
 DEFAULT_MAXITER = 600
 # Newton iterations of one pass (:func:`banded_newton`; each costs D + 2 evaluations).
 DEFAULT_NEWTON_MAXITER = 200
-_DAMPING, _MIN_DAMPING, _MAX_DAMPING = 1e-4, 1e-8, 1e6   # relative to the mean curvature
+_DAMPING, _MIN_DAMPING, _MAX_DAMPING = 1e-4, 1e-8, 1e6   # Marquardt: share of the diagonal
+_HESSIAN_REUSE = 2            # steps a Hessian serves again after full steps
 _DEG = 180.0 / np.pi
 
 
@@ -433,7 +434,7 @@ def banded_newton(problem, fun, x0, maxiter=DEFAULT_NEWTON_MAXITER, ftol=1e-9, g
     lower, upper = problem.lower, problem.upper
     x = np.clip(np.asarray(x0, dtype=float), lower, upper)
     f, g = fun(x)
-    lam, calm, blocks = _DAMPING, 0, None
+    lam, calm, blocks, age = _DAMPING, 0, None, 0
     for nit in range(1, maxiter + 1):
         free = ~(((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0)))
         pg = np.where(free, g, 0.0)
@@ -442,7 +443,7 @@ def banded_newton(problem, fun, x0, maxiter=DEFAULT_NEWTON_MAXITER, ftol=1e-9, g
         if blocks is None:
             if check is not None:
                 check()
-            blocks = _psd_blocks(problem, x)
+            blocks, age = _psd_blocks(problem, x), 0
         d = -_newton_direction(problem, x, blocks, g, free, lam)
         if not float(g @ d) < 0:
             d = -pg
@@ -453,9 +454,13 @@ def banded_newton(problem, fun, x0, maxiter=DEFAULT_NEWTON_MAXITER, ftol=1e-9, g
             lam *= 10.0
             continue
         lam = max(lam / 3.0, _MIN_DAMPING) if step[0] == 1.0 else min(lam * 4.0, _MAX_DAMPING)
-        _, xn, fn, gn = step
+        full, xn, fn, gn = step
         small = f - fn <= ftol * max(abs(f), abs(fn), 1.0)
-        x, f, g, blocks = xn, fn, gn, None
+        x, f, g = xn, fn, gn
+        # After full steps the Hessian serves again (it costs ~3 evaluations).
+        age += 1
+        if not (full == 1.0 and age <= _HESSIAN_REUSE):
+            blocks = None
         calm = calm + 1 if small else 0
         if calm >= 2:
             return nit, True
