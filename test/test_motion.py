@@ -404,13 +404,15 @@ def test_bad_method_is_rejected(robot, circle):
         adapt_library(robot, circle, {}, PAPER.with_changes(trajectory_method='fast'))
 
 
-def test_the_circle_uses_its_later_expand_stage_whatever_the_seed(robot, demo_library):
+def test_the_circle_ends_on_the_same_motion_whatever_the_seed(robot, demo_library):
     # With right joint 2 locked the typical points may stop at joints 1, 3 and 4 (a coin
-    # toss of the seed); the whole-trajectory pass then tries the later stage (5-7).
-    # Before, seeds 0 and 1 scored 29.11 and only 1 seed in 32 found about 26.
+    # toss of the seed); the whole-trajectory pass then tries the later stage (5-7),
+    # and keeps it only if the worst point is lower.  Before the pass converged (an
+    # L-BFGS on its 600-iteration cap), seeds 0 and 1 ended 18.63 and 20.57 (8 seeds:
+    # 18.6-23.3); converged, every seed ends at 16.17.
     from namo_fault_recovery.optimize.base import Clock
     from namo_fault_recovery.recovery.engine import recover
-    for seed in (0, 1):
-        result = recover(robot, demo_library, {'right_arm_joint2': None}, seed=seed,
-                         clock=Clock(None))
-        assert result['circle'].score_after < 27.0, (seed, result['circle'].score_after)
+    scores = [recover(robot, demo_library, {'right_arm_joint2': None}, seed=seed,
+                      clock=Clock(None))['circle'].score_after for seed in (0, 1)]
+    assert max(scores) <= 1.01 * min(scores), scores
+    assert max(scores) < 17.0, scores

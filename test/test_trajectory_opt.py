@@ -112,6 +112,44 @@ def test_numpy_lbfgs_matches_scipy(robot, circle, kriging_start):
     assert ours.value == pytest.approx(ref.value, rel=2e-3, abs=0.5)
 
 
+@pytest.mark.parametrize('collision', [False, True])
+def test_banded_hessian_matches_finite_differences(robot, circle, collision):
+    problem = _problem(robot, circle, 6, step_cap_deg=0.5, step_penalty=1.0,
+                       smoothness=0.05, collision=collision)
+    rng = np.random.default_rng(2)
+    x = np.clip(problem.x0 + rng.normal(scale=0.05, size=problem.x0.shape),
+                problem.lower + 1e-3, problem.upper - 1e-3)
+    n, dim = problem.n_points, problem.dim
+    h = 1e-6
+    g = problem.value_and_grad(x)[1]
+    full = np.array([(problem.value_and_grad(x + h * e)[1] - g) / h for e in np.eye(x.size)])
+    full = 0.5 * (full + full.T)
+    blocks = problem.point_hessians(x.reshape(n, dim))
+    diag, off = problem.step_hessian(x.reshape(n, dim))
+    assert np.any(off < -2.0 * problem.smoothness)          # the hinge is active somewhere
+    ours = np.zeros_like(full)
+    for t in range(n):
+        ours[t * dim:(t + 1) * dim, t * dim:(t + 1) * dim] = blocks[t]
+        for j in range(dim):
+            ours[t * dim + j, t * dim + j] += diag[t, j]
+            if t < n - 1:
+                ours[t * dim + j, (t + 1) * dim + j] = ours[(t + 1) * dim + j, t * dim + j] = \
+                    off[t, j]
+    np.testing.assert_allclose(ours, full, atol=1e-4 * np.abs(full).max())
+
+
+def test_newton_converges_where_lbfgs_stops_on_its_cap(robot, circle, kriging_start):
+    problem = _problem(robot, circle, 30, start=kriging_start.copy(), step_cap_deg=3.6,
+                       smooth=1.0)
+    lbfgs = optimise_trajectory(problem, Clock(None), maxiter=100, solver='lbfgs')
+    newton = optimise_trajectory(problem, Clock(None), solver='newton')
+    assert lbfgs.status == 'iterations'
+    assert newton.status == 'converged' and newton.nit < 100
+    assert newton.value < lbfgs.value
+    x = problem.gather(newton.q_right, newton.q_left).ravel()
+    assert np.all(x >= problem.lower) and np.all(x <= problem.upper)
+
+
 def test_projected_lbfgs_solves_a_bounded_quadratic():
     rng = np.random.default_rng(1)
     a = rng.normal(size=(20, 20))

@@ -63,12 +63,16 @@ class SearchOptions:
     neighbouring keyframes stay on one redundant branch.  ``share_branches`` (True,
     False, or gesture names) restarts each keyframe of a motion from its other
     keyframes' solutions (:func:`_share_branches`).  ``lock_start`` maps joints to the
-    start of ``lock_strategy='optimal'`` (None: the library average).
+    start of ``lock_strategy='optimal'`` (None: the library average).  ``pace`` (True
+    or gesture names) says which motions are kept within the velocity limits
+    (:func:`_pace`): the motion adaptation names those it publishes as searched, not
+    the typical points of a dense motion, whose whole motion it paces itself.
     """
 
     stay_close: float = 0.0
     share_branches: Union[bool, tuple] = True
     lock_start: Optional[dict] = None
+    pace: Union[bool, tuple] = True
 
 
 class PoseProblem(Problem):
@@ -432,6 +436,7 @@ def reconfigure_library(robot, library, faults, settings, *,
     setup = _Setup(robot, reference, selected, locks, settings, algo, options.stay_close,
                    options.share_branches)
     setup.faults, setup.seed = dict(faults), seed
+    setup.paced = None if options.pace is True else set(options.pace or ())
     setup.budget = None if clock.end is None else clock.end - clock.start
     notes += setup.notes
     stats = {'nfev': 0}
@@ -647,7 +652,7 @@ def _pace(setup, rows, clock, rng):
     owners = np.asarray(rows.owners)
     for owner in np.unique(owners):
         ks = np.nonzero(owners == owner)[0]
-        if len(ks) < 2:
+        if len(ks) < 2 or not _paced(setup, rows.selected[owner]):
             continue
         times = [kf.time_from_start for kf in rows.selected[owner].keyframes]
         ids = rows.ids[ks]
@@ -672,6 +677,12 @@ def _pace(setup, rows, clock, rng):
         _polish_in_tubes(setup, rows, repaired, clock)
     if repaired:
         rows.after = scorer.evaluate(rows.right, rows.left, rows.ids)
+
+
+def _paced(setup, gesture):
+    """Return True if the search keeps ``gesture`` within the velocity limits."""
+    paced = getattr(setup, 'paced', None)
+    return paced is None or gesture.name in paced
 
 
 def _motion_layout(setup, rows, owner, ks):

@@ -60,6 +60,7 @@ DEFAULT_MIN_POINTS = 12        # shorter motions are explored at every keyframe
 DEFAULT_CONTINUITY = 0.01      # penalty per deg^2 of joint-space jump
 DEFAULT_STAY_CLOSE = 1e-3      # per deg^2 away from the design, at the typical points
 _SETTLED_DEG = 0.5             # a consistency sweep that moves no point more has settled
+_STAGE_MARGIN = 1e-4           # a later stage must lower the worst point by this share
 _MAX_SWEEPS = 6                # consistency sweeps at most (5 fixed the elbow-lock circle)
 
 
@@ -119,11 +120,13 @@ class _Job:
     def engine_options(self, lock_start=None):
         """Return the keyword arguments of the typical points' keyframe search."""
         # A motion explored at its typical points is made consistent by _consistent;
-        # one explored at every keyframe shares its branches.
+        # one explored at every keyframe shares its branches.  Only the latter are
+        # published as searched: a dense motion is paced as a whole (_pace_motion), and
+        # pacing its typical points took up to half of the 1 s deadline.
         shared = tuple(g.name for g in self.library if self.quantisations.get(g.name) is None)
         return {'optimizer_overrides': self.optimizer_overrides,
                 'options': SearchOptions(stay_close=self.stay_close, share_branches=shared,
-                                         lock_start=lock_start)}
+                                         lock_start=lock_start, pace=shared)}
 
 
 def adapt_library(robot, library, faults, settings, *,
@@ -396,7 +399,14 @@ def _pace_motion(ctx, m, picks, clock, notes):
 
 
 def _whole_trajectory(ctx, m, budget, notes):
-    """Optimise every point of a motion at once from its Kriging result, per stage."""
+    """
+    Optimise every point of a motion at once from its Kriging result, per stage.
+
+    The first pass is kept if it lowers its own objective (the sum of the points'
+    scores and the step and collision terms); a later expansion stage's pass only if
+    it also lowers what the gesture is scored by, the worst point (after any contact),
+    since a lower sum may well raise the worst point.
+    """
     robot = ctx.robot
     passes = expansion_layouts(robot, m.gesture, ctx.locked, ctx.faulted, m.free, m.stage)
     for k, (level, lay) in enumerate(passes):
@@ -404,7 +414,13 @@ def _whole_trajectory(ctx, m, budget, notes):
             break
         out = optimise_motion(ctx.model, ctx.scorer, m.ids, m.q_r, m.q_l, lay, m.design,
                               budget, collision=ctx.checker)
-        if out.value < out.value_start:
+        better = out.value < out.value_start
+        if better and k:
+            (touch, worst), (was_touch, was) = (_worst_point(ctx, m, out.q_right, out.q_left),
+                                                _worst_point(ctx, m, m.q_r, m.q_l))
+            # Equal worst points (within rounding): the fewer joints moved.
+            better = (touch, worst * (1.0 + _STAGE_MARGIN)) < (was_touch, was)
+        if better:
             m.q_r, m.q_l, m.how = out.q_right, out.q_left, 'trajectory'
             if k:
                 m.stage, m.free = level, tuple(robot.arms[s].joint_names[j] for s, j in lay)
@@ -414,6 +430,16 @@ def _whole_trajectory(ctx, m, budget, notes):
                          f'({out.status}) after {out.nfev} evaluations; the best '
                          f'trajectory so far is used')
             break
+
+
+def _worst_point(ctx, m, q_r, q_l):
+    """Return (any point in contact, the worst point's score) of a motion's angles."""
+    collides = False
+    if ctx.checker is not None:
+        lm_r = batch_forward(ctx.model, q_r, 'right')
+        lm_l = batch_forward(ctx.model, q_l, 'left')
+        collides = bool(ctx.checker.collides(lm_r, lm_l, m.ids).any())
+    return collides, float(ctx.scorer.evaluate(q_r, q_l, m.ids).max())
 
 
 def _per_point(job, ctx, m, search, rng, notes):
