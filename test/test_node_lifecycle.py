@@ -227,6 +227,16 @@ BAD_CONFIGS = [
         '    right: {tail: 0}\n    left: [0, 0, 0, 0, 0, 0, 0]\n')], "unknown joint 'tail'"),
     ('robot file missing', lambda d: ['-p', 'robot_file:=/nonexistent/robot.yaml'],
      '/nonexistent/robot.yaml'),
+    ('robot profile and robot file', lambda d: [
+        '-p', f'robot_profile:={ROOT}/config/robots/talos.yaml',
+        '-p', f'robot_file:={ROOT}/config/namo_robot.yaml'],
+     'invalid parameter robot_profile: '),
+    ('robot profile naming a missing URDF', lambda d: ['-p', 'robot_profile:=' + _write(
+        d / 'p.yaml', 'name: x\nurdf: gone.urdf\narms: {}\n')],
+     "p.yaml: key 'urdf': no URDF file "),
+    ('library of another robot', lambda d: [
+        '-p', f'gesture_file:={ROOT}/config/robots/talos_gestures.yaml'],
+     "key 'robot': a library for robot 'talos', whose joints are not those of robot 'namo'"),
     ('negative deadline', lambda d: ['-p', 'deadline_sec:=-1.0'], 'deadline_sec'),
     ('integer deadline', lambda d: ['-p', 'deadline_sec:=2'], 'write 2.0, not 2'),
     ('unknown lock strategy', lambda d: ['-p', 'lock_strategy:=bogus'],

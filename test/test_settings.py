@@ -191,4 +191,5 @@ def test_a_bad_value_from_a_params_file_names_the_file(tmp_path):
 def test_the_table_is_in_parameter_order_and_names_are_unique():
     names = [s.name for s in SETTINGS]
     assert len(names) == len(set(names)) == len(declared.BY_NAME)
-    assert names[:3] == ['robot_file', 'gesture_file', 'deadline_sec']
+    assert names[:5] == ['robot_file', 'robot_profile', 'robot_description', 'gesture_file',
+                         'deadline_sec']

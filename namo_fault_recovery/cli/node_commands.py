@@ -8,6 +8,7 @@ domain, and prints what came back.
 
 import json
 import math
+import re
 import time
 
 from .ros_common import (add_connection_arguments, add_global_arguments, describe_fault,
@@ -57,6 +58,19 @@ def _library_header(library):
     return text + '; no locked joint (reference library)\n'
 
 
+def arm_of(joint):
+    """
+    Return the arm ('right', 'left') a joint name says, else None (a torso joint).
+
+    Namo's ``right_arm_joint2`` as Talos's ``arm_right_2_joint``: the side must be a word
+    of the name (``_``, ``/`` or its ends around it), as the profile template guesses.
+    """
+    for side in ('right', 'left'):
+        if re.search(rf'(^|[_/]){side}([_/]|$)', joint):
+            return side
+    return None
+
+
 def format_library(library, out):
     """Print a PublishedLibrary in degrees, one row per arm and keyframe, locks starred."""
     out.write(_library_header(library))
@@ -68,10 +82,10 @@ def format_library(library, out):
             out.write(f'  t = {t:.3f} s\n')
             for side in ('right', 'left'):
                 cells = ' '.join(f"{math.degrees(a):8.2f}{'*' if j in locks else ' '}"
-                                 for j, a in zip(joints, positions) if j.startswith(side))
+                                 for j, a in zip(joints, positions) if arm_of(j) == side)
                 if cells:
                     out.write(f'    {side:<5} {cells}\n')
-        others = [j for j in joints if not j.startswith(('right', 'left'))]
+        others = [j for j in joints if arm_of(j) is None]
         if others and gesture.positions:
             out.write(f"    other joints: {', '.join(others)}\n")
 

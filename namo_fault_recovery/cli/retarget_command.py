@@ -48,8 +48,8 @@ def library_text(result, library, profile_path, source_path, robot):
                       f'{", ".join(f"{s:.2f}" for s in g.scores)})'
                       f'{"; a capsule pair still penetrates" if g.collides.any() else ""}\n'
                       for g in result))
-    body = yaml.safe_dump({'units': 'deg', 'gestures': gestures}, sort_keys=False,
-                          default_flow_style=None, width=95)
+    body = yaml.safe_dump({'robot': robot.name, 'units': 'deg', 'gestures': gestures},
+                          sort_keys=False, default_flow_style=None, width=95)
     return head + body
 
 

@@ -175,6 +175,7 @@ def load_library(robot: RobotModel,
     """
     path = Path(path) if path is not None else config_path(DEFAULT_GESTURE_FILE)
     data = chk.load_yaml(path)
+    _check_robot(data, robot, path)
     scale = chk.as_angle_scale(chk.require(data, 'units', path), path, 'units')
     entries = chk.require(data, 'gestures', path)
     if not isinstance(entries, list) or not entries:
@@ -198,6 +199,22 @@ def load_library(robot: RobotModel,
     for line in found:
         report(line)
     return GestureLibrary(tuple(gestures), str(path), tuple(found))
+
+
+def _check_robot(data, robot, path):
+    """
+    Refuse a library made for another robot: its optional ``robot`` key names the robot.
+
+    Angles are listed per arm, not per joint name, so a library of another robot with
+    as many joints per arm would otherwise load (within wide limits) and be wrong.
+    """
+    if 'robot' not in data:
+        return
+    made_for = data['robot']
+    if made_for != robot.name:
+        raise ConfigError(path, 'robot', f'a library for robot {made_for!r}, whose joints are '
+                          f'not those of robot {robot.name!r} ({robot.source}); expected a '
+                          f'library made for {robot.name!r}')
 
 
 def _parse_gesture(entry, robot, scale, path, where, seen):

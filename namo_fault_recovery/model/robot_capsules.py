@@ -15,7 +15,8 @@ fits them to the URDF's ``<collision>`` geometry:
   first arm joint (on either arm's chain) are the torso;
 - a link's geometry becomes surface points in its frame: a box's corners and face
   centres, a cylinder's rims, a sphere's six poles, a mesh's vertices (loaded with
-  trimesh, ``package://`` names resolved upwards from the URDF's folder);
+  trimesh, ``package://`` names resolved upwards from the URDF's folder, then in the
+  ``share`` folders of ``AMENT_PREFIX_PATH``);
 - at the zero pose, a segment's radius is the :data:`COVER` quantile of its points'
   distances from its axis: a capsule that enclosed every point would be as wide as a
   gripper's open fingers.  A segment with no loadable geometry keeps the default
@@ -35,7 +36,9 @@ checked); a two-handed gesture's reference defines its designed right-left conta
 """
 
 from dataclasses import dataclass
+import io
 import logging
+import os
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +73,10 @@ def _resolve(filename, urdf_dir):
             return parent / rest
         if (parent / package / rest).is_file():
             return parent / package / rest
+    for prefix in filter(None, os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep)):
+        found = Path(prefix) / 'share' / package / rest        # an installed ROS package
+        if found.is_file():
+            return found
     return None
 
 
@@ -131,7 +138,8 @@ def link_points(urdf, link_name, urdf_dir):
 def _load_urdf(source):
     import yourdfpy
     logging.getLogger('yourdfpy').setLevel(logging.CRITICAL)
-    return yourdfpy.URDF.load(str(source), build_scene_graph=False, load_meshes=False,
+    return yourdfpy.URDF.load(source if isinstance(source, io.BytesIO) else str(source),
+                              build_scene_graph=False, load_meshes=False,
                               build_collision_scene_graph=False, load_collision_meshes=False)
 
 
@@ -201,11 +209,16 @@ def _fit_arm(robot, side, urdf, urdf_dir, notes):
 
 def fit_report(robot) -> FittedCapsules:
     """Fit the capsules of a profile robot (``robot.chains``) to its URDF's geometry."""
-    source = Path(robot.profile.tree.source)
-    urdf, default = _load_urdf(source), CapsuleModel()
+    profile = robot.profile
+    if profile.urdf_text is not None:           # a robot_description document
+        urdf, folder = _load_urdf(io.BytesIO(profile.urdf_text.encode())), profile.mesh_dir
+    else:
+        source = Path(profile.tree.source)
+        urdf, folder = _load_urdf(source), source.parent
+    default = CapsuleModel()
     radii, notes, torso_pts, rest = {}, [], [], {}
     for side in ('right', 'left'):
-        arm, rest[side], torso = _fit_arm(robot, side, urdf, source.parent, notes)
+        arm, rest[side], torso = _fit_arm(robot, side, urdf, folder, notes)
         torso_pts.append(torso)
         for seg, r in arm.items():
             radii.setdefault(seg, []).append(r)

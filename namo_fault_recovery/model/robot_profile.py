@@ -27,11 +27,14 @@ key, the link or joint, and what was expected.  The format::
         expansion: [torso_1_joint, torso_2_joint]
 
 ``urdf`` is a path relative to the profile, or ``{file, distribution}`` for a URDF
-shipped inside an installed Python distribution.  Chain joints that are neither
-``joints`` nor ``expansion`` are held at 0.  Positions come out in millimetres.
+shipped inside an installed Python distribution.  A URDF document given to
+:func:`load_profile` (the ``robot_description`` text) replaces it; its mesh names are
+then looked up from the folder of the URDF the profile names (else the profile's).
+Chain joints that are neither ``joints`` nor ``expansion`` are held at 0.  Positions
+come out in millimetres.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 import os
 from pathlib import Path
@@ -75,6 +78,10 @@ class RobotProfile:
     shared: tuple
     velocity_limits: dict   # joint -> rad/s (the URDF's, or the profile's where it has none)
     capsules: dict | None = None    # capsule radii (mm) that override the fitted ones
+    # A URDF given as a document (robot_description), kept for the capsule fit, and the
+    # folder its relative and package:// mesh names are looked up from.
+    urdf_text: str | None = field(default=None, compare=False, repr=False)
+    mesh_dir: str | None = None
 
 
 def _check_keys(mapping, known, path, where):
@@ -88,7 +95,11 @@ def _urdf_of(data, path):
     """Return the path of the profile's URDF (relative to the profile, or in a package)."""
     spec = chk.require(data, 'urdf', path)
     if isinstance(spec, str):
-        return (Path(path).parent / spec).resolve()
+        found = (Path(path).parent / spec).resolve()
+        if not found.is_file():
+            raise ConfigError(path, 'urdf', f'no URDF file {found}; expected a readable file '
+                              '(a path relative to the profile)')
+        return found
     if isinstance(spec, dict):
         _check_keys(spec, ('file', 'distribution'), path, 'urdf.')
         name = chk.require(spec, 'file', path, 'urdf')
@@ -212,6 +223,7 @@ def load_profile(path: str | os.PathLike, urdf: str | os.PathLike | None = None)
     path = Path(path)
     data = chk.load_yaml(path)
     _check_keys(data, _TOP_KEYS, path, '')
+    text = urdf if isinstance(urdf, str) and urdf.lstrip().startswith('<') else None
     tree = load_urdf_tree(urdf if urdf is not None else _urdf_of(data, path))
     arms_cfg = chk.require(data, 'arms', path)
     if not isinstance(arms_cfg, dict) or not arms_cfg:
@@ -223,7 +235,18 @@ def load_profile(path: str | os.PathLike, urdf: str | os.PathLike | None = None)
     shared = _names(data.get('shared', []), path, 'shared')
     _check_shared(arms, shared, path)
     return RobotProfile(str(data.get('name', tree.name)), str(path), tree, arms, shared,
-                        _velocity_limits(data, arms, tree, path), _capsules(data, path))
+                        _velocity_limits(data, arms, tree, path), _capsules(data, path),
+                        text, _mesh_dir(data, path) if text is not None else None)
+
+
+def _mesh_dir(data, path):
+    """Return where a URDF document's meshes are looked up: the named URDF's folder."""
+    if 'urdf' in data:
+        try:
+            return str(Path(_urdf_of(data, path)).parent)
+        except ConfigError:
+            pass            # the document replaces a URDF that is not here: the profile's
+    return str(Path(path).resolve().parent)
 
 
 def _capsules(data, path):

@@ -190,10 +190,19 @@ def _rows(engine_rows, weight_rows):
     """Return the table: the node's own settings around the engine's, in parameter order."""
     return (
         Setting('robot_file', str, '', 'arm model YAML (DH, joint names, limits); empty = '
-                'the packaged Namo model', read_only=True),
+                'the packaged Namo model (unless robot_profile is given)', read_only=True),
+        Setting('robot_profile', str, '', 'recovery profile YAML of any robot (arms, '
+                'landmark links, recovery joints; config/robots/talos.yaml): the robot is '
+                'built from it and its URDF instead of robot_file; empty = robot_file',
+                read_only=True),
+        Setting('robot_description', str, '', "the robot's URDF document (the XML text "
+                'robot_state_publisher takes): it replaces the URDF that robot_profile names; '
+                "empty = the profile's urdf, or if it names none the robot_description topic "
+                '(transient local, waited for)', read_only=True),
         Setting('gesture_file', str, '', 'reference gesture library YAML; empty = the '
                 "packaged library (Namo's 4 paper gestures as motions); "
-                'config/demo_motions.yaml adds the dense 100-point circle',
+                'config/demo_motions.yaml adds the dense 100-point circle; with '
+                "robot_profile, give that robot's (config/robots/talos_gestures.yaml)",
                 read_only=True),
         *engine_rows,
         Setting('seed', int, -1, 'random seed for reproducible runs; -1 draws one per run '
@@ -223,7 +232,8 @@ def _rows(engine_rows, weight_rows):
                 'library, settings) matches; otherwise the reason is logged', read_only=True),
         Setting('profile_file', str, '', 'recovery profile (URDF + profile YAML) of the '
                 "nominal chains the gesture player's measured corrections are fitted on (its "
-                'profile_file); empty = the packaged Namo profile', read_only=True),
+                'profile_file); empty = robot_profile (with robot_description), else the '
+                'packaged Namo profile', read_only=True),
         Setting('explored_topic', str, 'gesture_player/explored_motions', 'the gesture '
                 "player's latched explored motions: with its correction on "
                 '/structure_correction each becomes a library version (library_origin: '

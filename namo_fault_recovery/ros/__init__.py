@@ -9,6 +9,8 @@ the node's runtime, ``runtime/``):
   ``spin_until_shutdown``, their spin loop that a lost shutdown wake-up cannot hang;
 - :mod:`.node`: ``RecoveryNode``, which wires the interfaces to the runtime's parts;
 - :mod:`.parameters`: the parameter table, its validator and the node's settings;
+- :mod:`.description_wait`: the URDF from the ``robot_description`` topic, waited for
+  (and said on ``/diagnostics``) when the robot's profile names none;
 - :mod:`.input_monitor`: the latest joint state, measured angles and rejected inputs;
 - :mod:`.diagnostics`: ``/diagnostics`` built from a snapshot;
 - :mod:`.messages`: results to and from ROS messages, and the RViz markers.

@@ -13,7 +13,8 @@ When the two of one exploration are in, :class:`ExploredIntake` adopts them in a
 thread of its own (compiling the corrected chain reads the profile's URDF: never in a
 callback):
 
-- the correction is compiled on ``profile_file``'s nominal chain, checked to be the
+- the correction is compiled on ``profile_file``'s nominal chain (the node's own
+  profile when it runs on ``robot_profile`` and ``profile_file`` is empty), checked to be the
   robot's own arm, and handed to the run book: every later run (a fault on that arm
   included) searches on the corrected model;
 - the explored motion becomes a library version, origin ``explored``, scored by the
@@ -67,8 +68,10 @@ class ExploredIntake:
         self._robot, self._library = models              # the node's robot and library
         self._book, self._state = book, state
         self._publish, self._log = publish, log          # log(level, text)
-        self._profile_file = profile_file or str(config_path(NAMO_PROFILE_FILE))
-        self._profile = None
+        # profile_file: a path, or the robot's own RobotProfile (a node on robot_profile).
+        self._profile = None if isinstance(profile_file, str) else profile_file
+        self._profile_file = (getattr(self._profile, 'source', None) or profile_file
+                              or str(config_path(NAMO_PROFILE_FILE)))
         self._motions = {}               # (gesture, stamp ns) -> JointTrajectory
         self._corrections = {}           # side -> ArmCorrection, newest received
         self._adopted = set()            # (side, gesture, stamp) already taken

@@ -35,13 +35,12 @@ from visualization_msgs.msg import MarkerArray
 
 from . import diagnostics
 from . import messages as conv
+from .description_wait import wait_for_description
 from .explored_intake import ExploredIntake
 from .input_monitor import InputMonitor
 from .parameters import (check_parameter, declare_parameters, DEFAULT_STATE_DIR, MARKER_PARAMS,
                          node_config, one_line, parameter_specs, RERUN_PARAMS, StartupError)
 from ..errors import ConfigError, shorten
-from ..model.gestures import load_library
-from ..model.robot import load_robot
 from ..recovery.result import reference_result, summary
 from ..runtime import diagnostic_keys as dk
 from ..runtime.answer_pacer import AnswerPacer
@@ -53,6 +52,7 @@ from ..runtime.fault_intake import After, Clear, FaultIntake, Report
 from ..runtime.inputs import BadInput, parse_fault
 from ..runtime.latest_worker import LatestWorker
 from ..runtime.persistence import Persistence
+from ..runtime.robot_source import load_models, robot_source
 from ..runtime.run_book import Outcome, RunBook
 
 NODE_NAME = 'recovery_node'
@@ -104,6 +104,30 @@ def describe_reports(reports, lock_strategy):
                      for j, a in joints.items())
 
 
+def node_models(values, warning, wait):
+    """
+    Return ``(RobotSource, robot, library)`` of the node's parameters (StartupError).
+
+    A profile that names no URDF, without ``robot_description``: ``wait(profile)``
+    returns the URDF document (from the topic, :mod:`.description_wait`).
+    """
+    try:
+        source = robot_source(values)
+        if source.needs_description():
+            source = robot_source(dict(values, robot_description=wait(source.profile)))
+    except ValueError as exc:
+        raise StartupError(f'invalid parameter {one_line(exc)}') from None
+    try:
+        return (source, *load_models(source, values['gesture_file'] or None, warning))
+    except (ConfigError, FileNotFoundError) as exc:
+        raise StartupError(f'invalid configuration: {one_line(exc)}') from None
+
+
+def own_profile(robot):
+    """Return the RobotProfile a robot was built from (robot_profile), else ''."""
+    return getattr(robot, 'profile', None) or ''
+
+
 class RecoveryNode(Node):
     """The fault-recovery node; see the module docstring and ``msg_docs/``."""
 
@@ -115,12 +139,9 @@ class RecoveryNode(Node):
         self.add_post_set_parameters_callback(self._after_set_parameters)
         values = declare_parameters(self, lambda: self._last_param_reason)
         self._config = node_config(values)
-        try:
-            self._robot = load_robot(values['robot_file'] or None)
-            self._library = load_library(self._robot, values['gesture_file'] or None,
-                                         on_warning=self.get_logger().warning)
-        except (ConfigError, FileNotFoundError) as exc:
-            raise StartupError(f'invalid configuration: {one_line(exc)}') from None
+        self._source, self._robot, self._library = node_models(
+            values, self.get_logger().warning, lambda profile: wait_for_description(
+                self, profile, values['diagnostics_period_sec']))
         self._prefix = diagnostics.status_prefix(self.get_fully_qualified_name())
         self._tick = DemandTick(self._tick_work, lambda: (self._inputs.pending_state()
                                                           or self._inputs.log_pending()))
@@ -142,7 +163,8 @@ class RecoveryNode(Node):
                                      hold=self._intake.busy)
         self._explored = ExploredIntake(self, (self._robot, self._library), self._book,
                                         self._state, self._publish_library, self._log,
-                                        values['profile_file'], values['explored_topic'])
+                                        values['profile_file'] or own_profile(self._robot),
+                                        values['explored_topic'])
         try:
             self._create_interfaces()
             self._restore()
@@ -164,7 +186,7 @@ class RecoveryNode(Node):
 
     def _start_engine(self, engine, values):
         """Give ``engine`` its files and wait until it is ready (StartupError if not)."""
-        engine.load(values['robot_file'] or None, values['gesture_file'] or None,
+        engine.load(self._source, values['gesture_file'] or None,
                     values['engine_start_timeout_sec'])
         # The engine process imports, loads and warms up (about a second): the node is
         # not ready to meet its deadline before, so it waits here (a signal still ends it).

@@ -8,6 +8,8 @@ fast unit tests that need no DDS.
 - :mod:`.fault_intake`: fault reports persisted before they are acknowledged;
 - :mod:`.inputs`: validation of fault reports and joint states (no ROS types);
 - :mod:`.dispatcher`: the thread that runs the newest request and publishes it;
+- :mod:`.robot_source`: the node's robot from its parameters: the DH ``robot_file``, or
+  any robot's ``robot_profile`` and URDF (``robot_description``), with its library;
 - :mod:`.engine_process`: the engine in its own process (no shared interpreter lock),
   which also refines a published library in the background;
 - :mod:`.contingency_keeper`: the contingency table looked up before a live run, built

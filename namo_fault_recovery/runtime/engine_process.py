@@ -48,17 +48,16 @@ def _load_models(conn):
     The files come over the pipe: a child started before the node knew them
     (:meth:`EngineProcess.early`) has done its imports meanwhile.
     """
-    from ..model.gestures import load_library
-    from ..model.robot import load_robot
+    from .robot_source import load_models
     try:
         files = conn.recv()
     except (EOFError, OSError):
         return None                                  # the node went away (or refused)
     if files is _STOP:
         return None
-    robot = load_robot(files[0])
+    # files[0]: a RobotSource (a profile and its URDF), or a DH robot file (None: Namo's).
     # The node reports the library's warnings; the engine child loads it silently.
-    return robot, load_library(robot, files[1], on_warning=lambda line: None)
+    return load_models(files[0], files[1], on_warning=lambda line: None)
 
 
 def _serve(conn, current, parent_pid=None):
@@ -187,11 +186,16 @@ class EngineProcess:
         if self._files is not None:
             self._conn.send(self._files)
 
-    def load(self, robot_file, gesture_file, start_timeout):
-        """Give the engine its files and start timeout (a child started early, or a new one)."""
+    def load(self, robot, gesture_file, start_timeout):
+        """
+        Give the engine its robot and library and its start timeout (an early child or new).
+
+        ``robot`` is a :class:`~.robot_source.RobotSource`, or a DH robot file (None:
+        Namo's); ``gesture_file`` None is the packaged library.
+        """
         self._start_timeout = start_timeout
         early = self._files is None and self._proc is not None
-        self._files = (robot_file, gesture_file)
+        self._files = (robot, gesture_file)
         if not early:
             self._kill()
             self.start()
