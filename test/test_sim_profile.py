@@ -1,5 +1,5 @@
 """
-The simulator's physics on a robot from its URDF and profile: Talos (example-robot-data).
+The simulator's physics on robots from their URDF and profile: Talos, TIAGo++ (example-robot-data).
 
 Stepped by hand in simulated time, as test_sim_core.py does for Namo: the model is the
 robot's own URDF without its meshes, only the arm joints move, the capsules are the
@@ -11,6 +11,7 @@ from pathlib import Path
 
 from namo_fault_recovery.model.gestures import load_library
 from namo_fault_recovery.model.profile_robot import robot_from_profile
+from namo_fault_recovery.model.robot_profile import load_profile
 from namo_fault_recovery.resources import distribution_file
 from namo_fault_recovery.sim.physics import (contact_pairs, designed_allowances, NamoSim,
                                              segments_mm)
@@ -19,18 +20,27 @@ import numpy as np
 import pytest
 
 ROBOTS = Path(__file__).resolve().parent.parent / 'config' / 'robots'
-TALOS_URDF = 'talos_data/robots/talos_reduced.urdf'
+URDFS = {'talos': 'talos_data/robots/talos_reduced.urdf',
+         'tiago_dual': 'tiago_description/robots/tiago_dual.urdf'}
+_LOADED = {}
+
+
+def shipped(name):
+    """Return (robot, library, designed allowances) of a shipped profile robot (once)."""
+    try:
+        distribution_file('example-robot-data', URDFS[name])
+    except FileNotFoundError:
+        pytest.skip(f'example-robot-data (the {name} URDF) is not installed')
+    if name not in _LOADED:
+        robot = robot_from_profile(ROBOTS / f'{name}.yaml')
+        library = load_library(robot, ROBOTS / f'{name}_gestures.yaml')
+        _LOADED[name] = robot, library, designed_allowances(robot, library)
+    return _LOADED[name]
 
 
 @pytest.fixture(scope='module')
 def talos():
-    try:
-        distribution_file('example-robot-data', TALOS_URDF)
-    except FileNotFoundError:
-        pytest.skip('example-robot-data (the Talos URDF) is not installed')
-    robot = robot_from_profile(ROBOTS / 'talos.yaml')
-    library = load_library(robot, ROBOTS / 'talos_gestures.yaml')
-    return robot, library, designed_allowances(robot, library)
+    return shipped('talos')
 
 
 def run(sim, q, steps):
@@ -70,6 +80,35 @@ def test_the_capsules_are_the_optimisers_at_any_pose(talos):
             ends = sorted([(d.geom_xpos[g] - axis) * 1e3, (d.geom_xpos[g] + axis) * 1e3],
                           key=lambda p: np.linalg.norm(p - a))
             assert np.linalg.norm(ends[0] - a) < 1e-6 and np.linalg.norm(ends[1] - b) < 1e-6
+
+
+@pytest.mark.parametrize('name', ['talos', 'tiago_dual'])
+def test_every_key_pose_of_the_library_is_held_without_contact(name):
+    robot, library, allowances = shipped(name)
+    sim = NamoSim(robot, allowances=allowances)
+    assert sim.model.nq == len(robot.joint_names)       # no free joint, nothing else moves
+    for gesture in library:
+        for frame in gesture.keyframes:
+            q = frame.positions()
+            sim.set_positions(q)
+            sim.reset_contact_count()
+            run(sim, q, 100)
+            assert np.abs(sim.positions() - q).max() < math.radians(0.01), gesture.name
+            assert sim.contact_steps == 0, (gesture.name, sim.pairs_seen)
+
+
+def test_a_urdf_document_is_simulated_as_its_file(talos):
+    robot, _, allowances = talos
+    text = Path(robot.profile.tree.source).read_text()
+    described = robot_from_profile(load_profile(ROBOTS / 'talos.yaml', urdf=text))
+    assert described.profile.tree.source == '<robot_description>'
+    a = NamoSim(robot, allowances=allowances)
+    b = NamoSim(described, allowances=allowances, urdf=text)
+    q = np.radians([30, -20, -20, -60, 10, -20, 30, -30, -20, 20, -60, -10, 20, -30])
+    for sim in (a, b):
+        run(sim, q, 200)
+    assert np.abs(a.positions() - b.positions()).max() < 1e-9
+    assert np.abs(a.data.geom_xpos - b.data.geom_xpos).max() < 1e-9
 
 
 def test_the_arms_track_every_key_pose_of_the_library(talos):

@@ -13,7 +13,8 @@ loaded from its own URDF instead:
   floating base) is made fixed before the import: the body cannot collapse, fall or
   drift, and the model has exactly the arms' degrees of freedom.  Links joined by
   fixed joints stay separate bodies (``fusestatic`` off) so that each landmark link
-  has a body to carry its site.
+  has a body to carry its site.  Static links lose their inertia (it moves nothing,
+  and real URDFs have invalid ones there).
 - The capsules are the optimiser's (:func:`..model.self_contact.arm_segments`):
   shoulder-elbow, elbow-wrist, wrist-fingertip between the profile's landmarks, and
   the torso in the arms' base frame.  On a URDF robot a segment's ends need not be
@@ -34,6 +35,7 @@ from ..model.self_contact import SEGMENTS
 from ..model.urdf_tree import load_urdf_document
 
 LANDMARK_SITES = ('shoulder', 'elbow', 'wrist', 'tip')
+MIN_INERTIA = 1e-6      # kg m^2: the least principal inertia of a moving link
 _RGBA = {'right': (1.0, 0.55, 0.1, 1.0), 'left': (0.1, 0.6, 1.0, 1.0),
          'torso': (0.75, 0.75, 0.75, 1.0)}
 
@@ -65,8 +67,37 @@ def sim_urdf(robot, urdf=None):
         if joint.name not in moving:
             joint.type = 'fixed'
             joint.mimic = None
+    _check_inertias(doc, moving)
     text = doc.write_xml_string()
     return text.decode() if isinstance(text, bytes) else text
+
+
+def _check_inertias(doc, moving):
+    """
+    Drop the inertia of links no arm joint moves; make a moving link's inertia valid.
+
+    A static link's mass and inertia change nothing in a model whose base is fixed, and
+    real URDFs carry invalid ones there (TIAGo++'s antennas: an inertia that is not
+    positive definite), which MuJoCo refuses.  A moving link's inertia keeps its axes;
+    eigenvalues below :data:`MIN_INERTIA` are raised to it.
+    """
+    below = {}
+    for joint in doc.robot.joints:
+        below.setdefault(joint.parent, []).append(joint)
+    carried, todo = set(), [j for j in doc.robot.joints if j.name in moving]
+    while todo:
+        joint = todo.pop()
+        carried.add(joint.child)
+        todo += below.get(joint.child, [])
+    for link in doc.robot.links:
+        if link.inertial is None:
+            continue
+        if link.name not in carried:
+            link.inertial = None
+            continue
+        values, axes = np.linalg.eigh(np.asarray(link.inertial.inertia, dtype=float))
+        if values.min() < MIN_INERTIA:
+            link.inertial.inertia = (axes * np.maximum(values, MIN_INERTIA)) @ axes.T
 
 
 def profile_spec(robot, urdf=None):
