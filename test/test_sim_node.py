@@ -18,6 +18,7 @@ from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticArray
 from namo_fault_recovery import load_library, load_robot
 from namo_fault_recovery.resources import distribution_file
+from namo_fault_recovery.ros.description_wait import QOS as DESCRIPTION_QOS
 from namo_fault_recovery.ros.sim_node import sim_command
 from namo_fault_recovery.ros.spun_node import SpunNode, wait_until
 from namo_fault_recovery.runtime.robot_source import load_models, robot_source
@@ -26,8 +27,10 @@ from node_harness import NodeProcess, session_domain
 import numpy as np
 import pytest
 from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+import yaml
 
 pytestmark = pytest.mark.slow
 
@@ -353,3 +356,30 @@ def test_talos_from_its_profile_follows_a_key_pose_while_a_stuck_joint_holds():
         code = process.stop()
     assert code == 0, process.describe()
     assert 'Traceback' not in process.stderr + process.stdout
+
+
+def test_a_profile_naming_no_urdf_waits_for_the_robot_description_topic(tmp_path):
+    try:
+        urdf = distribution_file('example-robot-data', 'talos_data/robots/talos_reduced.urdf')
+    except FileNotFoundError:
+        pytest.skip('example-robot-data (the Talos URDF) is not installed')
+    doc = yaml.safe_load((ROBOTS / 'talos.yaml').read_text())
+    del doc['urdf']
+    profile = tmp_path / 'talos_without_urdf.yaml'
+    profile.write_text(yaml.safe_dump(doc))
+    process = NodeProcess(OTHER_DOMAIN, command=sim_command(), args=[
+        '-p', f'robot_profile:={profile}',
+        '-p', f"gesture_file:={ROBOTS / 'talos_gestures.yaml'}"])
+    client = SimClient(OTHER_DOMAIN)
+    try:
+        time.sleep(2.0)
+        assert not client.states and process.alive(), process.describe()   # it waits
+        pub = client.node.create_publisher(String, '/robot_description', DESCRIPTION_QOS)
+        pub.publish(String(data=Path(urdf).read_text()))
+        client.wait(lambda: client.states, '/joint_states after the URDF', timeout=40.0)
+        assert list(client.latest())[0] == 'arm_right_1_joint'
+    finally:
+        client.close()
+        code = process.stop()
+    assert code == 0, process.describe()
+    assert 'waiting for the URDF on /robot_description' in process.stderr + process.stdout

@@ -6,6 +6,7 @@ robot's own URDF without its meshes, only the arm joints move, the capsules are 
 optimiser's, and stuck joints, tracking and contacts behave as on Namo.
 """
 
+from dataclasses import replace
 import math
 from pathlib import Path
 
@@ -169,3 +170,14 @@ def test_a_colliding_pose_counts_and_the_torso_holds_the_arm_off(talos):
     assert sim.pairs_seen and all('torso' in pair and any(g.startswith('right_arm_')
                                                           for g in pair)
                                   for pair in sim.pairs_seen), sim.pairs_seen
+
+
+def test_a_torso_of_radius_zero_is_a_segment_that_still_counts(talos):
+    robot, _, allowances = talos
+    bare = replace(robot, capsules=replace(robot.capsules, torso_radius=0.0))
+    sim = NamoSim(bare, allowances=allowances)        # MuJoCo refuses a capsule of size 0
+    assert 0.0 < sim.model.geom('torso').size[0] < 1e-5
+    q = np.zeros(14)
+    q[2], q[3] = math.radians(90.0), math.radians(-135.0)   # the forearm across the axis
+    sim.set_positions(q)
+    assert {pair for c in sim.contacts() for pair in [(c.geom1, c.geom2)] if 'torso' in pair}

@@ -36,6 +36,7 @@ from ..model.urdf_tree import load_urdf_document
 
 LANDMARK_SITES = ('shoulder', 'elbow', 'wrist', 'tip')
 MIN_INERTIA = 1e-6      # kg m^2: the least principal inertia of a moving link
+MIN_RADIUS = 1e-6       # m: a capsule of radius 0 (a segment) as MuJoCo takes it
 _RGBA = {'right': (1.0, 0.55, 0.1, 1.0), 'left': (0.1, 0.6, 1.0, 1.0),
          'torso': (0.75, 0.75, 0.75, 1.0)}
 
@@ -150,8 +151,9 @@ def add_profile_capsules(spec, robot, pairs, allowances):
 
 
 def _capsule(body, name, radius, fromto, rgba):
+    """Add a capsule; radius 0 (no geometry to fit: a bare segment) becomes MIN_RADIUS."""
     geom = body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=fromto,
-                         size=[radius, 0.0, 0.0], rgba=rgba)
+                         size=[max(radius, MIN_RADIUS), 0.0, 0.0], rgba=rgba)
     geom.contype = 0          # only the explicit pairs collide
     geom.conaffinity = 0
 
