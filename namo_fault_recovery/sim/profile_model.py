@@ -43,7 +43,8 @@ _RGBA = {'right': (1.0, 0.55, 0.1, 1.0), 'left': (0.1, 0.6, 1.0, 1.0),
 
 def is_profile_robot(robot):
     """Return True for a robot from a URDF profile (it has compiled ``chains``)."""
-    return getattr(robot, 'chains', None) is not None and getattr(robot, 'profile', None)
+    return (getattr(robot, 'chains', None) is not None
+            and getattr(robot, 'profile', None) is not None)
 
 
 def sim_urdf(robot, urdf=None):
