@@ -4,25 +4,33 @@ The simulated Namo (``namo_sim``) as a real process over DDS.
 One simulator serves the module (its own ROS domain).  A trajectory controller client
 sends trajectories as a gesture player would, and reads ``/joint_states`` and
 ``~/contacts`` back: the arm follows, bad messages are rejected with a reason, a stuck
-joint stays put, and the reference Wai makes no self-contact.
+joint stays put, and the reference Wai makes no self-contact.  Talos, from its recovery
+profile and URDF (example-robot-data), runs in the same simulator: its arms follow a key
+pose of its library while a stuck joint holds.
 """
 
 import math
+from pathlib import Path
 import threading
 import time
 
 from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticArray
 from namo_fault_recovery import load_library, load_robot
+from namo_fault_recovery.resources import distribution_file
+from namo_fault_recovery.ros.description_wait import QOS as DESCRIPTION_QOS
 from namo_fault_recovery.ros.sim_node import sim_command
 from namo_fault_recovery.ros.spun_node import SpunNode, wait_until
+from namo_fault_recovery.runtime.robot_source import load_models, robot_source
 from namo_fault_recovery.sim.trajectory import ActiveTrajectory, Command, Point
 from node_harness import NodeProcess, session_domain
 import numpy as np
 import pytest
 from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+import yaml
 
 pytestmark = pytest.mark.slow
 
@@ -35,6 +43,7 @@ RIGHT = list(ROBOT.arms['right'].joint_names)
 LEFT = list(ROBOT.arms['left'].joint_names)
 ALL = RIGHT + LEFT
 TIMEOUT = 20.0
+ROBOTS = Path(__file__).resolve().parent.parent / 'config' / 'robots'
 
 
 def seconds(msg):
@@ -61,8 +70,8 @@ def trajectory(names, points, stamp=0.0):
 class SimClient:
     """Publishers to the two controllers; recorders of /joint_states and ~/contacts."""
 
-    def __init__(self):
-        self._spun = SpunNode('namo_sim_test_client', DOMAIN)
+    def __init__(self, domain=DOMAIN):
+        self._spun = SpunNode('namo_sim_test_client', domain)
         self.node = self._spun.node
         self.lock = threading.RLock()
         self.states = []          # (stamp s, positions by name)
@@ -312,3 +321,65 @@ def test_reference_wai_makes_no_self_contact_and_the_torso_does(sim):
     assert float(report['max_depth_mm']) > 1.0, report
     assert 'torso' in report['pairs_since_reset'], report
     move_to(client, [0.0] * 7, [0.0] * 7)
+
+
+def test_talos_from_its_profile_follows_a_key_pose_while_a_stuck_joint_holds():
+    try:
+        distribution_file('example-robot-data', 'talos_data/robots/talos_reduced.urdf')
+    except FileNotFoundError:
+        pytest.skip('example-robot-data (the Talos URDF) is not installed')
+    profile, library = ROBOTS / 'talos.yaml', ROBOTS / 'talos_gestures.yaml'
+    robot, gestures = load_models(robot_source({'robot_profile': str(profile)}), str(library))
+    right = list(robot.arms['right'].joint_names)
+    stuck = math.radians(-40.0)
+    process = NodeProcess(OTHER_DOMAIN, command=sim_command(), args=[
+        '-p', f'robot_profile:={profile}', '-p', f'gesture_file:={library}',
+        '-p', "stuck_joints:=['arm_left_4_joint:-40.0']"])
+    client = SimClient(OTHER_DOMAIN)
+    try:
+        client.wait(lambda: client.states, "Talos's first /joint_states", timeout=40.0)
+        assert list(client.latest()) == list(robot.joint_names)
+        client.reset_contacts()
+        pose = gestures['bye'].keyframes[0].positions()[:len(right)]
+        move_to_pose = trajectory(right, [(1.5, pose)])
+        client.send('right_arm_controller', move_to_pose)
+
+        def there():
+            state = client.latest()
+            return all(abs(state[n] - v) < math.radians(0.1) for n, v in zip(right, pose))
+        client.wait(there, "Talos's right arm at the bye key pose", timeout=15.0)
+        assert abs(client.latest()['arm_left_4_joint'] - stuck) < math.radians(0.1)
+        report = client.report_after(time.monotonic())
+        assert report['contact_events'] == '0' and report['stuck'] == 'arm_left_4_joint:-40.000'
+    finally:
+        client.close()
+        code = process.stop()
+    assert code == 0, process.describe()
+    assert 'Traceback' not in process.stderr + process.stdout
+
+
+def test_a_profile_naming_no_urdf_waits_for_the_robot_description_topic(tmp_path):
+    try:
+        urdf = distribution_file('example-robot-data', 'talos_data/robots/talos_reduced.urdf')
+    except FileNotFoundError:
+        pytest.skip('example-robot-data (the Talos URDF) is not installed')
+    doc = yaml.safe_load((ROBOTS / 'talos.yaml').read_text())
+    del doc['urdf']
+    profile = tmp_path / 'talos_without_urdf.yaml'
+    profile.write_text(yaml.safe_dump(doc))
+    process = NodeProcess(OTHER_DOMAIN, command=sim_command(), args=[
+        '-p', f'robot_profile:={profile}',
+        '-p', f"gesture_file:={ROBOTS / 'talos_gestures.yaml'}"])
+    client = SimClient(OTHER_DOMAIN)
+    try:
+        time.sleep(2.0)
+        assert not client.states and process.alive(), process.describe()   # it waits
+        pub = client.node.create_publisher(String, '/robot_description', DESCRIPTION_QOS)
+        pub.publish(String(data=Path(urdf).read_text()))
+        client.wait(lambda: client.states, '/joint_states after the URDF', timeout=40.0)
+        assert list(client.latest())[0] == 'arm_right_1_joint'
+    finally:
+        client.close()
+        code = process.stop()
+    assert code == 0, process.describe()
+    assert 'waiting for the URDF on /robot_description' in process.stderr + process.stdout

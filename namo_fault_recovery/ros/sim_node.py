@@ -1,7 +1,12 @@
 """
-``namo_sim``: a simulated Namo in MuJoCo, driven like the real robot's controllers.
+``namo_sim``: a simulated Namo (or any robot from its URDF) in MuJoCo, driven like its controllers.
 
 What it offers, so that a gesture player can be tried without the robot:
+
+- The robot of ``recovery_node``'s parameters (:mod:`..runtime.robot_source`): Namo's
+  DH ``robot_file``, or any two-armed robot from ``robot_profile`` and its URDF (the
+  profile's, ``robot_description``, or the ``robot_description`` topic, waited for as
+  ``recovery_node`` does), loaded from that URDF (:mod:`..sim.profile_model`).
 
 - Two trajectory controllers, as ros2_control's JointTrajectoryController on
   ``/<controller>/joint_trajectory`` (trajectory_msgs/JointTrajectory): by default
@@ -33,6 +38,7 @@ in the executor, so no callback waits for it and it never waits for a callback.
 """
 
 import math
+from pathlib import Path
 import sys
 import threading
 import time
@@ -46,11 +52,12 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
+from .description_wait import wait_for_description
 from .fingertip_topics import GROUND_TRUTH_TOPIC, point_message, topic, TRACKER_QOS
 from .fingertip_topics import TRACKER_TOPIC
+from .node import node_models
+from .parameters import StartupError
 from .spin import run_node
-from ..model.gestures import load_library
-from ..model.robot import load_robot
 from ..model.urdf import urdf_string
 from ..sim.physics import designed_allowances, NamoSim, READING_NOISE_DEG
 from ..sim.structure_change import apply_changes, hidden_changes
@@ -71,8 +78,15 @@ def sim_command():
 _T = ParameterType
 # The node's read-only parameters: name -> (default, description, type).
 PARAMETERS = {
-    'robot_file': ('', 'robot model YAML (empty: the packaged Namo model)',
-                   _T.PARAMETER_STRING),
+    'robot_file': ('', 'robot model YAML (empty: the packaged Namo model, unless '
+                   'robot_profile is given)', _T.PARAMETER_STRING),
+    'robot_profile': ('', 'recovery profile YAML of any robot (config/robots/talos.yaml): '
+                      'the robot is simulated from its URDF instead of robot_file',
+                      _T.PARAMETER_STRING),
+    'robot_description': ('', "the robot's URDF document: it replaces the URDF that "
+                          "robot_profile names; empty = the profile's urdf, or if it names "
+                          'none the robot_description topic (transient local, waited for)',
+                          _T.PARAMETER_STRING),
     'gesture_file': ('', 'gesture library whose two-handed gestures define '
                      'the designed hand contact (empty: the packaged one)',
                      _T.PARAMETER_STRING),
@@ -107,9 +121,9 @@ PARAMETERS = {
         False, 'accept a non-zero velocity at the last point', _T.PARAMETER_BOOL),
     # The simulated robot's own structure, hidden from the planner.
     'sim_urdf_file': ('', "the simulator's own URDF (empty: the planner's, generated from "
-                      'robot_file)', _T.PARAMETER_STRING),
+                      "robot_file, or robot_profile's)", _T.PARAMETER_STRING),
     'profile_file': ('', 'recovery profile naming the fingertip links of that URDF (empty: '
-                     'the packaged Namo profile)', _T.PARAMETER_STRING),
+                     'robot_profile, else the packaged Namo profile)', _T.PARAMETER_STRING),
     'structure_changes': ([''], "hidden changes 'KIND:JOINT:AMOUNT', KIND tool (mm), bend "
                           '(deg), encoder_offset (deg) or link_length (mm)',
                           _T.PARAMETER_STRING_ARRAY),
@@ -160,9 +174,9 @@ class SimNode(Node):
     def __init__(self):
         super().__init__(NODE_NAME)
         self.p = self._declare_parameters()
-        self.robot = load_robot(self.p['robot_file'] or None)
-        library = load_library(self.robot, self.p['gesture_file'] or None,
-                               on_warning=self.get_logger().warning)
+        self.source, self.robot, library = node_models(
+            self.p, self.get_logger().warning,
+            lambda profile: wait_for_description(self, profile, STATUS_PERIOD))
         for name in ('timestep', 'kp', 'joint_state_rate', 'contact_report_rate'):
             if not self.p[name] > 0:
                 raise ValueError(f'parameter {name} must be > 0, got {self.p[name]}')
@@ -204,8 +218,13 @@ class SimNode(Node):
 
     def _hidden_structure(self):
         """Return (changes, URDF text) of the simulated robot; the truth of its fingertips."""
-        base = self.p['sim_urdf_file'] or urdf_string(self.robot)
-        profile = self.p['profile_file'] or None
+        source = self.source
+        if source.profile is None:
+            planner = urdf_string(self.robot)
+        else:
+            planner = source.description or Path(self.robot.profile.tree.source)
+        base = self.p['sim_urdf_file'] or planner
+        profile = self.p['profile_file'] or source.profile or None
         self.truth = TrueFingertips(apply_changes(base, []), profile)
         tools = {side: float(self.p[f'hidden_tool_{side}_mm']) for side in ('right', 'left')}
         changes = hidden_changes(self.p['structure_changes'], tools,
@@ -468,7 +487,8 @@ def structure_status(p, changes, tracker, hardware_id):
 
 def main(args=None):
     """Run the simulator until Ctrl-C or SIGTERM; return the exit code."""
-    return run_node(NODE_NAME, SimNode, args, config_errors=(ValueError, KeyError, OSError))
+    errors = (ValueError, KeyError, OSError, StartupError)
+    return run_node(NODE_NAME, SimNode, args, config_errors=errors)
 
 
 if __name__ == '__main__':

@@ -43,8 +43,9 @@ from typing import NamedTuple
 import mujoco
 import numpy as np
 
-from ..model.kinematics import forward_kinematics, shoulder_position
-from ..model.robot import ARMS, N_JOINTS
+from .profile_model import add_profile_capsules, is_profile_robot, MovingCapsules, profile_spec
+from ..model.kinematics import arm_joint_count, forward_kinematics, shoulder_position
+from ..model.robot import ARMS
 from ..model.urdf import capsule_segments, SEGMENTS, urdf_string
 from ..objective.collision import segment_distance
 
@@ -64,11 +65,12 @@ def contact_pairs():
     return pairs
 
 
-def _segments_mm(robot, q14):
-    """Return {capsule name: (start, end)} in mm in the base frame for 14 angles."""
+def segments_mm(robot, q):
+    """Return {capsule name: (start, end)} in mm in the base frame for both arms' angles."""
     out = {}
+    n = arm_joint_count(robot)
     for i, side in enumerate(ARMS):
-        lm = forward_kinematics(robot, q14[i * N_JOINTS:(i + 1) * N_JOINTS], side)
+        lm = forward_kinematics(robot, q[i * n:(i + 1) * n], side)
         ends = (shoulder_position(robot, side), lm.elbow, lm.wrist, lm.tip)
         for k, seg in enumerate(SEGMENTS):
             out[f'{side}_arm_{seg}'] = (ends[k], ends[k + 1])
@@ -88,13 +90,15 @@ def designed_allowances(robot, library):
     simulator does not know which gesture is playing, so it allows the largest).  Only
     pairs with a positive depth appear.
     """
-    radius = {c.name: c.radius * 1e3 for c in capsule_segments(robot)}
+    cap = robot.capsules
+    radius = {f'{side}_arm_{seg}': float(getattr(cap, seg)) for side in ARMS for seg in SEGMENTS}
+    radius['torso'] = float(cap.torso_radius)
     out = {}
     for gesture in library:
         if not gesture.two_handed:
             continue
         for frame in gesture.keyframes:
-            segs = _segments_mm(robot, frame.positions())
+            segs = segments_mm(robot, frame.positions())
             for a, b in contact_pairs():
                 if b == 'torso':
                     continue
@@ -137,11 +141,30 @@ def add_capsules(spec, robot, allowances):
             spec.add_pair(name=f'{a}-{b}', geomname1=a, geomname2=b)
 
 
+def _spec(robot, urdf, allowances):
+    """
+    Return the MjSpec of ``robot`` with its capsules and contact pairs.
+
+    Namo: its generated URDF (or ``urdf``, the simulator's own copy: a change the
+    planner does not know), rigid capsules.  A profile robot: its own URDF (or
+    ``urdf``) through :func:`.profile_model.profile_spec`, moving capsules.
+    """
+    if is_profile_robot(robot):
+        spec = profile_spec(robot, urdf)
+        add_profile_capsules(spec, robot, contact_pairs(), allowances)
+        return spec
+    spec = mujoco.MjSpec.from_string(urdf or urdf_string(robot))
+    add_capsules(spec, robot, allowances)
+    return spec
+
+
 class NamoSim:
     """
     The simulated robot: step it, command its actuators, stick joints, read contacts.
 
-    Not thread-safe: the caller serialises access (the node holds one lock).
+    Namo, or any two-armed robot from a URDF profile (:mod:`.profile_model`): its arm
+    joints (``robot.joint_names``, in that order) are actuated, every other joint is
+    fixed.  Not thread-safe: the caller serialises access (the node holds one lock).
     """
 
     def __init__(self, robot, timestep=0.002, kp=300.0, kv=30.0, armature=0.05,
@@ -154,15 +177,13 @@ class NamoSim:
         self.joint_names = tuple(robot.joint_names)
         self.kp, self.kv = float(kp), float(kv)
         self.allowances = dict(allowances or {})
-        # urdf: the simulator's own copy (a change the planner does not know), or the planner's.
-        spec = mujoco.MjSpec.from_string(urdf or urdf_string(robot))
+        spec = _spec(robot, urdf, self.allowances)
         spec.option.timestep = timestep
         spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
         spec.option.gravity = GRAVITY if gravity else (0.0, 0.0, 0.0)
         for body in spec.bodies:
             if body.name != 'world':
                 body.gravcomp = 1.0
-        add_capsules(spec, robot, self.allowances)
         for name in self.joint_names:
             joint = spec.joint(name)
             joint.armature = armature
@@ -178,6 +199,7 @@ class NamoSim:
         self.model = spec.compile()
         self.data = mujoco.MjData(self.model)
         m = self.model
+        self._moving = MovingCapsules(m, robot) if is_profile_robot(robot) else None
         self._qadr = np.array([m.jnt_qposadr[m.joint(n).id] for n in self.joint_names])
         self._dadr = np.array([m.jnt_dofadr[m.joint(n).id] for n in self.joint_names])
         self._act = np.array([m.actuator(n).id for n in self.joint_names])
@@ -210,7 +232,7 @@ class NamoSim:
         return float(self.model.opt.timestep)
 
     def positions(self):
-        """Return the 14 joint angles (rad), in ``joint_names`` order."""
+        """Return the joint angles (rad), in ``joint_names`` order."""
         return self.data.qpos[self._qadr].copy()
 
     def set_reading_noise(self, std, seed=None):
@@ -221,14 +243,14 @@ class NamoSim:
         self._rng = np.random.default_rng(seed)
 
     def readings(self):
-        """Return the 14 angles as the encoders read them: positions plus the noise."""
+        """Return the angles as the encoders read them: positions plus the noise."""
         q = self.positions()
         if self.reading_noise > 0:
             q += self._rng.normal(0.0, self.reading_noise, q.shape)
         return q
 
     def velocities(self):
-        """Return the velocities of the 14 joints, in rad/s."""
+        """Return the velocities of the joints, in rad/s."""
         return self.data.qvel[self._dadr].copy()
 
     def index(self, name):
@@ -246,6 +268,9 @@ class NamoSim:
         self.data.qvel[:] = 0.0
         self.set_targets(q, np.zeros_like(q))
         mujoco.mj_forward(self.model, self.data)
+        if self._moving is not None:        # the capsules where the new pose has them
+            self._moving.update(self.model, self.data)
+            mujoco.mj_forward(self.model, self.data)
 
     def set_targets(self, q, qd=None):
         """Command the actuators to ``q`` (rad) at ``qd`` (rad/s); stuck joints ignore it."""
@@ -286,6 +311,8 @@ class NamoSim:
     def step(self, n=1):
         """Advance the physics ``n`` steps, counting self-contacts after each."""
         for _ in range(n):
+            if self._moving is not None:
+                self._moving.update(self.model, self.data)
             mujoco.mj_step(self.model, self.data)
             touching = self._count()
             if touching:

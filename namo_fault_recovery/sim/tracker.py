@@ -146,6 +146,11 @@ class TrueFingertips:
             if arm.landmark_links['tip'] in loaded.tree.parent_joint}
 
     def __call__(self, angles: dict) -> dict:
-        """Return {side: (x, y, z) mm} for ``angles`` ({joint: rad}, every chain joint)."""
-        return {side: chain.forward([angles[j] for j in chain.joint_names]).tip
+        """
+        Return {side: (x, y, z) mm} for ``angles`` ({joint: rad}).
+
+        A chain joint missing from ``angles`` is at 0: a joint the simulator holds fixed
+        (a profile robot's torso, which only the recovery's staged expansion moves).
+        """
+        return {side: chain.forward([angles.get(j, 0.0) for j in chain.joint_names]).tip
                 for side, chain in self.chains.items()}
