@@ -9,14 +9,14 @@ start when their launch argument says so.
 Arguments (all 'true' or 'false'):
 
 - ``player``: ``gesture_player``, which plays the current library on the arm controllers.
-- ``sim``: ``namo_sim``, the simulated Namo in MuJoCo (the arm controllers, /joint_states).
+- ``sim``: ``namo_sim``, the simulated robot in MuJoCo (the arm controllers, /joint_states).
 - ``robot_state_publisher``: TF of the URDF from /joint_states (default: as ``sim``).
 - ``rviz``: RViz with the packaged view (robot model, /gesture_markers, TF).
 
 Another robot (strings; empty: Namo):
 
-- ``robot_profile``: its recovery profile YAML, for ``recovery_node`` and
-  ``gesture_player`` (the robot from its URDF instead of Namo's model);
+- ``robot_profile``: its recovery profile YAML, for ``recovery_node``,
+  ``gesture_player`` and ``namo_sim`` (the robot from its URDF instead of Namo's model);
 - ``gesture_file``: its gesture library (``namo-recovery retarget`` makes one);
 - ``urdf``: the URDF that ``robot_state_publisher`` (and so RViz) shows and publishes
   on ``/robot_description``; a profile without a ``urdf`` key makes ``recovery_node``
@@ -78,7 +78,7 @@ def generate_launch_description():
              output='screen', parameters=[robot],
              condition=IfCondition(LaunchConfiguration('player'))),
         Node(package=PACKAGE, executable='namo_sim', name='namo_sim', output='screen',
-             condition=IfCondition(LaunchConfiguration('sim'))),
+             parameters=[robot], condition=IfCondition(LaunchConfiguration('sim'))),
         Node(package='robot_state_publisher', executable='robot_state_publisher',
              name='robot_state_publisher', output='screen',
              parameters=[{'robot_description': robot_description}],
