@@ -61,3 +61,16 @@ def test_frozen_arms(robot):
     assert frozen_arms(robot, left) == ('left',)
     assert frozen_arms(robot, left[:6] + ('right_arm_joint1',)) == ()
     assert frozen_arms(robot, robot.joint_names) == ('right', 'left')
+
+
+def test_a_joint_on_its_stop_reads_past_its_limit_and_is_taken_at_the_limit(robot):
+    """Encoder noise at a hard stop: a little past the limit is the limit; far past is not."""
+    from namo_fault_recovery.runtime.inputs import MEASURED_LIMIT_TOLERANCE
+    upper = float(robot.arms['right'].upper[0])
+    assert parse_fault(robot, ['right_arm_joint1'], [upper + 1e-4]) == \
+        {'right_arm_joint1': upper}
+    assert parse_joint_state(robot, ['right_arm_joint1'], [upper + 1e-4]) == \
+        {'right_arm_joint1': upper}
+    for parse in (parse_fault, parse_joint_state):
+        with pytest.raises(BadInput, match='outside its limits'):
+            parse(robot, ['right_arm_joint1'], [upper + 2 * MEASURED_LIMIT_TOLERANCE])

@@ -10,6 +10,7 @@ A profile that names no URDF makes the node wait for the ``/robot_description`` 
 (as ``robot_state_publisher`` publishes it) and say so on ``/diagnostics``.
 """
 
+import math
 from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -171,3 +172,64 @@ def test_the_gesture_player_runs_on_talos_and_commands_its_arm_joints(tmp_path, 
         codes = [proc.stop() for proc in (player, node)]
     assert codes == [0, 0], player.describe() + node.describe()
     assert 'Traceback' not in player.stderr + player.stdout, player.describe()
+
+
+def test_talos_end_to_end_on_the_simulator_stuck_detected_reconfigured_replayed(tmp_path, talos):
+    """
+    namo_sim, recovery_node and gesture_player, all on Talos's profile, over DDS.
+
+    Talos's right shoulder (arm_right_2_joint) is stuck at rest in the simulator; playing
+    salute, which swings it 94 deg, detects it, reports it, and carries on with the
+    library reconfigured for it; salute is then played again on that library.  Rest is
+    that joint's upper limit: the simulator reads it a little past (its encoder noise),
+    which the node first rejected as out of limits, so nothing was reconfigured.
+    """
+    from namo_fault_recovery.ros.sim_node import sim_command
+    from namo_fault_recovery.runtime.private_node import player_command
+    from sensor_msgs.msg import JointState
+    from std_srvs.srv import Trigger
+    robot, library = talos
+    joint = 'arm_right_2_joint'
+    robot_args = ['-p', f'robot_profile:={PROFILE}', '-p', f'gesture_file:={LIBRARY}']
+    node = NodeProcess(DOMAIN, state_dir=tmp_path / 'state', args=robot_args + [
+        '-p', 'contingency_table:=false', '-p', 'refine_budget_sec:=0.0'])
+    sim = NodeProcess(DOMAIN, command=sim_command(), env=ros_env(DOMAIN),
+                      args=robot_args + ['-p', f"stuck_joints:=['{joint}:0.0']"])
+    player = NodeProcess(DOMAIN, command=player_command(), env=ros_env(DOMAIN),
+                         args=robot_args)
+    client = RosClient(DOMAIN, gestures=len(library))
+    faults = []
+    client.node.create_subscription(JointState, '/actuator_fault', faults.append, 10)
+    procs = (player, sim, node)
+    try:
+        reference = client.wait_library(timeout=START, what="Talos's reference library")
+        play = client.node.create_client(Trigger, '/gesture_player/play/salute')
+        assert play.wait_for_service(timeout_sec=START), player.describe()
+        first = _call(client, play, 60.0)
+        assert first.success, first.message + player.describe() + node.describe()
+        assert 'carried on' in first.message and joint in first.message, first.message
+        assert any(joint in msg.name for msg in faults), faults
+        adapted = client.wait_library(after=reference.stamp, timeout=30.0,
+                                      what=f'the library for {joint}')
+        assert all(abs(a) < math.radians(1.0) for a in adapted.column(joint))
+        second = _call(client, play, 60.0)
+        assert second.success and 'carried on' not in second.message, second.message
+    finally:
+        client.close()
+        codes = [proc.stop() for proc in procs]
+    assert codes == [0, 0, 0], ''.join(p.describe() for p in procs)
+    for proc in procs:
+        assert 'Traceback' not in proc.stderr + proc.stdout, proc.describe()
+
+
+def _call(client, service, timeout):
+    """Call a Trigger service from the client's node; return its response."""
+    import time
+
+    from std_srvs.srv import Trigger
+    future = service.call_async(Trigger.Request())
+    end = time.monotonic() + timeout
+    while not future.done() and time.monotonic() < end:
+        time.sleep(0.05)
+    assert future.done(), f'no answer within {timeout:g} s'
+    return future.result()

@@ -12,6 +12,11 @@ from ..recovery.locks import clamp_lock
 
 
 MAX_REASON = 300      # characters: a rejected value never makes a reason unbounded
+# rad: how far past a limit a *measured* angle may read and still be taken (clamped onto
+# the limit).  A joint resting on its hard stop reads beyond it by its encoder's noise
+# and the stop's compliance (Talos's shoulder at 0, its upper limit, read +0.0007 rad in
+# the simulator); MoveIt accepts a start state this far out (start_state_max_bounds_error).
+MEASURED_LIMIT_TOLERANCE = 0.05
 
 
 class BadInput(ValueError):
@@ -43,7 +48,8 @@ def parse_fault(robot, names, positions=(), velocities=(), efforts=()):
     position array is empty or the entry is NaN the lock strategy chooses the angle
     (None).  Rejected with :class:`BadInput`: an empty message, an unknown or repeated
     joint name, arrays whose length does not match ``name``, an infinite position, and
-    a position outside the joint's limits.
+    a position further than :data:`MEASURED_LIMIT_TOLERANCE` outside the joint's limits
+    (one within it is clamped onto the limit: a joint stuck on its stop).
     """
     names = list(names)
     positions = list(positions)
@@ -67,12 +73,13 @@ def parse_fault(robot, names, positions=(), velocities=(), efforts=()):
                                f'(use NaN or an empty position array to let the lock '
                                f'strategy choose)')
             if not math.isnan(value):
-                if not robot.within_limits(side, index, value):
+                if not robot.within_limits(side, index, value, MEASURED_LIMIT_TOLERANCE):
                     arm = robot.arms[side]
                     raise BadInput(
                         f'position {value:.6g} rad ({math.degrees(value):.4g} deg) of joint '
                         f'{name!r} is outside its limits [{arm.lower[index]:.6g}, '
-                        f'{arm.upper[index]:.6g}] rad')
+                        f'{arm.upper[index]:.6g}] rad (by more than '
+                        f'{MEASURED_LIMIT_TOLERANCE:g} rad)')
                 # Within the tolerance of the limits: clamp, so that every published
                 # angle is within its limits bit for bit (the engine's own clamp).
                 angle = clamp_lock(robot, name, value)
@@ -86,8 +93,8 @@ def parse_joint_state(robot, names, positions):
 
     Joints the robot model does not know (head, wheels, grippers...) are ignored, as on a
     real robot's ``/joint_states``.  Rejected with :class:`BadInput`: a message without
-    names or positions, mismatched lengths, and a non-finite or out-of-limit angle of an
-    arm joint.
+    names or positions, mismatched lengths, and a non-finite angle of an arm joint or one
+    further than :data:`MEASURED_LIMIT_TOLERANCE` outside its limits (clamped within it).
     """
     names = list(names)
     positions = list(positions)
@@ -103,8 +110,8 @@ def parse_joint_state(robot, names, positions):
         value = float(value)
         if not math.isfinite(value):
             raise BadInput(f'non-finite measured position {_fmt(value)} for joint {name!r}')
-        if not robot.within_limits(side, index, value):
+        if not robot.within_limits(side, index, value, MEASURED_LIMIT_TOLERANCE):
             raise BadInput(f'measured position {value:.6g} rad of joint {name!r} is outside '
-                           f'its limits')
-        measured[name] = value
+                           f'its limits (by more than {MEASURED_LIMIT_TOLERANCE:g} rad)')
+        measured[name] = clamp_lock(robot, name, value)   # on its stop: at its limit
     return measured
