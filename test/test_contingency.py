@@ -5,6 +5,7 @@ import io
 import json
 import math
 import os
+from pathlib import Path
 import time
 
 from namo_fault_recovery.cli.main import main
@@ -22,6 +23,9 @@ LIBRARY = load_library(ROBOT)
 SETTINGS = RecoverySettings()
 # Left-arm joints: only Wai uses that arm, and their entries cost milliseconds.
 CHEAP = ('left_arm_joint1', 'left_arm_joint3')
+ROBOTS = Path(__file__).resolve().parent.parent / 'config' / 'robots'
+TALOS = ROBOTS / 'talos.yaml'
+TALOS_LIBRARY = ROBOTS / 'talos_gestures.yaml'
 
 
 def fake_result(total, seed=0, locks=None):
@@ -238,6 +242,55 @@ def test_precompute_command_writes_a_table_the_node_settings_accept(tmp_path):
 def test_precompute_usage_errors(argv, words, capsys, tmp_path):
     assert main(['precompute', '--out', str(tmp_path / 't.json')] + argv, io.StringIO()) == 2
     assert words in capsys.readouterr().err
+    assert not (tmp_path / 't.json').exists()
+
+
+def talos_models():
+    """Return Talos and its library as the node loads them (skip without the URDF)."""
+    from namo_fault_recovery.resources import distribution_file
+    from namo_fault_recovery.runtime.robot_source import load_models, RobotSource
+    try:
+        distribution_file('example-robot-data', 'talos_data/robots/talos_reduced.urdf')
+    except FileNotFoundError:
+        pytest.skip('example-robot-data (the Talos URDF) is not installed')
+    return load_models(RobotSource(profile=str(TALOS)), str(TALOS_LIBRARY))
+
+
+def test_a_profile_robots_fingerprint_is_its_content_not_its_objects():
+    """Two loads of Talos (as precompute and the node) print alike; a tool cache does not count."""
+    robot, library = talos_models()
+    base = ct.table_fingerprint(robot, library, SETTINGS)
+    again, library_again = talos_models()
+    assert ct.table_fingerprint(again, library_again, SETTINGS) == base
+    again.chains['right'].with_tool(50.0)              # fills the arm's tooled cache
+    assert ct.table_fingerprint(again, library_again, SETTINGS) == base
+    arm = robot.arms['right']
+    upper = arm.upper.copy()
+    upper[1] -= 0.01
+    moved = replace(robot, arms={**robot.arms, 'right': replace(arm, upper=upper)})
+    assert ct.table_fingerprint(moved, library, SETTINGS) != base
+
+
+def test_precompute_builds_another_robots_table_that_its_node_accepts(tmp_path):
+    robot, library = talos_models()
+    path = tmp_path / 'talos.json'
+    out = io.StringIO()
+    assert main(['precompute', '--robot-profile', str(TALOS), '--gesture-file',
+                 str(TALOS_LIBRARY), '--seeds', '1', '--budget', '0.3', '--joint',
+                 'arm_left_1_joint', '--out', str(path)], out) == 0, out.getvalue()
+    assert 'arm_left_1_joint = ' in out.getvalue()
+    table, reason = ct.ContingencyTable.load(path, ct.table_fingerprint(robot, library,
+                                                                        SETTINGS))
+    assert reason is None and len(table) == 1
+    locks = ct.table_locks(robot, library, {'arm_left_1_joint': None}, SETTINGS)
+    assert table.lookup(locks) is not None
+
+
+def test_precompute_takes_a_robot_file_or_a_profile_not_both(capsys, tmp_path):
+    argv = ['--robot-file', str(ROBOTS.parent / 'namo_robot.yaml'), 'precompute',
+            '--robot-profile', str(TALOS), '--out', str(tmp_path / 't.json')]
+    assert main(argv, io.StringIO()) == 2
+    assert 'expected one of the two' in capsys.readouterr().err
     assert not (tmp_path / 't.json').exists()
 
 

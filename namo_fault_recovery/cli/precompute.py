@@ -5,9 +5,12 @@ One entry per fault set (each joint failing on top of ``--active`` faults, all 1
 by default or those of ``--joint``), each the best library of ``--seeds`` runs without a
 deadline (:mod:`~namo_fault_recovery.recovery.contingency`).  The settings options are
 ``solve``'s, named like the node's parameters: a table is used only by a node whose
-robot, library and settings (but the deadline) are the same.
+robot, library and settings (but the deadline) are the same.  ``--robot-profile`` builds
+the table for another robot (its recovery profile, as the node's ``robot_profile``) with
+its library (``--gesture-file``).
 """
 
+import argparse
 import math
 import time
 
@@ -17,8 +20,6 @@ from .common import (add_setting_options, engine_settings, parse_faults, UsageEr
 
 def cmd_precompute(args, out):
     """Build the table, print one line per entry and a summary, and write the file."""
-    from ..model.gestures import load_library
-    from ..model.robot import load_robot
     from ..recovery import contingency
     if args.jobs < 1:
         raise UsageError(f'--jobs: expected a number of processes >= 1, got {args.jobs}')
@@ -29,8 +30,7 @@ def cmd_precompute(args, out):
         raise UsageError(f'--budget: expected a number of seconds >= 0 (0: none), got {budget}')
     budget = budget or None
     settings = engine_settings(args)
-    robot = load_robot(args.robot_file)
-    library = load_library(robot, args.gesture_file)
+    robot, library = _models(args)
     active = parse_faults(robot, args.active or [])
     joints = None
     if args.joint:
@@ -70,6 +70,16 @@ def cmd_precompute(args, out):
     return 0
 
 
+def _models(args):
+    """Return ``(robot, library)``: the node's of ``--robot-file`` or ``--robot-profile``."""
+    from ..runtime.robot_source import load_models, RobotSource
+    profile = getattr(args, 'robot_profile', None)
+    if profile and args.robot_file:
+        raise UsageError(f'--robot-profile: {profile} is given with --robot-file '
+                         f'{args.robot_file}; expected one of the two')
+    return load_models(RobotSource(args.robot_file, profile), args.gesture_file)
+
+
 def register(sub):
     """Add the ``precompute`` subcommand to the main parser's subcommands."""
     from ..recovery.contingency import DEFAULT_SEEDS, DEFAULT_TABLE_PATH
@@ -90,6 +100,12 @@ def register(sub):
     p.add_argument('--active', action='append', metavar='JOINT[=DEG]',
                    help='a fault already in force, that every entry adds to (repeatable; '
                         'without DEG the lock strategy chooses the angle)')
+    p.add_argument('--robot-profile', default=None, metavar='FILE',
+                   help="another robot's recovery profile (as the node's robot_profile; "
+                        'default: the robot file)')
+    # SUPPRESS: given after the command it wins; absent, the global option stands.
+    p.add_argument('--gesture-file', default=argparse.SUPPRESS, metavar='FILE',
+                   help="the robot's gesture library (as the node's gesture_file)")
     add_setting_options(p)
     p.set_defaults(func=cmd_precompute)
     return p

@@ -278,6 +278,11 @@ class KinematicChain:
         self._init = (tuple(rot[:, k].copy() for k in range(3)), pos.copy())
         self._frames = {link: (s, c) for link, (s, c) in compiler.link_frames.items()}
 
+    def __repr__(self):
+        """Return the chain as its constants: the same text for the same chain in any process."""
+        return (f'KinematicChain({self.base!r}, {self.tip!r}, {tuple(self.joint_names)!r}, '
+                f'{self.describe()!r})')
+
     def describe(self) -> tuple:
         """Return the compiled constants (steps, offsets, signs, landmarks) as plain data."""
         rounded = (lambda a: tuple(np.round(np.asarray(a, dtype=float), 9).ravel().tolist()))

@@ -79,21 +79,23 @@ TABLE_FILE = 'contingency_table.json'
 # The node's default state directory (the ``state_dir`` parameter) + TABLE_FILE.
 DEFAULT_TABLE_PATH = f'{DEFAULT_STATE_DIR}/{TABLE_FILE}'
 FLOAT_DIGITS = 12             # significant digits of a float in the fingerprint
+NOT_CONTENT = ('source', 'warnings', 'tooled')   # dataclass fields a fingerprint skips
 
 
 def canonical(value):
     """
     Return ``value`` as plain JSON data that is the same whenever the model is.
 
-    Dataclasses become their fields (``source``, a file name, and a library's load
-    ``warnings`` left out: the content counts, not where it was read from or what was
-    said about it), arrays and tuples lists, floats text with
-    ``FLOAT_DIGITS`` significant digits (so that a round trip through a file or a
-    harmless last-bit difference does not change a fingerprint).
+    Dataclasses become their fields (``source``, a file name, a library's load
+    ``warnings`` and a profile arm's ``tooled`` cache left out: the content counts, not
+    where it was read from, what was said about it or what was derived from it since),
+    arrays and tuples lists, floats text with ``FLOAT_DIGITS`` significant digits (so
+    that a round trip through a file or a harmless last-bit difference does not change a
+    fingerprint); any other object its ``repr`` (a compiled chain's is its constants).
     """
     if is_dataclass(value) and not isinstance(value, type):
         return {f.name: canonical(getattr(value, f.name)) for f in fields(value)
-                if f.name not in ('source', 'warnings')}
+                if f.name not in NOT_CONTENT}
     if isinstance(value, dict):
         return {str(k): canonical(v) for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))}
     if isinstance(value, np.ndarray):
