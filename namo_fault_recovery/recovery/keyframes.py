@@ -226,16 +226,14 @@ def _solve(robot, scorer, checker, batch, algo, clock, rng, stats=None):
                                        batch_forward(robot, best_l, 'left'), ids))[0]
     if rows.size == 0:
         return best_r, best_l, status
-    sub = _Batch(batch.right[rows], batch.left[rows], ids[rows],
-                 [batch.layouts[k] for k in rows], stay_close=batch.stay_close,
-                 motions=batch.motions[rows])
-    r2, l2, st2 = _solve_once(robot, scorer, checker, sub, _repair_algorithm(algo), clock,
-                              rng, stats)
-    # Candidates per row: the plain result, the penalised one, and the starting pose
-    # (collision-free unless the locks themselves force a contact).  The best score
-    # among those that do not collide wins; if all collide, the least penetration.
-    candidates = [(best_r[rows], best_l[rows]), (r2, l2), (batch.right[rows],
-                                                           batch.left[rows])]
+    r2, l2, r3, l3, st2 = _repair(robot, scorer, checker, batch, rows, (best_r, best_l),
+                                  _repair_algorithm(algo), clock, rng, stats)
+    # Candidates per row: the plain result, the penalised ones (from the starting pose
+    # and from the plain result), and the starting pose (collision-free unless the locks
+    # themselves force a contact).  The best score among those that do not collide
+    # wins; if all collide, the least penetration.
+    candidates = [(best_r[rows], best_l[rows]), (r2, l2), (r3, l3),
+                  (batch.right[rows], batch.left[rows])]
     scores, pens, hits = [], [], []
     for qr, ql in candidates:
         lm_r, lm_l = batch_forward(robot, qr, 'right'), batch_forward(robot, ql, 'left')
@@ -251,6 +249,32 @@ def _solve(robot, scorer, checker, batch, algo, clock, rng, stats=None):
         if st2[i] in ('deadline', 'cancelled'):
             status[k] = st2[i]
     return best_r, best_l, status
+
+
+def _repair(robot, scorer, checker, batch, rows, plain, algo, clock, rng, stats):
+    """
+    Solve the colliding ``rows`` again with the capsule penalty, from two starts at once.
+
+    One start is the row's starting pose (collision-free unless the locks force a
+    contact), the other the plain optimum that collided: the penalty pushes it out into
+    the nearest clear pose, which is usually far better than the clear basin around the
+    start (measured on Talos's Wai with arm_right_6_joint locked: 22.0-22.3 from the
+    plain optimum against 24-36 from the start).  Both starts are rows of one batched
+    problem.  Return (right, left) from the start, (right, left) from the plain optimum,
+    and the statuses of the first.
+    """
+    layouts = [batch.layouts[k] for k in rows]
+    start = {i: [(batch.right if s == 'right' else batch.left)[k, j] for s, j in lay]
+             for i, (k, lay) in enumerate(zip(rows, layouts))}
+    m = len(rows)
+    from_plain = {m + i: [(plain[0] if s == 'right' else plain[1])[k, j] for s, j in lay]
+                  for i, (k, lay) in enumerate(zip(rows, layouts))}
+    both = np.concatenate([rows, rows])
+    sub = _Batch(batch.right[both], batch.left[both], batch.target_ids[both],
+                 layouts + layouts, {**start, **from_plain}, stay_close=batch.stay_close,
+                 motions=batch.motions[both])
+    r2, l2, st2 = _solve_once(robot, scorer, checker, sub, algo, clock, rng, stats)
+    return r2[:m], l2[:m], r2[m:], l2[m:], st2[:m]
 
 
 def _repair_algorithm(algo):
