@@ -95,6 +95,22 @@ def test_node_benchmarks_get_their_node_and_models_as_one_object_each():
     assert running.start(out=io.StringIO()) == (None, None)
 
 
+def test_bench_stream_takes_the_global_files_and_domain():
+    # bench stream declared --gesture-file, --robot-file and --domain-id again with
+    # default None, which overwrote the global options given before the command.
+    glob = ['--gesture-file', 'g.yaml', '--robot-file', 'r.yaml', '--domain-id', '5']
+    for command in (['bench', 'stream'], ['bench', 'latency']):
+        args = build_parser().parse_args(glob + command + ['--start-node'])
+        assert NodeTarget.from_args(args) == NodeTarget(True, 5, 'r.yaml', 'g.yaml', ()), command
+        assert ModelFiles.from_args(args) == ModelFiles('r.yaml', 'g.yaml'), command
+    # Given after the command, the command's own option wins.
+    args = build_parser().parse_args(glob + ['bench', 'stream', '--gesture-file', 'h.yaml',
+                                             '--robot-file', 's.yaml', '--domain-id', '6'])
+    assert NodeTarget.from_args(args) == NodeTarget(False, 6, 's.yaml', 'h.yaml', ())
+    args = build_parser().parse_args(['bench', 'stream'])
+    assert NodeTarget.from_args(args) == NodeTarget(False, None, None, None, ())
+
+
 def _parsers(parser, path):
     """Yield (command path, parser) for ``parser`` and every subcommand under it."""
     yield ' '.join(path), parser

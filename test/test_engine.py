@@ -162,7 +162,7 @@ def test_a_cut_short_motion_worse_than_the_locked_design_is_replaced_by_it(robot
     wai = result['wai']
     kept = no_worse_than_locked(robot, library['wai'], wai, result.locks, settings)
     assert kept is wai                                   # better than the design: kept
-    worse = replace(wai, score_after=wai.score_before + 10.0)
+    worse = replace(wai, score_after=wai.score_before + 10.0, status='deadline')
     fixed = no_worse_than_locked(robot, library['wai'], worse, result.locks, settings)
     assert fixed.score_after == wai.score_before
     column = robot.joint_names.index('right_arm_joint2')
@@ -171,6 +171,72 @@ def test_a_cut_short_motion_worse_than_the_locked_design_is_replaced_by_it(robot
         design[column] = lock
         assert list(q) == design
     assert 'cut short' in fixed.message
+
+
+def _locked_design(robot, gesture, locks):
+    """Return a gesture's design (K, 14) with ``locks`` applied."""
+    q = gesture.joint_matrix().copy()
+    for joint, angle in locks.items():
+        q[:, robot.joint_names.index(joint)] = angle
+    return q
+
+
+def _penetration(robot, gesture, positions):
+    """Return (any point collides, total penetration in mm) of angles (K, 14)."""
+    from namo_fault_recovery.model.kinematics import batch_forward
+    from namo_fault_recovery.model.robot import N_JOINTS
+    from namo_fault_recovery.objective.collision import CollisionModel
+    from namo_fault_recovery.objective.score import gesture_targets
+    checker = CollisionModel(robot, gesture_targets(gesture), robot.capsules)
+    q = np.array(positions, dtype=float)
+    n = N_JOINTS
+    lm_r, lm_l = batch_forward(robot, q[:, :n], 'right'), batch_forward(robot, q[:, n:], 'left')
+    rows = np.arange(len(q))
+    return (bool(checker.collides(lm_r, lm_l, rows).any()),
+            float(checker.penetration(lm_r, lm_l, rows).sum()))
+
+
+def test_a_clear_result_is_never_traded_for_a_colliding_locked_design(robot, library):
+    # Right joint 2 stuck at 20 deg drives the locked Wai into the torso and the other
+    # hand.  It still scores 35.37; the best clear pose seed 0 finds scores 43.31, so
+    # the fallback to the locked design used to publish the colliding pose.
+    locks = {'right_arm_joint2': float(np.radians(20.0))}
+    result = recover(robot, library, locks, RecoverySettings(), seed=0, clock=Clock(None))
+    wai = result['wai']
+    assert not wai.collides and wai.colliding_pairs == ()
+    assert not _penetration(robot, library['wai'], wai.positions)[0]
+    hit, _ = _penetration(robot, library['wai'], _locked_design(robot, library['wai'], locks))
+    assert hit                                     # the locked design collides ...
+    assert wai.score_after > wai.score_before      # ... and scores better than the result
+    assert 'WARNING' not in wai.message and 'that design is published' not in wai.message
+    assert 'scores better (35.37) but collides' in wai.message
+
+
+def test_of_two_colliding_poses_the_shallower_is_published(robot, library):
+    from dataclasses import replace
+    from namo_fault_recovery.recovery.figures import no_worse_than_locked
+    settings, gesture = RecoverySettings(), library['wai']
+    shallow = {'right_arm_joint2': float(np.radians(20.0))}
+    deep = {'right_arm_joint2': float(np.radians(40.0))}
+    q_shallow = _locked_design(robot, gesture, shallow)
+    q_deep = _locked_design(robot, gesture, deep)
+    (hit_s, pen_s), (hit_d, pen_d) = (_penetration(robot, gesture, q_shallow),
+                                      _penetration(robot, gesture, q_deep))
+    assert hit_s and hit_d and pen_s < pen_d
+    base = recover(robot, library, shallow, settings, seed=0, clock=Clock(None))['wai']
+    # A result deeper in contact than the locked design: the locked design is published.
+    worse = replace(base, positions=tuple(map(tuple, q_deep)), collides=True,
+                    score_after=base.score_before + 10.0,
+                    message='wai: reconfigured; WARNING: the pose still collides')
+    out = no_worse_than_locked(robot, gesture, worse, shallow, settings)
+    assert np.allclose(out.positions, q_shallow) and out.collides and out.colliding_pairs
+    assert out.score_after == base.score_before
+    assert out.message.endswith('that design is published; WARNING: the pose still collides')
+    # A result in shallower contact than the locked design is kept.
+    out = no_worse_than_locked(robot, gesture, replace(worse, positions=tuple(map(
+        tuple, q_shallow))), deep, settings)
+    assert np.allclose(out.positions, q_shallow) and out.score_after == worse.score_after
+    assert 'but collides deeper' in out.message
 
 
 @pytest.mark.parametrize('fault, gesture', [

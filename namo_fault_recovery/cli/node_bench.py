@@ -174,11 +174,13 @@ def _add_stream(bench_subparsers):
                        '/joint_states streams (idle, 100 Hz, 500 Hz, 500 Hz + CPU burner)')
     p.add_argument('--start-node', action='store_true',
                    help='start a private recovery_node (fresh state directory) for the run')
-    p.add_argument('--gesture-file', metavar='F', default=None,
+    # SUPPRESS: given after the command it wins; absent, the global option stands.
+    p.add_argument('--gesture-file', metavar='F', default=argparse.SUPPRESS,
                    help='with --start-node: the gesture library the node loads '
-                        '(default: the packaged one)')
-    p.add_argument('--robot-file', metavar='F', default=None,
-                   help='with --start-node: the robot model the node loads')
+                        '(default: the global --gesture-file, else the packaged one)')
+    p.add_argument('--robot-file', metavar='F', default=argparse.SUPPRESS,
+                   help='with --start-node: the robot model the node loads (default: the '
+                        'global --robot-file, else the packaged one)')
     p.add_argument('--node-param', dest='node_params', action='append', default=[],
                    metavar='NAME:=VALUE',
                    help='with --start-node: a parameter of the node (repeatable), e.g. '
@@ -198,9 +200,9 @@ def _add_stream(bench_subparsers):
                    help='write stream_bench.json there')
     p.add_argument('--timeout', type=float, default=60.0, metavar='SEC',
                    help='how long to wait for the node per step (default 60 s)')
-    p.add_argument('--domain-id', type=int, default=None, metavar='N',
-                   help='ROS domain id (default: $ROS_DOMAIN_ID; a private one with '
-                        '--start-node)')
+    p.add_argument('--domain-id', type=int, default=argparse.SUPPRESS, metavar='N',
+                   help='ROS domain id (default: the global --domain-id, else '
+                        '$ROS_DOMAIN_ID; a private one with --start-node)')
     p.add_argument('-v', '--verbose', action='store_true', help='print every run')
     p.set_defaults(func=cmd_stream)
     return p

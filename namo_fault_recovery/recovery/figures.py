@@ -3,9 +3,10 @@ The figures of an adapted motion, as a :class:`~.result.GestureResult`, and its 
 
 :func:`describe_motion` scores a motion's published points against their designs
 (worst and mean score, the breakdown at the worst point, fingertip error, joint jumps,
-collisions at every point, Kriging-interpolated ones included); :func:`no_worse_than_locked`
-publishes the design with the locks applied instead of a motion that a cut-short search
-left worse.  Used by :mod:`.motion`; free of ROS.
+collisions at every point, Kriging-interpolated ones included);
+:func:`no_worse_than_locked` publishes the design with the locks applied instead of a
+motion that scores worse, unless that design collides and the motion does not (or
+collides less).  Used by :mod:`.motion`; free of ROS.
 """
 
 from dataclasses import replace
@@ -23,6 +24,7 @@ LABELS = {'kriging': '{k} typical points + Kriging',
           'per_point': 'every point explored in order',
           'trajectory': '{k} typical points + Kriging, then every point optimised at once',
           'keyframes': 'every keyframe explored'}
+COLLIDES_WARNING = 'WARNING: the pose still collides'
 
 
 def columns(side):
@@ -113,13 +115,18 @@ def motion_speed_ratio(robot, gesture, q):
 
 def no_worse_than_locked(robot, gesture, result, locks, settings) -> GestureResult:
     """
-    Return ``result``, or the locked design if a cut-short search left it worse.
+    Return ``result``, or the locked design if that scores better and collides no more.
 
     A run that the deadline (or a cancel) stops early can end with a motion that scores
     worse than no adaptation at all (typical points half-solved, then Kriging spreads
     the half-made corrections).  The design with the failed joints at their locks
     (``score_before``) is then published instead, checked for collisions like any
-    other result, and the message says so.
+    other result, and the message says so.  A search can also end worse than the
+    locked design on purpose: when the locks drive that design into a self-collision,
+    the keyframe search keeps the best collision-free candidate (``keyframes._solve``).
+    So the locked design is taken by the rule of ``_solve``: if it is clear, or if both
+    collide and it penetrates no deeper (summed over the points and pairs); a clear
+    result is never traded for a colliding design.
     """
     if not result.score_after > result.score_before:
         return result
@@ -130,19 +137,50 @@ def no_worse_than_locked(robot, gesture, result, locks, settings) -> GestureResu
     if settings.collision_check:
         model = robot.changed_model(settings.tool_length_mm, settings.tool_arm)
         checker = CollisionModel(model, gesture_targets(gesture), robot.capsules)
-        q = np.array(positions)
-        lm_r = batch_forward(model, q[:, :N_JOINTS], 'right')
-        lm_l = batch_forward(model, q[:, N_JOINTS:], 'left')
-        rows = np.arange(len(q))
-        collides = bool(np.any(checker.collides(lm_r, lm_l, rows)))
-        pairs = tuple(sorted({str(p) for names in checker.colliding_pairs(lm_r, lm_l, rows)
-                              for p in names}))
-    note = ('the search was cut short before it beat the design with the locks applied; '
-            'that design is published')
+        hit_result, pen_result, _ = contact(model, checker, result.positions)
+        collides, pen, pairs = contact(model, checker, positions)
+        if collides and (not hit_result or pen > pen_result):
+            deeper = ' deeper' if hit_result else ''
+            note = (f'the design with the locks applied scores better '
+                    f'({result.score_before:.2f}) but collides{deeper} '
+                    f'({", ".join(pairs)}); not published')
+            return replace(result, message=_joined(result.message, note))
     return replace(result, positions=positions, score_after=result.score_before,
                    score_mean=result.score_before_mean,
                    tip_error_mm=result.tip_error_before_mm,
                    max_jump_deg=result.max_jump_before_deg, collides=collides,
                    speed_ratio=motion_speed_ratio(robot, gesture, np.array(positions)),
                    colliding_pairs=pairs, breakdown={},
-                   message=f'{result.message}; {note}' if result.message else note)
+                   message=_locked_message(result, collides))
+
+
+def contact(model, checker, positions):
+    """Return (any point collides, total penetration in mm, the pairs that touch)."""
+    q = np.array(positions, dtype=float)
+    lm_r = batch_forward(model, q[:, :N_JOINTS], 'right')
+    lm_l = batch_forward(model, q[:, N_JOINTS:], 'left')
+    rows = np.arange(len(q))
+    collides = bool(np.any(checker.collides(lm_r, lm_l, rows)))
+    pen = float(checker.penetration(lm_r, lm_l, rows).sum())
+    pairs = tuple(sorted({str(p) for names in checker.colliding_pairs(lm_r, lm_l, rows)
+                          for p in names}))
+    return collides, pen, pairs
+
+
+def _joined(message, note):
+    """Return ``message`` with ``note`` appended."""
+    return f'{message}; {note}' if message else note
+
+
+def _locked_message(result, collides):
+    """Return ``result``'s message for publishing the locked design in its place."""
+    parts = [p for p in (result.message or '').split('; ') if p and p != COLLIDES_WARNING]
+    if result.status in ('deadline', 'cancelled'):
+        parts.append('the search was cut short before it beat the design with the locks '
+                     'applied; that design is published')
+    else:
+        parts.append('the adapted pose scored worse than the design with the locks '
+                     'applied; that design is published')
+    if collides:
+        parts.append(COLLIDES_WARNING)
+    return '; '.join(parts)

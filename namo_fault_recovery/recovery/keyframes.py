@@ -29,7 +29,7 @@ import numpy as np
 
 from . import pacing
 from .budget import ENGINE_RESERVE, STAGE1_SHARE
-from .figures import largest_jump
+from .figures import COLLIDES_WARNING, largest_jump
 from .locks import clamp_lock, resolve_locks
 from .result import GestureResult, LibraryResult
 from ..model.kinematics import ArmLandmarks, batch_forward, batch_forward_jacobian, take_landmarks
@@ -1069,5 +1069,5 @@ def _message(name, status, stage, collides):
     if stage == 2:
         text += '; the healthy arm moves too (stage 2)'
     if collides:
-        text += '; WARNING: the pose still collides'
+        text += f'; {COLLIDES_WARNING}'
     return text
