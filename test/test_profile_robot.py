@@ -198,3 +198,26 @@ def test_a_colliding_optimum_is_repaired_from_where_it_collided(others):
         wai = res['wai']
         assert not wai.collides, seed
         assert wai.score_after <= 22.5, (seed, wai.score_after)
+
+
+def test_an_idle_faulted_arm_is_moved_clear_of_the_body(others):
+    """
+    A faulted arm that a gesture does not use is moved out of the body, barely.
+
+    Talos's left elbow held at its average lock (-119 deg) puts the resting left forearm
+    into the torso during every right-arm gesture; the library must not publish that.
+    """
+    robot = others['talos']
+    lib = load_library(robot, ROBOTS / 'talos_gestures.yaml')
+    res = recover(robot, lib, {'arm_left_4_joint': None}, RecoverySettings(), seed=1000,
+                  clock=Clock(None))
+    assert any('moved clear of the body' in n for n in res.notes), res.notes
+    for name in ('bye', 'salute', 'side_invite'):
+        gesture = res[name]
+        assert not gesture.collides, (name, gesture.colliding_pairs)
+        assert gesture.score_after == pytest.approx(0.0, abs=1e-9)
+        for new, ref in zip(gesture.keyframes, lib[name].keyframes):
+            step = np.degrees(np.abs(np.asarray(new.left) - np.asarray(ref.left)))
+            step[3] = 0.0                                   # the locked elbow
+            assert step.max() <= 20.0, (name, step)
+            assert np.array_equal(new.right, ref.right)     # the gesture itself untouched

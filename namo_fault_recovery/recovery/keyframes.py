@@ -48,6 +48,7 @@ _DEG2 = (180.0 / np.pi) ** 2
 DEFAULT_EXPANSION_THRESHOLD = 5.0   # mm of fingertip error
 SHARE_NEIGHBOURS = 5       # a keyframe is restarted from this many keyframes of its motion
 SHARE_SWEEPS = 3           # restart sweeps at most (each spreads a branch a little further)
+IDLE_STAY_CLOSE = 0.01      # per deg^2: an idle faulted arm moved clear stays near its pose
 SHARE_POLISHED = 1         # of those restarts, the best-scoring ones are polished
 RESTART_MAXITER = 20       # polish iterations of a repair's branch restarts
 PACED_NOTE = ('its keyframes were searched into branches too far apart for the joints '
@@ -468,6 +469,11 @@ def reconfigure_library(robot, library, faults, settings, *,
     if optimal:
         locks, out, note = _optimise_locks(setup, locks, out, optimal, rng, search, stats)
         notes.append(note)
+    if out['cleared'].any():
+        moved = sorted({setup.selected[setup.owners[k]].name
+                        for k in np.nonzero(out['cleared'])[0]})
+        notes.append(f'the faulted arm these gestures do not use was moved clear of the '
+                     f'body (its locked reference pose collides): {", ".join(moved)}')
     return _library_result(setup, locks, out, notes, time.monotonic() - start,
                            int(stats['nfev']))
 
@@ -619,6 +625,7 @@ def _run(setup, lock_sets, rng, clock, stats):
     stage1 = rows.after.copy()
     if rows.two_stage:
         _stage2(setup, rows, clock, rng)
+    cleared = _clear_idle_arms(setup, rows, clock, rng)
     _pace(setup, rows, clock, rng)
     best_r, best_l, after = rows.right, rows.left, rows.after
     # The optimisers search within the limits; clipping again guards that promise.
@@ -629,7 +636,7 @@ def _run(setup, lock_sets, rng, clock, stats):
     return {'right': best_r, 'left': best_l, 'after': after, 'stage1': stage1,
             'stage': rows.stage, 'expansion': rows.expansion, 'status': rows.status,
             'layouts': rows.layouts, 'base_right': rows.base_r, 'base_left': rows.base_l,
-            'paced': rows.paced}
+            'paced': rows.paced, 'cleared': cleared}
 
 
 def pose_values(robot, scorer, checker, q, ids):
@@ -833,6 +840,48 @@ def _stage2(setup, rows, clock, rng):
             rows.stage[k] = 2
         if st2[i] in ('deadline', 'cancelled'):
             rows.status[k] = st2[i]
+
+
+def _clear_idle_arms(setup, rows, clock, rng):
+    """
+    Move a faulted arm that a gesture does not use out of the body; return those rows.
+
+    A gesture scores only the arms it uses, so a faulted arm it does not use holds its
+    reference pose with the locks applied, and that pose may run into the body: Talos's
+    left elbow held at the average of its gestures (-119 deg) puts the resting forearm
+    into the torso during every right-arm gesture.  Such rows are solved again on the
+    idle arm's healthy joints alone: the collision term pushes it clear, and the
+    ``stay_close`` pull keeps it as near its reference pose as it can be.  The score
+    does not change (the arm is not scored).  Returns a mask of the rows moved.
+    """
+    robot, checker = setup.robot, setup.checker
+    done = np.zeros(len(rows.ids), dtype=bool)
+    if checker is None:
+        return done
+    idle = {k: tuple(s for s in setup.faulted if s not in t.arms and s not in setup.frozen)
+            for k, t in enumerate(rows.targets)}
+    todo = [k for k, sides in idle.items() if sides]
+    if not todo:
+        return done
+    hit = checker.collides(batch_forward(robot, rows.right[todo], 'right'),
+                           batch_forward(robot, rows.left[todo], 'left'), rows.ids[todo])
+    todo = [k for k, h in zip(todo, hit) if h]
+    if not todo:
+        return done
+    lay = [free_layout(robot, idle[k], setup.locked, setup.faulted) for k in todo]
+    batch = _Batch(rows.right[todo], rows.left[todo], rows.ids[todo], lay,
+                   stay_close=IDLE_STAY_CLOSE, motions=[rows.motions[k] for k in todo])
+    r2, l2, _ = _solve(robot, setup.scorer, checker, batch, setup.algo, clock, rng)
+    clear = ~checker.collides(batch_forward(robot, r2, 'right'),
+                              batch_forward(robot, l2, 'left'), rows.ids[todo])
+    for i, k in enumerate(todo):
+        if clear[i]:
+            rows.right[k], rows.left[k] = r2[i], l2[i]
+            done[k] = True
+    if done.any():
+        rows.after[done] = setup.scorer.evaluate(rows.right[done], rows.left[done],
+                                                 rows.ids[done])
+    return done
 
 
 def _take(out, c, n_t):
