@@ -221,3 +221,24 @@ def test_an_idle_faulted_arm_is_moved_clear_of_the_body(others):
             step[3] = 0.0                                   # the locked elbow
             assert step.max() <= 20.0, (name, step)
             assert np.array_equal(new.right, ref.right)     # the gesture itself untouched
+        # One correction over the whole gesture: the idle arm does not twitch.
+        offset = np.array([kf.left for kf in gesture.keyframes]) - np.array(
+            [kf.left for kf in lib[name].keyframes])
+        offset[:, 3] = 0.0
+        assert np.ptp(offset, axis=0).max() <= 1e-9, (name, offset)
+
+
+def test_an_idle_arm_moved_clear_stays_clear_along_a_dense_motion(robot):
+    # Namo's demo circle (right arm) with left joint 2 at its average lock: the locked
+    # resting left arm touches the torso.  One clear pose is held along the whole circle
+    # (clearances solved at each typical point and blended by Kriging touched again).
+    from namo_fault_recovery.resources import config_path
+    lib = load_library(robot, config_path('demo_motions.yaml'))
+    res = recover(robot, lib, {'left_arm_joint2': None}, RecoverySettings(), seed=0,
+                  clock=Clock(None))
+    circle = res['circle']
+    assert not circle.collides, circle.colliding_pairs
+    offset = np.array(circle.positions)[:, 7:] - lib['circle'].joint_matrix()[:, 7:]
+    offset[:, 1] = 0.0                                  # the locked joint
+    assert np.ptp(offset, axis=0).max() <= 1e-6, offset
+    assert circle.score_after == pytest.approx(0.0, abs=1e-9)

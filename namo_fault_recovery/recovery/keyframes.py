@@ -469,11 +469,7 @@ def reconfigure_library(robot, library, faults, settings, *,
     if optimal:
         locks, out, note = _optimise_locks(setup, locks, out, optimal, rng, search, stats)
         notes.append(note)
-    if out['cleared'].any():
-        moved = sorted({setup.selected[setup.owners[k]].name
-                        for k in np.nonzero(out['cleared'])[0]})
-        notes.append(f'the faulted arm these gestures do not use was moved clear of the '
-                     f'body (its locked reference pose collides): {", ".join(moved)}')
+    notes += _cleared_note(setup, out['cleared'])
     return _library_result(setup, locks, out, notes, time.monotonic() - start,
                            int(stats['nfev']))
 
@@ -878,10 +874,53 @@ def _clear_idle_arms(setup, rows, clock, rng):
         if clear[i]:
             rows.right[k], rows.left[k] = r2[i], l2[i]
             done[k] = True
+    _hold_idle_still(setup, rows, idle, done)
     if done.any():
         rows.after[done] = setup.scorer.evaluate(rows.right[done], rows.left[done],
                                                  rows.ids[done])
     return done
+
+
+def _cleared_note(setup, cleared):
+    """Return the note (a list of at most one) naming the gestures whose idle arm moved."""
+    if not cleared.any():
+        return []
+    moved = sorted({setup.selected[setup.owners[k]].name for k in np.nonzero(cleared)[0]})
+    return [f'the faulted arm these gestures do not use was moved clear of the body (its '
+            f'locked reference pose collides): {", ".join(moved)}']
+
+
+def _hold_idle_still(setup, rows, idle, done):
+    """
+    Give the idle arm one correction over each gesture: the same offset at every point.
+
+    Each keyframe's clearance is solved alone and ends somewhere different on the edge
+    of contact: the arm would twitch between keyframes, and a dense motion's Kriging
+    would blend clear poses into touching ones (Namo's circle with left joint 2 locked).
+    Of the corrections found (pose minus locked design), the smallest that is clear at
+    every keyframe of the gesture is applied to all of them, so an idle arm whose design
+    holds still holds still (in place; ``done`` marks the rows moved).
+    """
+    robot, checker = setup.robot, setup.checker
+    owners = np.asarray(rows.owners)
+    arm = {'right': rows.right, 'left': rows.left}
+    design = {'right': rows.base_r, 'left': rows.base_l}
+    for m in np.unique(owners[done]):
+        ks = np.nonzero(owners == m)[0]
+        sides = idle[ks[0]]
+        offsets = [{s: arm[s][k] - design[s][k] for s in sides} for k in ks if done[k]]
+        offsets.sort(key=lambda o: sum(np.abs(v).sum() for v in o.values()))
+        for offset in offsets:
+            trial = {s: arm[s][ks].copy() for s in ARMS}
+            for s in sides:
+                trial[s] = robot.arms[s].clip(design[s][ks] + offset[s])
+            if not checker.collides(batch_forward(robot, trial['right'], 'right'),
+                                    batch_forward(robot, trial['left'], 'left'),
+                                    rows.ids[ks]).any():
+                for s in sides:
+                    arm[s][ks] = trial[s]
+                done[ks] = True
+                break
 
 
 def _take(out, c, n_t):
