@@ -259,7 +259,7 @@ def _repair(robot, scorer, checker, batch, rows, plain, algo, clock, rng, stats)
     One start is the row's starting pose (collision-free unless the locks force a
     contact), the other the plain optimum that collided: the penalty pushes it out into
     the nearest clear pose, which is usually far better than the clear basin around the
-    start (measured on Talos's Wai with arm_right_6_joint locked: 22.0-22.3 from the
+    start (measured on Talos's Wai with arm_right_6_joint locked: 21.2-21.6 from the
     plain optimum against 24-36 from the start).  Both starts are rows of one batched
     problem.  Return (right, left) from the start, (right, left) from the plain optimum,
     and the statuses of the first.
