@@ -313,15 +313,14 @@ def test_a_wave_that_flips_the_wrist_too_fast_is_not_playable(robot, product_lib
     assert not playable(robot, replace(bye, positions=tuple(map(tuple, positions))))
 
 
-def test_playability_counts_played_paths_that_touch_beyond_their_design():
-    """Left joint 3 locked: Wai's keyframes are clear, its path from rest presses the palms."""
+def test_playability_counts_straight_paths_that_touch_and_the_played_ones_bent_clear():
+    """Left joint 3 locked: Wai's keyframes are clear, its straight path presses the palms."""
     from namo_fault_recovery.benchmarks.playability import run_playability
     out = io.StringIO()
     summary = run_playability(out, seeds=1, joints=['left_arm_joint3'], jobs=1,
                               progress=False)
     part = summary['parts']['budget']
     assert part['unplayable'] == 0 and part['gestures'] == 4
-    assert part['path_contacts'] >= 1 and part['max_path_depth_mm'] > 1.0
-    worst = part['worst_paths'][0]
-    assert worst['gesture'] == 'wai' and not worst['keyframes_collide']
+    assert part['straight_path_contacts'] >= 1 and part['max_straight_depth_mm'] > 1.0
+    assert part['path_contacts'] == 0 and part['max_path_depth_mm'] <= 1.0
     assert 'played paths touch beyond their design' in out.getvalue()

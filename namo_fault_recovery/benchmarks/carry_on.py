@@ -37,6 +37,7 @@ from ..model.self_contact import pressed_joints
 from ..objective.score import ScoreWeights, SimilarityScore
 from ..playback.blend import BlendLimits
 from ..playback.carry import CarryOn
+from ..playback.clearance import PathClearance
 from ..playback.monitor import MonitorThresholds
 from ..playback.timing import plan_motion, PlayTiming
 
@@ -98,12 +99,14 @@ class Bench:
         self.lower = np.concatenate([robot.arms[s].lower for s in ('right', 'left')])
         self.upper = np.concatenate([robot.arms[s].upper for s in ('right', 'left')])
         self.limits = BlendLimits(self.velocity, np.full(len(self.names), acceleration))
+        self.clearance = PathClearance(robot, self.names)      # the player's clear_path
         self.wait = wait
 
     def plan(self, times, frames, start, locks):
         """Time keyframes as the player does (the CarryOn planner)."""
         return plan_motion(self.names, start, times, frames, self.velocity, locks=locks,
-                           lower=self.lower, upper=self.upper, timing=self.timing)
+                           lower=self.lower, upper=self.upper, timing=self.timing,
+                           clearance=self.clearance)
 
     def session(self, plan):
         """Return the player's CarryOn for ``plan``."""

@@ -28,6 +28,7 @@ import time
 import numpy as np
 
 from ..objective.score import ScoreWeights, SimilarityScore
+from ..playback.clearance import PathClearance
 from ..playback.monitor import MonitorThresholds, Playback
 from ..playback.timing import plan_motion, PlayTiming
 
@@ -52,7 +53,8 @@ def play_on_sim(sim, robot, times, frames, locks=None, monitor=MonitorThresholds
     lower = np.concatenate([robot.arms[s].lower for s in ('right', 'left')])
     upper = np.concatenate([robot.arms[s].upper for s in ('right', 'left')])
     plan = plan_motion(names, sim.positions(), times, frames, limits, locks=locks,
-                       lower=lower, upper=upper, timing=timing)
+                       lower=lower, upper=upper, timing=timing,
+                       clearance=PathClearance(robot, names))
     playback = Playback(plan, [names[:7], names[7:]], monitor)
     steps = max(1, int(round(1.0 / (RATE * sim.timestep))))
     trace = []

@@ -50,6 +50,7 @@ from . import common
 from ..model.gestures import load_library
 from ..model.self_contact import pressed_joints, reference_contact
 from ..objective.score import ScoreWeights, SimilarityScore
+from ..playback.clearance import PathClearance
 from ..playback.monitor import MonitorThresholds, Playback
 from ..playback.timing import plan_motion, PlayTiming
 from ..playback.tracking import fit_tracking
@@ -114,7 +115,8 @@ def play(sim, robot, gesture, arrival, options, limit=30.0):
     frames = np.array([kf.positions() for kf in gesture.keyframes])
     limits, lower, upper = _limits(robot)
     plan = plan_motion(names, sim.readings(), times, frames, limits, lower=lower,
-                       upper=upper, timing=options.timing)
+                       upper=upper, timing=options.timing,
+                       clearance=PathClearance(robot, names))
     playback = Playback(plan, [names[:7], names[7:]], options.monitor,
                         functools.partial(pressed_joints, robot, names))
     steps = max(1, int(round(1.0 / (RATE * sim.timestep))))

@@ -24,6 +24,9 @@ Also the self-contact of the played path by the capsule model
 from rest): the engine checks its keyframes, the player plays the path between them,
 so a gesture whose path goes deeper than its design (:data:`~..model.self_contact.
 TOLERANCE_MM`) is counted (``path_contacts``) with the engine's own verdict beside.
+The player bends a path that presses deeper than its keyframes
+(:mod:`..playback.clearance`); ``straight_path_contacts`` counts the same of the
+straight path it played before, from the same plans.
 """
 
 import multiprocessing
@@ -35,6 +38,7 @@ from . import common
 from .product import load_models, node_settings
 from ..model.self_contact import TOLERANCE_MM, undesigned_depth
 from ..optimize.base import Clock
+from ..playback.clearance import PathClearance
 from ..playback.timing import plan_motion, PlayTiming
 from ..recovery.engine import recover
 from ..recovery.keyframes import PACED_NOTE
@@ -53,29 +57,33 @@ _WORKER = {}
 
 def play_figures(robot, gesture, locks, timing=PlayTiming(), reference=None):
     """
-    Return (stretch, peak speed over the limit, path depth mm) of the player's plan.
+    Return (stretch, peak speed over the limit, path depth mm, straight depth mm).
 
     The plan of the GestureResult starts at the rest pose (all zeros), holds ``locks``
-    (joint -> rad) and clips into the joint limits, as the player does.  The peak is
-    read off the plan timed as designed (limits so high that nothing is stretched), on
-    a fine grid; the depth is the played path's deepest contact beyond ``reference``'s
-    design (0 without a reference).
+    (joint -> rad) and clips into the joint limits, and its path is bent clear of the
+    body (:mod:`..playback.clearance`), as the player does.  The peak is read off the
+    plan timed as designed (limits so high that nothing is stretched), on a fine grid;
+    the depths are the played path's deepest contact beyond ``reference``'s design, and
+    the same of the straight path that the player played before it bent paths (0
+    without a reference).
     """
     names = robot.joint_names
     limits = np.tile(np.asarray(robot.velocity_limits, dtype=float), 2)
     lower = np.concatenate([robot.arms[s].lower for s in ('right', 'left')])
     upper = np.concatenate([robot.arms[s].upper for s in ('right', 'left')])
     args = (names, np.zeros(len(names)), gesture.times, np.asarray(gesture.positions))
-    played = plan_motion(*args, limits, locks=locks, lower=lower, upper=upper, timing=timing)
-    timed = plan_motion(*args, limits * _NO_LIMIT, locks=locks, lower=lower, upper=upper,
-                        timing=timing)
+    options = {'locks': locks, 'lower': lower, 'upper': upper, 'timing': timing}
+    clearance = PathClearance(robot, names)
+    played = plan_motion(*args, limits, clearance=clearance, **options)
+    timed = plan_motion(*args, limits * _NO_LIMIT, clearance=clearance, **options)
     t = np.linspace(0.0, timed.duration, _GRID)
     peak = float(np.max(np.abs(timed.velocity_at(t)) / limits))
-    depth = 0.0
+    depths = [0.0, 0.0]
     if reference is not None:
-        path = np.arange(0.0, played.duration + PATH_STEP, PATH_STEP)
-        depth = undesigned_depth(robot, reference, played.command_at(path))
-    return float(played.stretch), peak, depth
+        for k, plan in enumerate((played, plan_motion(*args, limits, **options))):
+            path = np.arange(0.0, plan.duration + PATH_STEP, PATH_STEP)
+            depths[k] = undesigned_depth(robot, reference, plan.command_at(path))
+    return float(played.stretch), peak, *depths
 
 
 def _init_worker(which):
@@ -94,9 +102,11 @@ def _run_one(task):
                   quantisations=_WORKER['quant'], optimizer_overrides=overrides)
     gestures = []
     for g in res.gestures:
-        stretch, peak, depth = play_figures(robot, g, res.locks, reference=lib[g.name])
+        stretch, peak, depth, straight = play_figures(robot, g, res.locks,
+                                                      reference=lib[g.name])
         gestures.append({'gesture': g.name, 'stretch': stretch, 'peak_ratio': peak,
                          'speed_ratio': g.speed_ratio, 'path_depth_mm': depth,
+                         'straight_depth_mm': straight,
                          'keyframes_collide': bool(g.collides)})
     return {'fault': joint, 'seed': seed, 'gestures': gestures,
             'repaired': sum(PACED_NOTE in n for n in res.notes),
@@ -122,7 +132,9 @@ def _summary(runs):
             'path_contacts_clear_keyframes': sum(not g['keyframes_collide'] for g in touching),
             'max_path_depth_mm': max(g['path_depth_mm'] for g in rows),
             'worst_paths': sorted(touching, key=lambda g: -g['path_depth_mm'])[:5],
-            'path_contacts_by': _count_by(touching)}
+            'path_contacts_by': _count_by(touching),
+            'straight_path_contacts': sum(g['straight_depth_mm'] > TOLERANCE_MM for g in rows),
+            'max_straight_depth_mm': max(g['straight_depth_mm'] for g in rows)}
 
 
 def _count_by(rows):
@@ -203,4 +215,6 @@ def print_playability(out, s, deadline):
                       f"{'' if g['keyframes_collide'] else ' (keyframes clear)'}\n")
         out.write(f"{k}: {p['path_contacts']} of {p['gestures']} played paths touch beyond "
                   f"their design ({p['path_contacts_clear_keyframes']} of them with every "
-                  f"keyframe clear), deepest {p['max_path_depth_mm']:.1f} mm (target 0)\n")
+                  f"keyframe clear), deepest {p['max_path_depth_mm']:.1f} mm (target 0); "
+                  f"straight, as played before paths were bent: {p['straight_path_contacts']}"
+                  f", deepest {p['max_straight_depth_mm']:.1f} mm\n")

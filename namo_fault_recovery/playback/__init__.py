@@ -3,6 +3,8 @@ Playing the gesture library on the robot, free of ROS.
 
 - :mod:`.timing`: from the measured pose and a gesture's keyframes to a smooth,
   speed-limited trajectory that holds every locked joint at its lock angle;
+- :mod:`.clearance`: a played path that presses the body no deeper than its keyframes
+  do: where the spline between them would, one via pose bends it out of the contact;
 - :mod:`.monitor`: tracking of the commands on the measured joint states: a stuck
   joint is a fault, the last point reached within tolerance is the end of the motion;
 - :mod:`.deviation`: noticing a structure change: the tracked fingertip, at its capture

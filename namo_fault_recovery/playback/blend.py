@@ -84,7 +84,7 @@ def resume(plan, t, holds=None, sample_period=0.05):
     """
     names = plan.joint_names
     t = float(np.clip(t, 0.0, plan.duration))
-    later = plan.waypoint_times[plan.waypoint_times > t + 1e-6]
+    later = plan.knots[plan.knots > t + 1e-6]
     knots = np.concatenate([[t], later]) if len(later) else np.array([t, t + MIN_SEGMENT])
     q, v = _hold(plan.command_at(knots), plan.velocity_at(knots), names, holds)
     spline = CubicHermiteSpline(knots - t, q, v, axis=0)
@@ -304,7 +304,7 @@ def _knots(command):
     """Knots of a blend: a BLEND_STEP grid, the target's own knots and the switches."""
     duration = command.duration
     n = max(2, int(math.ceil(duration / BLEND_STEP)) + 1)
-    shifted = command.wait + command.target.waypoint_times - command.t0
+    shifted = command.wait + command.target.knots - command.t0
     inner = np.concatenate([shifted, command.switches])
     inner = inner[(inner > 1e-6) & (inner < duration - 1e-6)]
     return np.union1d(np.linspace(0.0, duration, n), inner)
@@ -377,7 +377,7 @@ def _motion(command, names, holds, sample_period):
     q, v, _ = command(knots)
     q, v = _hold(q, v, names, holds)
     rejoined = command.target_time(command.duration)
-    later = target.waypoint_times[target.waypoint_times > rejoined + 1e-6]
+    later = target.knots[target.knots > rejoined + 1e-6]
     if len(later):       # then the target itself: its pieces are cubics, kept as they are
         q_later, v_later = _hold(target.command_at(later), target.velocity_at(later),
                                  names, holds)

@@ -13,7 +13,7 @@ after a fault the free joints often travel further than designed, and only the
 segments where they do are slowed down.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline, PchipInterpolator
@@ -49,8 +49,10 @@ class PlannedMotion:
     A timed trajectory for all the played joints, sampled for the controllers.
 
     ``times`` start at 0 (the moment the goal is sent); ``waypoint_times`` are the times
-    of the start pose and of every keyframe; ``stretch`` is the duration over the
-    duration before the speed limits were applied (1.0 when nothing was slowed down).
+    of the start pose and of every keyframe (a gesture's phase); ``stretch`` is the
+    duration over the duration before the speed limits were applied (1.0 when nothing was
+    slowed down).  ``spline_knots`` are the spline's own knots when it has more than the
+    waypoints (the via poses of :mod:`.clearance`); :attr:`knots` is either.
     """
 
     joint_names: tuple
@@ -62,6 +64,12 @@ class PlannedMotion:
     stretch: float
     locks: dict = field(default_factory=dict)
     _spline: object = field(default=None, repr=False, compare=False)
+    spline_knots: object = field(default=None, repr=False, compare=False)
+
+    @property
+    def knots(self) -> np.ndarray:
+        """Return the times between which the trajectory is one cubic (s)."""
+        return self.waypoint_times if self.spline_knots is None else self.spline_knots
 
     @property
     def duration(self):
@@ -148,7 +156,7 @@ def _stretch(times, points, limits):
 
 
 def plan_motion(joint_names, start, keyframe_times, keyframes, velocity_limits,
-                locks=None, lower=None, upper=None, timing=PlayTiming()):
+                locks=None, lower=None, upper=None, timing=PlayTiming(), clearance=None):
     """
     Return the PlannedMotion that plays ``keyframes`` from the measured pose ``start``.
 
@@ -156,20 +164,15 @@ def plan_motion(joint_names, start, keyframe_times, keyframes, velocity_limits,
     ``velocity_limits`` (J,) rad/s.  ``locks`` maps joint names to lock angles: those
     columns are commanded at the lock angle at every point, the approach included,
     whatever the keyframes and the measured pose say.  ``lower``/``upper`` clip every
-    waypoint into the joint limits.
+    waypoint into the joint limits.  With a :class:`~.clearance.PathClearance`, a path
+    that presses the body deeper than its waypoints do is bent out of the contact.
     """
     names = tuple(joint_names)
     start = np.asarray(start, dtype=float).copy()
     frames = np.atleast_2d(np.asarray(keyframes, dtype=float)).copy()
     kf_times = np.asarray(keyframe_times, dtype=float)
     limits = np.asarray(velocity_limits, dtype=float)
-    if frames.shape[1] != len(names) or start.shape != (len(names),):
-        raise ValueError(f'expected {len(names)} joints, got start {start.shape} and '
-                         f'keyframes {frames.shape}')
-    if len(kf_times) != len(frames) or np.any(np.diff(kf_times) < 0):
-        raise ValueError('keyframe times must be one per keyframe and non-decreasing')
-    if limits.shape != (len(names),) or not np.all(limits > 0):
-        raise ValueError('velocity_limits must be one positive speed per joint')
+    _check_shapes(names, start, frames, kf_times, limits)
     locks = {j: float(a) for j, a in (locks or {}).items() if j in names}
     for joint, angle in locks.items():
         start[names.index(joint)] = angle
@@ -186,10 +189,31 @@ def plan_motion(joint_names, start, keyframe_times, keyframes, velocity_limits,
     keep = np.concatenate([[True], np.diff(times) >= MIN_SEGMENT - 1e-12])
     times, points = times[keep], points[keep]
 
-    nominal = times[-1]
-    times, spline = _stretch(times, points, limits)
-    return sampled_motion(names, spline, times, timing.sample_period,
-                          float(times[-1] / nominal), locks, points)
+    def timed(knots, poses):
+        stretched, spline = _stretch(knots, poses, limits)
+        return sampled_motion(names, spline, stretched, timing.sample_period,
+                              float(stretched[-1] / times[-1]), locks, poses)
+
+    motion = timed(times, points)
+    if clearance is None:
+        return motion
+    locked = [names.index(j) for j in locks]
+    knots, poses, via = clearance.bend(motion.waypoint_times, points, timed, locked)
+    if not np.any(via):
+        return motion
+    bent = timed(knots, poses)
+    return replace(bent, waypoint_times=bent.waypoint_times[~via], waypoints=poses[~via],
+                   spline_knots=bent.waypoint_times)
+
+
+def _check_shapes(names, start, frames, kf_times, limits):
+    if frames.shape[1] != len(names) or start.shape != (len(names),):
+        raise ValueError(f'expected {len(names)} joints, got start {start.shape} and '
+                         f'keyframes {frames.shape}')
+    if len(kf_times) != len(frames) or np.any(np.diff(kf_times) < 0):
+        raise ValueError('keyframe times must be one per keyframe and non-decreasing')
+    if limits.shape != (len(names),) or not np.all(limits > 0):
+        raise ValueError('velocity_limits must be one positive speed per joint')
 
 
 def sampled_motion(joint_names, spline, knots, sample_period, stretch=1.0, locks=None,

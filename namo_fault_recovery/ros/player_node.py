@@ -58,6 +58,7 @@ from ..playback import monitor as detector
 from ..playback.blend import BlendLimits
 from ..playback.book import GestureTrack, parse_lock_angle, PlayerBook
 from ..playback.carry import CarryOn
+from ..playback.clearance import PathClearance
 from ..playback.monitor import MonitorThresholds, Outcome
 from ..playback.timing import plan_motion, PlayTiming
 from ..runtime.robot_source import robot_source
@@ -147,7 +148,11 @@ def _declare(node):
                  node.declare_parameter('acceleration_limit_deg', 600.0).value),
              'joint_states': node.declare_parameter('joint_states_timeout_sec', 1.0).value,
              'first_states': node.declare_parameter('joint_states_wait_sec', 5.0).value,
-             'report_faults': node.declare_parameter('report_faults', True).value}
+             'report_faults': node.declare_parameter('report_faults', True).value,
+             'clear_path': node.declare_parameter('clear_path', True, ParameterDescriptor(
+                 description='bend a path that presses the body deeper than its keyframes '
+                             'do (capsule model; needs both arms played)',
+                 read_only=True)).value}
     if not waits['carry_on'] >= 0:
         raise ValueError(f'carry_on_wait_sec must be >= 0, got {waits["carry_on"]}')
     if not waits['acceleration'] > 0:
@@ -196,6 +201,17 @@ def plan_message(plan, joints) -> JointTrajectory:
     return msg
 
 
+def path_clearance(player, joints) -> PathClearance | None:
+    """Return the PathClearance of the played ``joints``, or None (off, or one arm only)."""
+    if not player._waits['clear_path']:
+        return None
+    try:
+        return PathClearance(player._robot, joints)
+    except ValueError as exc:
+        player.get_logger().warning(f'clear_path: {exc}; paths are played unchecked')
+        return None
+
+
 def explorer(player, robot, inputs, services) -> Exploration:
     """Return the player's :class:`~.exploration.Exploration`, wired to its state."""
     return Exploration(player, robot, PlayerHooks(
@@ -213,7 +229,8 @@ class GesturePlayer(Node):
         (self._robot, self._groups, self._timing, self._monitor,
          self._waits) = _declare(self)
         self._joints = [j for group in self._groups.values() for j in group]
-        self._limits = _joint_limits(self._robot, self._joints)
+        self._limits, self._clearance = (_joint_limits(self._robot, self._joints),
+                                         path_clearance(self, self._joints))
         self._book = PlayerBook()
         self._measured = {}           # joint -> angle
         self._speeds = {}             # joint -> velocity, when /joint_states has them
@@ -231,9 +248,8 @@ class GesturePlayer(Node):
                                  latched, callback_group=inputs)
         self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 50,
                                  callback_group=inputs)
-        self.create_subscription(JointState, '/joint_states', self._on_joint_states,
-                                 QoSProfile(depth=10,
-                                            reliability=ReliabilityPolicy.BEST_EFFORT),
+        sensor = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+        self.create_subscription(JointState, '/joint_states', self._on_joint_states, sensor,
                                  callback_group=inputs)
         reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(JointState, '/actuator_fault', self._on_fault, reliable,
@@ -434,8 +450,8 @@ class GesturePlayer(Node):
     def _plan_frames(self, times, frames, start, locks):
         """Time keyframes (in the played joints' order) from ``start`` with ``locks``."""
         limits, lower, upper = self._limits
-        return plan_motion(self._joints, start, times, frames, limits, locks=locks,
-                           lower=lower, upper=upper, timing=self._timing)
+        return plan_motion(self._joints, start, times, frames, limits, locks=locks, lower=lower,
+                           upper=upper, timing=self._timing, clearance=self._clearance)
 
     def _send(self, plan):
         """
