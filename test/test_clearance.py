@@ -20,8 +20,8 @@ CLEARANCE = PathClearance(ROBOT, NAMES)
 CROSSING = {'left_arm_joint3': math.radians(-45.0)}
 
 
-def wai(locks, clearance):
-    g = LIBRARY['wai']
+def wai(locks, clearance, name='wai'):
+    g = LIBRARY[name]
     frames = [np.concatenate([kf.right, kf.left]) for kf in g.keyframes]
     return plan_motion(NAMES, np.zeros(14), [kf.time_from_start for kf in g.keyframes],
                        frames, LIMITS, locks=locks, clearance=clearance)
@@ -47,11 +47,21 @@ def test_a_path_that_presses_the_palms_through_each_other_is_bent_clear():
     assert np.all(np.abs(bent.velocities) <= LIMITS + 1e-9)
 
 
-def test_a_clear_path_is_played_as_it_was():
-    straight, checked = wai(None, None), wai(None, CLEARANCE)
-    assert path_depth(straight) <= 1.0
+@pytest.mark.parametrize('name', ['bye', 'salute', 'side_invite'])
+def test_a_clear_path_is_played_as_it_was(name):
+    straight, checked = wai(None, None, name), wai(None, CLEARANCE, name)
     np.testing.assert_array_equal(checked.knots, straight.knots)
     np.testing.assert_array_equal(checked.positions, straight.positions)
+
+
+def test_the_designed_palms_are_pressed_no_deeper_on_the_way_than_at_the_key_pose():
+    """The reference Wai's approach presses the hands 0.53 mm deeper than its key pose."""
+    straight, bent = wai(None, None), wai(None, CLEARANCE)
+    key = CLEARANCE.depths(straight.waypoints).max(axis=0)
+    for plan, most in ((straight, 0.5), (bent, 0.05)):
+        t = np.arange(0.0, plan.duration, 0.01)
+        deeper = np.max(CLEARANCE.depths(plan.command_at(t)) - key)
+        assert (deeper > most) == (plan is straight), deeper
 
 
 def test_the_rest_of_a_bent_plan_follows_its_via_pose():
@@ -65,3 +75,23 @@ def test_the_rest_of_a_bent_plan_follows_its_via_pose():
 def test_a_path_with_one_arm_played_cannot_be_checked():
     with pytest.raises(ValueError, match="'left_arm_joint1' is not among the played joints"):
         PathClearance(ROBOT, NAMES[:7])
+
+
+def test_an_arm_swung_through_the_torso_of_another_robot_goes_round_it():
+    """TIAGo++: the idle left arm moved clear with its elbow stuck; straight, 93 mm deep."""
+    from namo_fault_recovery.model.profile_robot import robot_from_profile
+    from namo_fault_recovery.model.self_contact import penetrations
+    from namo_fault_recovery.resources import config_path
+    robot = robot_from_profile(config_path('robots/tiago_dual.yaml'))
+    names = robot.joint_names
+    limits = np.tile(np.asarray(robot.velocity_limits, dtype=float), 2)
+    key = np.zeros(14)
+    key[7:] = np.radians([13.2, 84.4, 200.4, 122.4, -120.0, -2.2, -106.9])
+    locks = {'arm_left_4_joint': math.radians(122.4)}
+    plans = [plan_motion(names, np.zeros(14), [1.0], [key], limits, locks=locks,
+                         clearance=c) for c in (None, PathClearance(robot, names))]
+    depth = [penetrations(robot, p.command_at(np.arange(0.0, p.duration, 0.01))).max()
+             for p in plans]
+    assert depth[0] > 50.0 and depth[1] <= 1.0
+    assert plans[1].duration == pytest.approx(plans[0].duration)
+    np.testing.assert_allclose(plans[1].final, plans[0].final)

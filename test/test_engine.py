@@ -268,3 +268,15 @@ def test_every_seed_finds_the_best_basin_of_the_served_library(
                            'n_sources': 20, 'max_cycles': 40, 'polish': 8,
                            'polish_maxiter': 300})[gesture].score_after
     assert max(scores) <= 1.01 * min(scores + [thorough]), (scores, thorough)
+
+
+def test_a_dense_motion_that_still_collides_says_so(robot, demo_library, monkeypatch):
+    """The circle (Kriging, then the whole-trajectory pass) warns as a keyframed gesture."""
+    from namo_fault_recovery.recovery import figures
+    monkeypatch.setattr(figures, 'collisions',
+                        lambda *args: (True, ('right_hand-torso',)))
+    res = recover(robot, demo_library, {FAULT: None}, RecoverySettings(), seed=11,
+                  clock=Clock(None))
+    circle = res['circle']
+    assert circle.collides and circle.method != 'keyframes'
+    assert circle.message.endswith(figures.COLLIDES_WARNING), circle.message

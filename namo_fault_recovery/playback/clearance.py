@@ -3,32 +3,42 @@ A played path that presses the body no deeper than its own waypoints do (no ROS)
 
 The engine checks self-contact at a gesture's keyframes; the player joins them by a
 spline in joint space, and on the way the arms can press deeper than at any keyframe.
-Example: Wai with left joint 3 locked.  The optimiser reaches the palms-together pose
-with other joints than the design does, and the straight approach from rest brings the
-palms 11 mm through each other before they part again to the key pose, which touches
-only as designed.  The simulator's (and a real robot's) palms then collide.
+Example: Wai with left joint 3 stuck at -45 deg, the key pose's own angle.  The arm
+starts from rest with that joint already there, and the straight approach brings the
+palms 11 mm through each other before the key pose, where they touch only as designed.
+Or TIAGo++'s idle left arm, moved clear of the body with its elbow stuck: the straight
+swing to that pose passes 93 mm through the torso.  The simulator's (and a real
+robot's) bodies then collide.
 
 :class:`PathClearance` samples a planned path every :data:`STEP` seconds with the
 capsule model of :mod:`..model.self_contact`.  A pair may press as deep as the deepest
 waypoint (start pose or keyframe) presses it: the engine judged the keyframes (a
 designed Wai touch, or a graze it reported), and where a motion starts is not its
-doing.  Where a segment goes deeper by more than :data:`~..model.self_contact.
-TOLERANCE_MM`, :meth:`PathClearance.bend` adds one via pose at the deepest instant.
-The pose is pushed out of the contact along the depth's gradient in the joints that
-move on that segment, never a locked one.  The push is the smallest of
-:data:`PUSHES` that leaves the whole path clear, so the path keeps close to the
-designed one.  The speed limits are applied afterwards, as for any waypoint.
+doing.  Where a segment goes deeper (by more than :data:`SLACK_MM`),
+:meth:`PathClearance.bend` adds a via pose at the deepest instant, pushed out of the
+contact along the depth's gradient in the joints that move on that segment (never a
+locked one), within the joint limits.  The push is the smallest of :data:`PUSHES`
+that clears that part of the path, so the path keeps close to the designed one; where
+none does, the one that at least halves the excess, and the next via goes on from
+there.  The keyframes and their times stay; the speed limits are applied afterwards,
+as for any waypoint.  A path that no via makes shallower is played as it was.
 """
 
 import numpy as np
 
-from ..model.self_contact import penetrations, TOLERANCE_MM
+from .timing import waypoint_spline
+from ..model.self_contact import penetrations
 
 STEP = 0.02              # s between the checked poses of a path
-PUSHES = (0.05, 0.1, 0.15, 0.2, 0.3, 0.45, 0.6)   # rad: largest joint move of the via pose
+# mm a path may press deeper than its deepest waypoint: none to speak of, so that a path
+# whose keyframes are within the design by the simulator's tolerance is too.
+SLACK_MM = 0.05
+_SCREEN_STEP = 0.04      # s between the poses that screen the pushes (then checked at STEP)
+PUSHES = (0.05, 0.1, 0.15, 0.2, 0.3, 0.45, 0.6, 0.8, 1.0)   # rad: the via's largest move
 _GRADIENT_STEP = 1e-3    # rad: finite difference of the depth
 _MOVING = 1e-6           # rad: a joint that moves less on a segment is left where it is
-_MAX_VIAS = 3            # via poses added to one motion at most
+_MAX_VIAS = 4            # via poses added to one motion at most
+_PROGRESS = 0.5          # a via that does not clear its part must at least halve its excess
 
 
 class PathClearance:
@@ -44,6 +54,12 @@ class PathClearance:
             raise ValueError(f'a path can be checked only with both arms played; '
                              f'{missing[0]!r} is not among the played joints')
         self.columns = np.array([names.index(j) for j in order])
+        # Other played joints (not in the capsule model) are never pushed.
+        self.lower, self.upper = np.full(len(names), -np.inf), np.full(len(names), np.inf)
+        self.lower[self.columns] = np.concatenate([robot.arms[s].lower
+                                                   for s in ('right', 'left')])
+        self.upper[self.columns] = np.concatenate([robot.arms[s].upper
+                                                   for s in ('right', 'left')])
 
     def depths(self, poses: np.ndarray) -> np.ndarray:
         """Return every pair's depth (mm) at ``poses`` (N, J) in the player's order."""
@@ -59,24 +75,29 @@ class PathClearance:
 
         ``plan(times, points)`` returns the PlannedMotion of those waypoints (the
         player's timing, its speed limits and locks); ``locked`` are column indices
-        that never move; ``via`` marks the added rows.  Unchanged when the path is clear,
-        or when no push clears it (the path the engine would have played, as before).
+        that never move; ``via`` marks the added rows.  Each via pose clears its part
+        of the path, or at least halves its excess (a deep pass through the torso may
+        take several); the bent path is returned only if it is shallower than the
+        straight one, else the waypoints as they were.
         """
         times, points = np.asarray(times, float), np.asarray(points, float)
         via = np.zeros(len(times), dtype=bool)
-        allowed = self.depths(points).max(axis=0) + TOLERANCE_MM
+        allowed = self.depths(points).max(axis=0) + SLACK_MM
+        straight = found = self._deepest(plan(times, points), allowed)
         for _ in range(_MAX_VIAS):
-            found = self._deepest(plan(times, points), allowed)
-            bent = found and self._via(times, points, plan, allowed, found, locked)
-            if bent is None:
+            bent = found[0] > 0.0 and self._via(times, points, plan, allowed, found, locked)
+            if not bent:
                 break
             times, points, s = bent
             via = np.insert(via, s, True)
+            found = self._deepest(plan(times, points), allowed)
+        if found[0] >= straight[0]:
+            return times[~via], points[~via], np.zeros(np.count_nonzero(~via), dtype=bool)
         return times, points, via
 
     def _deepest(self, motion, allowed, between=None):
         """
-        Return (time, pose) of ``motion``'s deepest excess, or None if it is clear.
+        Return (excess mm, time, pose) of ``motion``'s deepest excess (0 where clear).
 
         ``between`` = (first, last) knot indices limits the search to those segments.
         """
@@ -86,28 +107,37 @@ class PathClearance:
         poses = motion.command_at(t)
         over = self.excess(poses, allowed)
         k = int(np.argmax(over))
-        return None if over[k] <= 0.0 else (float(t[k]), poses[k])
+        return float(over[k]), float(t[k]), poses[k]
 
     def _via(self, times, points, plan, allowed, found, locked):
         """Return the waypoints with a pushed via pose at ``found``, or None."""
-        t, pose = found
+        excess, t, pose = found
         s = int(np.searchsorted(times, t, side='right')) - 1
         s = min(max(s, 0), len(times) - 2)
         moving = np.abs(points[s + 1] - points[s]) > _MOVING
         moving[list(locked)] = False
-        if not np.any(moving):
-            return None
-        direction = self._outward(pose, allowed, moving)
+        direction = self._outward(pose, allowed, moving) if np.any(moving) else None
         if direction is None:
             return None
         t = float(np.clip(t, times[s] + 0.25 * (times[s + 1] - times[s]),
                           times[s] + 0.75 * (times[s + 1] - times[s])))
-        for push in PUSHES:
-            new_t = np.insert(times, s + 1, t)
-            new_p = np.insert(points, s + 1, pose + push * direction, axis=0)
-            if self._deepest(plan(new_t, new_p), allowed, (s, s + 2)) is None:
-                return new_t, new_p, s + 1
-        return None
+        new_t = np.insert(times, s + 1, t)
+        samples = np.append(np.arange(times[s], times[s + 1], _SCREEN_STEP), times[s + 1])
+        best = (np.inf, None)
+        for pushes in np.reshape(PUSHES, (-1, 3)):    # the smallest pushes first
+            tries = [np.insert(points, s + 1, np.clip(pose + push * direction, self.lower,
+                                                      self.upper), axis=0)
+                     for push in pushes]
+            poses = np.concatenate([waypoint_spline(new_t, p)(samples) for p in tries])
+            left = self.excess(poses, allowed).reshape(len(tries), len(samples)).max(axis=1)
+            k = int(np.argmin(left))
+            if left[k] < best[0]:
+                best = (left[k], tries[k])
+            if best[0] <= 0.0:
+                break
+        if best[0] > _PROGRESS * excess:
+            return None
+        return new_t, best[1], s + 1
 
     def _outward(self, pose, allowed, moving):
         """Return the joint direction (largest move 1 rad) that most reduces the excess."""

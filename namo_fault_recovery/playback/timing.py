@@ -127,7 +127,8 @@ def _slopes(times, points):
     return slopes
 
 
-def _spline(times, points):
+def waypoint_spline(times, points) -> CubicHermiteSpline:
+    """Return the player's spline through ``points`` at ``times`` (before any stretch)."""
     return CubicHermiteSpline(times, points, _slopes(times, points), axis=0)
 
 
@@ -144,7 +145,7 @@ def _segment_ratios(spline, times, limits):
 def _stretch(times, points, limits):
     """Stretch the segments too fast for ``limits``; return the times and their spline."""
     for _ in range(_MAX_PASSES):
-        spline = _spline(times, points)
+        spline = waypoint_spline(times, points)
         ratios = _segment_ratios(spline, times, limits)
         if np.all(ratios <= 1.0):
             return times, spline
@@ -152,7 +153,7 @@ def _stretch(times, points, limits):
         times = np.concatenate([[0.0], np.cumsum(np.diff(times) * scale)])
     # The slopes of neighbouring segments interact; a last uniform stretch bounds all.
     times = times * (np.max(ratios) * _STRETCH_MARGIN)
-    return times, _spline(times, points)
+    return times, waypoint_spline(times, points)
 
 
 def plan_motion(joint_names, start, keyframe_times, keyframes, velocity_limits,

@@ -83,6 +83,8 @@ def describe_motion(ctx, motion, picks) -> GestureResult:
                    f'mean score {after.mean():.2f}')
         if m.status == 'deadline':
             message += '; deadline reached, best result so far used'
+        if collides:                  # as the keyframe search's message says it
+            message += f'; {COLLIDES_WARNING}'
     return GestureResult(
         name=gesture.name, times=tuple(float(kf.time_from_start) for kf in gesture.keyframes),
         positions=tuple(tuple(float(a) for a in row)
