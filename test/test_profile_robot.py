@@ -242,3 +242,13 @@ def test_an_idle_arm_moved_clear_stays_clear_along_a_dense_motion(robot):
     offset[:, 1] = 0.0                                  # the locked joint
     assert np.ptp(offset, axis=0).max() <= 1e-6, offset
     assert circle.score_after == pytest.approx(0.0, abs=1e-9)
+
+
+def test_retarget_reads_the_global_robot_file(tmp_path, capsys):
+    """``--robot-file`` before the command names the source robot, as for every command."""
+    import io
+    from namo_fault_recovery.cli.main import main as cli_main
+    missing = tmp_path / 'no_such_robot.yaml'
+    argv = ['--robot-file', str(missing), 'retarget', '--from', 'x.yaml', '--to', str(NAMO)]
+    assert cli_main(argv, out=io.StringIO()) == 2
+    assert 'no_such_robot.yaml: cannot read file' in capsys.readouterr().err

@@ -10,6 +10,7 @@ whether a capsule pair still penetrates.  The written library loads on that robo
 (``load_library`` checks it, as the node does).
 """
 
+import argparse
 import math
 from pathlib import Path
 
@@ -87,8 +88,9 @@ def register(sub):
     p.add_argument('--to', required=True, metavar='PROFILE', help="the robot's recovery profile")
     p.add_argument('--out', default=None, metavar='FILE',
                    help='write the library to FILE (default: print it)')
-    p.add_argument('--robot-file', default=None, metavar='FILE',
-                   help="the source robot file (default: Namo's)")
+    # SUPPRESS: given after the command it wins; absent, the global option stands.
+    p.add_argument('--robot-file', default=argparse.SUPPRESS, metavar='FILE',
+                   help="the source robot file (default: the global --robot-file, Namo's)")
     p.add_argument('--seed', type=int, default=0, help='seed of the random starts (0)')
     p.set_defaults(func=cmd_retarget)
     return p
