@@ -77,6 +77,40 @@ def test_ours_recovers_an_encoder_offset():
     assert err[list(PICKS)].mean() < 1.0 and max(res.trials_per_point) <= 5
 
 
+ELBOW = ROBOT.arms['right'].joint_names.index('right_arm_joint4')
+
+
+def test_ours_keeps_trials_for_the_expansion_a_lock_needs():
+    # The elbow locked at 0: the designed DOF (and the first stage) leave every point
+    # 140-180 mm away, so the noise-sized steps there gain nothing; at sigma 4 mm they
+    # used to spend all 5 trials of every point before the last stage (121 mm mean on
+    # this seed, every point but one at its stage-0 pose).
+    res, ses, err = explore(NOMINAL, locks={ELBOW: 0.0}, sigma=4.0, seed=1)
+    last = res.free_joints
+    assert res.stage == 2 and len(last) == 6 and max(res.trials_per_point) <= 5
+    early = dict.fromkeys(PICKS, 0)
+    for point, q, _ in ses.log:
+        early[point] += bool(np.allclose(q[[4, 5, 6]], 0.0))   # joints 5-7 not yet free
+    assert max(early.values()) <= 2        # the designed pose, one step of real gain
+    assert err[list(PICKS)].max() < 10.0   # every point reached after the expansion
+
+
+def test_a_refused_step_is_shortened_not_the_end_of_exploration():
+    # On this seed the 6-DOF solution of point 25 is in self-collision by the model:
+    # that trial used to be refused and end the exploration with three points at
+    # 139-165 mm; now the step is shortened (or the point waits) and the others go on.
+    res, ses, err = explore(NOMINAL, locks={ELBOW: 0.0}, sigma=1.0, seed=7)
+    assert res.status != 'refused' and ses.refused == 0
+    assert max(res.trials_per_point) <= 5
+    others = [PICKS.index(p) for p in (0, 50, 75)]
+    assert err[[PICKS[i] for i in others]].max() < 2.0
+    for _, q, _ in ses.log:                  # every commanded pose passed the checks
+        assert CLEARANCE(q[None])[0] >= 5.0
+    hit = ses.robot.current().copy()
+    hit[0] = NOMINAL.upper[0] + 0.1
+    assert 'outside its limits' in ses.problem(hit) and ses.refused == 0
+
+
 def test_annealing_improves_on_the_unadapted_motion():
     truth = true_chain('tool:right_arm_fingertip_joint:50')
     schedule = AnnealingSchedule(trials_per_stage=40, temperature_mm=10.0, step_deg=3.0)

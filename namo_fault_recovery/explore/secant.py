@@ -40,6 +40,7 @@ class SecantOptions:
     secant_move: float = 3.0        # ... and for moves this many times larger than that
     shrink: float = 3.0             # James-Stein factor of the per-point bias
     max_groups: int = 2
+    halvings: int = 3               # a step the safety checks refuse is halved this often
 
 
 class _State:
@@ -69,9 +70,11 @@ def explore_secant(session: TrialSession, task: ExploreTask,
         for k in range(len(task.start)):
             st.record(k, session.trial(st.q[k], task.point_ids[k] if task.point_ids else k))
             st.prev[k] = (st.q[k].copy(), st.meas[k].copy())
-        for stage, free in task.layouts:
+        for i, (stage, free) in enumerate(task.layouts):
             out.stage, out.free = stage, tuple(int(j) for j in free)
-            predicted = _run_stage(session, task, st, np.asarray(free, int), options, out)
+            later = len(task.layouts) - 1 - i
+            predicted = _run_stage(session, task, st, np.asarray(free, int), options, out,
+                                   later)
             if np.max(predicted) <= task.expansion_mm:
                 break
     _keep_best(task, st)
@@ -137,8 +140,33 @@ def _broyden(task, st, k, trial, tip_fn, options):
         st.secant[k] += np.outer(miss, dq) / nrm
 
 
-def _run_stage(session, task, st, free, options, out):
-    """Run rounds at one layout until every point converges; return predicted errors (K,)."""
+def _waiting(task, st, tip_fn, predicted, options, later):
+    """
+    Return which points wait for the next layout instead of a trial at this one (K,).
+
+    Only while a later layout remains: a point the corrected model leaves beyond the
+    expansion threshold even at its new pose will need the expanded DOF, so it keeps
+    its trials for them.  It takes a trial here only if the model predicts the move
+    gains more than the noise of two measurements (3 sigma sqrt 2) and one trial per
+    later layout stays in its budget; otherwise noise-sized steps at a layout that
+    cannot reach would spend the trials the expansion needs.
+    """
+    if not later:
+        return np.zeros(len(st.q), dtype=bool)
+    idx = np.arange(len(st.q))
+    now = np.linalg.norm(tip_fn(st.q, idx) - task.targets, axis=1)
+    gain = now - predicted
+    margin = 3.0 * math.sqrt(2.0) * task.sigma_mm
+    reserve = st.trials >= options.max_trials_per_point - later
+    return (predicted > task.expansion_mm) & ((gain <= margin) | reserve)
+
+
+def _run_stage(session, task, st, free, options, out, later=0):
+    """
+    Run rounds at one layout until every point converges; return predicted errors (K,).
+
+    ``later`` is the number of layouts after this one (see :func:`_waiting`).
+    """
     k = len(task.start)
     done = np.zeros(k, dtype=bool)
     predicted = np.full(k, np.inf)
@@ -152,14 +180,38 @@ def _run_stage(session, task, st, free, options, out):
                                        task.upper, task.start)
         moves = np.degrees(np.abs(q_new - st.q).max(axis=1))
         done |= (moves < options.tol_deg) | (st.trials >= options.max_trials_per_point)
+        done |= _waiting(task, st, tip_fn, predicted, options, later)
         todo = np.flatnonzero(~done)
         if not todo.size:
             out.status = ('budget' if np.any(st.trials >= options.max_trials_per_point)
                           and np.any(moves >= options.tol_deg) else 'converged')
             return predicted
         for p in todo:
-            trial = session.trial(q_new[p], task.point_ids[p] if task.point_ids else p)
+            goal = _safe_step(session, st.q[p], q_new[p], options.halvings)
+            name = task.point_ids[p] if task.point_ids else p
+            if goal is None:
+                done[p] = True
+                out.notes.append(f'point {name}: every step towards the solved pose would be '
+                                 f'refused ({session.problem(q_new[p])}); it waits')
+                continue
+            trial = session.trial(goal, name)
             _broyden(task, st, p, trial, tip_fn, options)
             st.prev[p] = (trial.q.copy(), trial.tip.copy())
-            st.q[p] = q_new[p]
+            st.q[p] = goal
             st.record(p, trial)
+
+
+def _safe_step(session, q_from, q_to, halvings):
+    """
+    Return the longest safe part of the step ``q_from`` -> ``q_to`` (all, 1/2, 1/4, ...).
+
+    The corrected model's solution knows nothing of self-collision: where the whole
+    step would be refused (the pose or the move from where the robot is now), a
+    shorter one in the same direction still learns, and the next round plans again
+    from it.  None when even ``1 / 2 ** halvings`` of it would be refused.
+    """
+    for i in range(halvings + 1):
+        goal = q_from + 0.5 ** i * (q_to - q_from)
+        if not session.problem(goal):
+            return goal
+    return None

@@ -143,6 +143,17 @@ class TrialSession:
     seconds: float = 0.0
     log: list = field(default_factory=list)      # (point id, q commanded, Trial)
 
+    def problem(self, q):
+        """
+        Return why a trial at ``q`` would be refused now, or '' if it is safe.
+
+        Nothing is commanded and nothing is counted: an explorer may shorten a step
+        the checks would refuse instead of ending its exploration on it.
+        """
+        q = np.asarray(q, dtype=float)
+        here = np.asarray(self.robot.current(), dtype=float)
+        return self.safety.problem(here, q, move_duration(here, q, self.robot.velocity))
+
     def trial(self, q, point=-1):
         """Run one trial at ``q`` (rad) for typical point ``point``; return its Trial."""
         if self.should_stop():
