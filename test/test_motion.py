@@ -416,3 +416,21 @@ def test_the_circle_ends_on_the_same_motion_whatever_the_seed(robot, demo_librar
                       clock=Clock(None))['circle'].score_after for seed in (0, 1)]
     assert max(scores) <= 1.01 * min(scores), scores
     assert max(scores) < 17.0, scores
+
+
+def test_a_whole_trajectory_pass_cut_by_the_deadline_says_so(robot, demo_library, monkeypatch):
+    """The circle's pass ran out of time: its status is the deadline's, not 'converged'."""
+    from dataclasses import replace
+    real = motion_module.optimise_motion
+
+    def cut(*args, **kwargs):
+        return replace(real(*args, **kwargs), status='deadline')
+
+    monkeypatch.setattr(motion_module, 'optimise_motion', cut)
+    res = adapt_library(robot, demo_library, {'right_arm_joint1': None}, RecoverySettings(),
+                        clock=Clock(None), seed=0)
+    circle = res['circle']
+    assert circle.method == 'trajectory'
+    assert circle.status == 'deadline' and not res.deadline_met
+    assert 'deadline reached' in circle.message
+    assert res['wai'].status != 'deadline'

@@ -426,6 +426,7 @@ def _whole_trajectory(ctx, m, budget, notes):
                 m.stage, m.free = level, tuple(robot.arms[s].joint_names[j] for s, j in lay)
         m.nfev += out.nfev
         if out.status in ('deadline', 'cancelled'):
+            m.status = out.status       # the motion is what was reached, not converged
             notes.append(f'{m.gesture.name}: the whole-trajectory pass was cut short '
                          f'({out.status}) after {out.nfev} evaluations; the best '
                          f'trajectory so far is used')
