@@ -38,6 +38,25 @@ def fake_result(total, seed=0, locks=None):
                          deadline=None, seed=seed, notes=('a note',))
 
 
+def servable_result(locks, **changes):
+    """Return the reference library with ``locks`` applied: an entry the keeper serves."""
+    from namo_fault_recovery.recovery.result import reference_result
+    names = list(ROBOT.joint_names)
+    gestures = tuple(replace(g, positions=tuple(
+        tuple(locks.get(names[k], a) for k, a in enumerate(q)) for q in g.positions))
+        for g in reference_result(LIBRARY).gestures)
+    return replace(reference_result(LIBRARY), gestures=gestures, locks=dict(locks),
+                   **changes)
+
+
+def wait_for_entries(keeper, count):
+    """Wait (up to 10 s) until ``keeper`` serves ``count`` entries."""
+    for _ in range(200):
+        if keeper.entries == count:
+            return
+        time.sleep(0.05)
+
+
 def test_fingerprint_is_stable_and_ignores_the_deadline_only():
     base = ct.table_fingerprint(ROBOT, LIBRARY, SETTINGS)
     assert len(base) == 64
@@ -301,10 +320,10 @@ def test_a_hit_is_served_within_the_node_deadline_not_the_budget_it_was_built_wi
     table = ct.ContingencyTable(ct.table_fingerprint(ROBOT, LIBRARY, SETTINGS))
     for faults in ct.fault_sets(ROBOT, LIBRARY, SETTINGS):
         locks = ct.table_locks(ROBOT, LIBRARY, faults, SETTINGS)
-        cut = replace(fake_result(20.0, locks=locks), faults=dict(faults), deadline=0.3,
-                      deadline_met=False, success=False, wall_time=0.263,
-                      gestures=(replace(fake_result(20.0).gestures[0], status='deadline',
-                                        wall_time=0.263),))
+        cut = servable_result(locks, faults=dict(faults), deadline=0.3, deadline_met=False,
+                              success=False, wall_time=0.263)
+        cut = replace(cut, gestures=(replace(cut.gestures[0], status='deadline',
+                                             wall_time=0.263),) + cut.gestures[1:])
         table.add(cut)
     path = tmp_path / 'offline.json'
     table.save(path)
@@ -313,10 +332,7 @@ def test_a_hit_is_served_within_the_node_deadline_not_the_budget_it_was_built_wi
                                offline_file=str(path))
     try:
         keeper.configure(SETTINGS)
-        for _ in range(200):
-            if keeper.entries == len(table):
-                break
-            time.sleep(0.05)
+        wait_for_entries(keeper, len(table))
         hit = keeper.lookup({'right_arm_joint2': None}, SETTINGS)
     finally:
         keeper.stop()
@@ -324,6 +340,37 @@ def test_a_hit_is_served_within_the_node_deadline_not_the_budget_it_was_built_wi
     assert (hit.origin, hit.deadline, hit.deadline_met, hit.success) == ('table', 1.0, True, True)
     assert hit.wall_time == 0.263 and hit.gestures[0].status == 'deadline'   # its search kept
     text = summary(hit)
-    assert text.startswith('reconfigured 1/1 gestures from a search of 0.263 s made in '
+    assert text.startswith(f'reconfigured {len(LIBRARY)}/{len(LIBRARY)} gestures from a search '
+                           f'of 0.263 s made in '
                            'advance (deadline 1.000 s met) for right_arm_joint2'), text
     assert 'MISSED' not in text and 'from the contingency table' in text, text
+
+
+def test_an_entry_is_checked_and_prepared_as_it_joins_a_failing_one_is_not_served(tmp_path):
+    """A hit needs no check of its own: an entry that fails check_result is never served."""
+    from namo_fault_recovery.runtime.contingency_keeper import ContingencyKeeper
+    table = ct.ContingencyTable(ct.table_fingerprint(ROBOT, LIBRARY, SETTINGS))
+    plan = ct.fault_sets(ROBOT, LIBRARY, SETTINGS)
+    for faults in plan:
+        locks = ct.table_locks(ROBOT, LIBRARY, faults, SETTINGS)
+        table.add(servable_result(locks, faults=dict(faults)))
+    bad = next(f for f in plan if 'right_arm_joint2' in f)
+    locks = ct.table_locks(ROBOT, LIBRARY, bad, SETTINGS)
+    table.add(replace(servable_result(locks), locks={'right_arm_joint2': locks[
+        'right_arm_joint2'] + 0.1}), locks)         # published angle not its lock angle
+    path = tmp_path / 'offline.json'
+    table.save(path)
+    logs, prepared = [], []
+    keeper = ContingencyKeeper(ROBOT, LIBRARY, tmp_path / 'state', lambda *a: logs.append(a),
+                               offline_file=str(path), prepare=prepared.append)
+    try:
+        keeper.configure(SETTINGS)
+        wait_for_entries(keeper, len(table) - 1)
+        served = keeper.lookup(bad, SETTINGS)    # None, or the builder's entry by now
+        hit = keeper.lookup(next(f for f in plan if f is not bad), SETTINGS)
+    finally:
+        keeper.stop()
+    assert served is None or served.locks == locks
+    assert hit is not None and any(p.gestures is hit.gestures for p in prepared)
+    assert len(prepared) >= len(table) - 1
+    assert any('not served' in text and 'right_arm_joint2' in text for _, text in logs), logs

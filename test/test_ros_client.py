@@ -9,6 +9,7 @@ options of the ROS commands (``--namespace`` before or after the command) are ch
 on the real parser.
 """
 
+from dataclasses import replace
 import io
 import math
 
@@ -20,7 +21,7 @@ from namo_fault_recovery.ros.client import (BadNamespace, Inbox, node_diagnostic
                                             normalise_namespace, rebuild_library,
                                             TriggerAnswer)
 from namo_fault_recovery.ros.diagnostics import Snapshot, statuses
-from namo_fault_recovery.ros.messages import library_to_msgs
+from namo_fault_recovery.ros.messages import library_to_msgs, PreparedMessages
 from namo_fault_recovery.runtime import diagnostic_keys as keys
 from namo_fault_recovery.runtime.state_store import Fault
 import pytest
@@ -50,6 +51,24 @@ def _statuses(robot, prefix, result, stamp=STAMP, pending=False, reported=None):
 def _msgs(robot, result, stamp=STAMP):
     header = Time(sec=stamp // 1_000_000_000, nanosec=stamp % 1_000_000_000)
     return {m.header.frame_id: m for m in library_to_msgs(robot.joint_names, result, header)}
+
+
+def test_prepared_messages_are_the_conversion_stamped_at_each_publication(robot, result):
+    """A version prepared in advance (a table entry) goes out as converted at once."""
+    prepared = PreparedMessages(robot.joint_names, limit=2)
+    prepared.prepare(result)
+    hit = replace(result, origin='table', deadline_met=True)     # the entry, served
+    for stamp in (STAMP, STAMP + 1):
+        header = Time(sec=stamp // 1_000_000_000, nanosec=stamp % 1_000_000_000)
+        msgs = prepared.messages(hit, header)
+        assert msgs == library_to_msgs(robot.joint_names, result, header)
+    assert prepared.messages(hit, header) is msgs                # reused, not converted
+    other = replace(result, gestures=tuple(g for g in result.gestures))   # equal, not the entry's
+    assert prepared.messages(other, header) is not msgs
+    assert prepared.messages(other, header) == msgs
+    for _ in range(2):                                           # the oldest is dropped
+        prepared.prepare(replace(result, gestures=tuple(g for g in result.gestures)))
+    assert prepared.messages(hit, header) is not msgs
 
 
 def test_a_library_comes_back_as_the_engine_result(robot, result):

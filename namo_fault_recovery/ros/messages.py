@@ -6,9 +6,11 @@ skeleton markers, and the ``diagnostic_msgs`` statuses.  Only the node and the R
 command line import this module; the numerical core stays free of ROS.
 """
 
+from collections import OrderedDict
 import math
+import threading
 
-from builtin_interfaces.msg import Duration
+from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point
 import numpy as np
@@ -51,6 +53,45 @@ def library_to_msgs(joint_names, result, stamp):
                                                    time_from_start=duration_msg(t)))
         msgs.append(msg)
     return msgs
+
+
+class PreparedMessages:
+    """
+    The messages of library versions converted in advance: a table hit only publishes.
+
+    :meth:`prepare` (the contingency table's entries, as they join it, in the table's
+    own threads) converts a result's gestures once; :meth:`messages` returns them with
+    the header stamp of this publication, matched by the very ``gestures`` tuple (a hit
+    is the entry's result with other fields replaced), else converts at once.  The
+    messages returned are reused: publish them before the next call (the node publishes
+    under its run book's lock, one version at a time).  At most ``limit`` versions are
+    kept, the oldest prepared dropped first.
+    """
+
+    def __init__(self, joint_names, limit=1024):
+        self._joint_names = tuple(joint_names)
+        self._limit = limit
+        self._lock = threading.Lock()
+        self._prepared = OrderedDict()     # id(gestures) -> (gestures, [JointTrajectory])
+
+    def prepare(self, result):
+        """Convert ``result``'s gestures now, for a later :meth:`messages` (thread-safe)."""
+        msgs = library_to_msgs(self._joint_names, result, Time())
+        with self._lock:
+            self._prepared[id(result.gestures)] = (result.gestures, msgs)
+            self._prepared.move_to_end(id(result.gestures))
+            while len(self._prepared) > self._limit:
+                self._prepared.popitem(last=False)
+
+    def messages(self, result, stamp):
+        """Return one JointTrajectory per gesture of ``result``, stamped ``stamp``."""
+        with self._lock:
+            found = self._prepared.get(id(result.gestures))
+        if found is None or found[0] is not result.gestures:
+            return library_to_msgs(self._joint_names, result, stamp)
+        for msg in found[1]:
+            msg.header.stamp = stamp
+        return found[1]
 
 
 def stamp_key(stamp):

@@ -153,9 +153,10 @@ class RecoveryNode(Node):
                                   self._library, self._book, self.get_logger().error)
         self._intake = FaultIntake(self._book, self._state.commit_faults, self._on_accepted,
                                    self._inputs.measured, on_error=self._intake_error)
+        self._prepared = conv.PreparedMessages(self._robot.joint_names)
         self._table = ContingencyKeeper(self._robot, self._library, self._state.store.directory,
                                         self._log, values['contingency_file'] or None,
-                                        hold=self._intake.busy)
+                                        hold=self._intake.busy, prepare=self._prepared.prepare)
         self._dispatcher = Dispatcher(self._book, self._engine, self._robot, self._library,
                                       lambda: self._config, self._publish_and_persist,
                                       self._log, self._publish_refined, self._table)
@@ -358,7 +359,7 @@ class RecoveryNode(Node):
         stamp_ns = max(self.get_clock().now().nanoseconds, self._last_stamp_ns + 1)
         self._last_stamp_ns = stamp_ns
         stamp = Time(nanoseconds=stamp_ns).to_msg()
-        for msg in conv.library_to_msgs(self._robot.joint_names, result, stamp):
+        for msg in self._prepared.messages(result, stamp):     # a table hit's: ready
             self._library_pub.publish(msg)
         self._tick.change()
         self._markers.submit(result, stamp)        # drawn a moment later, off this path

@@ -14,7 +14,11 @@ is at that priority too), and stopped (``SIGSTOP``) while a live run computes, o
 armed its death signal (a live run that began before is stopped then), so that it never
 competes with one.  Each entry arrives over a pipe, joins the table, and the
 table file is rewritten atomically.  :meth:`ContingencyKeeper.lookup` is a dictionary
-look-up: a hit is published at once.  A new plan (after each publication) waits
+look-up: a hit is published at once.  Its work is done when an entry joins the table
+(loaded or built), off the fault's path: the entry is checked there
+(:func:`~.restore.check_result`, an entry that fails it is dropped, so a hit needs no
+check of its own), and ``prepare(result)``, given by the node, converts it to its
+messages in advance.  A new plan (after each publication) waits
 ``HOLD_POLL`` s, and longer while ``hold()`` says a fault is being handled: planning and
 starting a builder process hold the interpreter lock for milliseconds, which a fault's
 intake and publication need more.
@@ -29,6 +33,7 @@ import threading
 import time
 
 from .engine_process import die_with_parent
+from .restore import check_result
 from ..recovery.contingency import (ContingencyTable, entry_key, fault_sets, measure_entry,
                                     table_fingerprint, table_locks)
 from ..recovery.motion import typical_points
@@ -59,8 +64,9 @@ class ContingencyKeeper:
     """The table of one node: lookup, background build, persistence."""
 
     def __init__(self, robot, library, state_dir, log, offline_file=None, seeds=BUILD_SEEDS,
-                 hold=lambda: False):
+                 hold=lambda: False, prepare=None):
         self._hold = hold                     # hold() true: plan later (a fault is handled)
+        self._prepare = prepare               # prepare(result): an entry joined the table
         self._robot = robot
         self._library = library
         self._path = os.path.join(os.path.expanduser(str(state_dir)), TABLE_FILE)
@@ -89,6 +95,8 @@ class ContingencyKeeper:
         """
         Return the table's library for ``faults`` (origin ``table``), or None.
 
+        A library returned passed :func:`~.restore.check_result` for its fault set when
+        its entry joined the table (the robot and the library do not change).
         The hit is served now, within the node's deadline (``settings.deadline_sec``):
         that is its deadline, met.  The search that made the entry in advance keeps its
         own time and statuses (the library's ``wall_time``, each gesture's), so an
@@ -157,10 +165,11 @@ class ContingencyKeeper:
     def _apply(self, settings, active):
         fingerprint = self._fingerprint(settings)
         with self._lock:
-            if self._table is None or self._table.fingerprint != fingerprint:
-                self._table = self._load(fingerprint)
-                self._plan_keys = ()
             table = self._table
+        if table is None or table.fingerprint != fingerprint:
+            table = self._load(fingerprint)          # checked and prepared, off the lock
+            with self._lock:
+                self._table, self._plan_keys = table, ()
         try:
             plan = fault_sets(self._robot, self._library, settings, active=active)
         except ValueError as exc:
@@ -199,7 +208,21 @@ class ContingencyKeeper:
                                   f'{self._offline}')
             else:
                 self._log('warning', why)
+        for key, (locks, result) in list(table.entries.items()):
+            if not self._admit(locks, result):
+                del table.entries[key]
         return table
+
+    def _admit(self, locks, result):
+        """Return True if an entry may be served (checked, then prepared); log why not."""
+        problem = check_result(self._robot, self._library, result, locks)
+        if problem:
+            self._log('warning', f'contingency table: the entry for {sorted(locks)} is not '
+                                 f'served: {problem}')
+            return False
+        if self._prepare is not None:
+            self._prepare(result)
+        return True
 
     def _start_builder(self, settings, plan):
         parent, child = self._ctx.Pipe()
@@ -249,10 +272,12 @@ class ContingencyKeeper:
                                   f'{time.monotonic() - began:.1f} s ({cpu:.1f} s of CPU in '
                                   f'the builder process, {cpu_total:.1f} s of it searching)')
                 return
+            admitted = self._admit(locks or result.locks, result)
             with self._lock:
                 if self._proc is not proc or self._table is None:
                     return
-                self._table.add(result, locks)
+                if admitted:
+                    self._table.add(result, locks)
                 cpu_total += cpu
                 table = self._table
             built += 1

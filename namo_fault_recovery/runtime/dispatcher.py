@@ -9,7 +9,9 @@ writes it to the state file, off this path).  Publishing is a callable given by 
 A run with no structure change (no fault, no tool, no correction learned on the robot)
 needs no engine: the reference library is published at once.  With a learned correction
 (the run's ``learned``) the engine searches on the corrected model and the contingency
-table, computed on the nominal one, is not consulted.
+table, computed on the nominal one, is not consulted.  A table hit was checked when its
+entry joined the table (:mod:`.contingency_keeper`): it is published without a check of
+its own, so that the fault's path is the durable write and the messages alone.
 """
 
 from dataclasses import replace
@@ -74,6 +76,7 @@ class Dispatcher:
         config = self._config()
         settings = config.settings
         faults = {j: f.angle for j, f in run.faults.items()}
+        checked = False                           # a table hit: checked in advance
         if not structure_changed(faults, settings) and not run.learned:
             # No structure change: the engine returns the reference library at once.
             result = recover(self._robot, self._library, faults, settings, seed=config.seed)
@@ -81,6 +84,7 @@ class Dispatcher:
             measured = {j: f.measured for j, f in run.faults.items() if f.measured is not None}
             # The table was computed on the nominal model: not for a corrected arm.
             result = None if run.learned else self._lookup(faults, settings, measured, config)
+            checked = result is not None
             if result is None:
                 if self._table is not None:
                     self._table.pause()            # the live run gets the CPU
@@ -97,7 +101,8 @@ class Dispatcher:
         in_hand = time.monotonic()
         if not self._book.is_current(run.generation):
             return                                # superseded: a newer run answers
-        problem = check_result(self._robot, self._library, result, run.faults)
+        problem = None if checked else check_result(self._robot, self._library, result,
+                                                    run.faults)
         if problem:
             self._fail(run, problem)
             return
