@@ -10,8 +10,8 @@ the margin covers that.
 
 import numpy as np
 
-from ..model.kinematics import forward_kinematics
-from ..model.robot import ARMS, N_JOINTS
+from ..model.kinematics import forward_kinematics, split_arms
+from ..model.robot import ARMS
 from ..model.self_contact import pair_distances, PAIRS, radius_sums
 
 
@@ -19,11 +19,10 @@ def capsule_clearance(robot, side, held):
     """
     Return ``clearance(q)``: (N, n) poses of ``side`` -> (N,) smallest clearance (mm).
 
-    ``held`` (14,) rad is the whole robot's pose; the other arm stays at its part of it.
+    ``held`` (2n,) rad is the whole robot's pose; the other arm stays at its part of it.
     """
-    held = np.asarray(held, dtype=float)
     other = [s for s in ARMS if s != side][0]
-    rest = held[:N_JOINTS] if other == 'right' else held[N_JOINTS:]
+    rest = split_arms(robot, held)[ARMS.index(other)]
     mine = np.array([side in (a, b) for a, _, b, _ in PAIRS])
     sums = radius_sums(robot.capsules)[mine]
 

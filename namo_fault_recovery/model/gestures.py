@@ -40,7 +40,7 @@ class Keyframe:
         return self.right if side == 'right' else self.left
 
     def positions(self) -> np.ndarray:
-        """All 14 angles, right arm first (the order of RobotModel.joint_names)."""
+        """All 2n angles (14 on Namo), right arm first (the order of RobotModel.joint_names)."""
         return np.concatenate((self.right, self.left))
 
 
@@ -73,7 +73,7 @@ class Gesture:
         return np.array([kf.time_from_start for kf in self.keyframes])
 
     def joint_matrix(self) -> np.ndarray:
-        """Return every keyframe's 14 joint angles (rad) stacked, right arm first: (T, 14)."""
+        """Return every keyframe's 2n joint angles (rad) stacked, right arm first: (T, 2n)."""
         return np.array([kf.positions() for kf in self.keyframes])
 
     def with_keyframes(self, keyframes: Iterable[Keyframe]) -> 'Gesture':
@@ -131,7 +131,7 @@ class GestureLibrary:
 
 
 def _arm_angles(value, side, robot, scale, file, key, right_angles):
-    """Parse one arm of a keyframe: a list of 7 angles, a joint->angle map or 'mirror'."""
+    """Parse one arm of a keyframe: a list of its n angles, a joint->angle map or 'mirror'."""
     if value == 'mirror':
         if side != 'left' or right_angles is None:
             raise ConfigError(file, key, "'mirror' is only valid for the left arm")

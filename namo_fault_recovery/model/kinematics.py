@@ -1,9 +1,10 @@
 """
 Batched forward kinematics of Namo's arms (modified DH), free of ROS.
 
-Every function takes joint angles of shape ``(..., 7)`` in radians and evaluates all
-leading configurations in one vectorised pass: there is no Python loop over them, only
-over the 7 links of the chain.  Positions are in millimetres in the robot's base frame.
+Every function takes joint angles of shape ``(..., n)`` in radians (n joints per arm: 7
+on Namo) and evaluates all leading configurations in one vectorised pass: there is no
+Python loop over them, only over the links of the chain.  Positions are in millimetres
+in the robot's base frame.
 """
 
 from typing import NamedTuple
@@ -30,6 +31,19 @@ def arm_joint_count(robot) -> int:
     """Return the number of joints per arm: 7 on Namo, the profile's on a URDF robot."""
     chains = getattr(robot, 'chains', None)
     return N_JOINTS if chains is None else len(robot.arms['right'].joint_names)
+
+
+def split_arms(robot, q) -> tuple:
+    """
+    Return the (right, left) columns of whole-robot angles ``q`` (..., 2n), right arm first.
+
+    ``n`` is :func:`arm_joint_count` (7 on Namo); both are views of ``q`` as an array.
+    """
+    q = np.asarray(q, dtype=float)
+    n = arm_joint_count(robot)
+    if q.ndim == 0 or q.shape[-1] != 2 * n:
+        raise ValueError(f"expected both arms' angles, shape (..., {2 * n}), got {q.shape}")
+    return q[..., :n], q[..., n:]
 
 
 def as_joint_array(q, name='q', n_joints=N_JOINTS):
@@ -168,15 +182,15 @@ def shoulder_position(robot, arm='right'):
 
 
 class ArmJacobian(NamedTuple):
-    """Derivatives of one arm's landmarks with respect to its 7 joint angles."""
+    """Derivatives of one arm's landmarks with respect to its n joint angles."""
 
-    positions: np.ndarray   # (N, 3, 7, 3): d(elbow, wrist, tip) / dq_i
-    axes: np.ndarray        # (N, 7, 3): angular velocity of the palm per unit dq_i
+    positions: np.ndarray   # (N, 3, n, 3): d(elbow, wrist, tip) / dq_i
+    axes: np.ndarray        # (N, n, 3): angular velocity of the palm per unit dq_i
 
 
 def forward_kinematics_jacobian(robot, q, arm='right'):
     """
-    Return ``(landmarks, jacobian)`` for angles q (N, 7) in one vectorised pass.
+    Return ``(landmarks, jacobian)`` for angles q (N, n) in one vectorised pass.
 
     For a revolute joint i with axis z_i through o_i, a point p downstream moves as
     ``z_i x (p - o_i)`` and the palm rotates about z_i.  For the mirrored left arm the

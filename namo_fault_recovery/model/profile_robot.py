@@ -37,7 +37,7 @@ from .robot_profile import load_profile, MM_PER_M, RobotProfile
 from ..errors import ConfigError
 
 # The joint counts per arm that the engine takes from a profile robot today.
-ENGINE_ARM_JOINTS = (7, 7)
+ENGINE_ARM_JOINTS = (5, 8)
 
 
 @dataclass(frozen=True)

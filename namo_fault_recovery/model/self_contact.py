@@ -33,7 +33,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .kinematics import forward_kinematics, shoulder_position
+from .kinematics import forward_kinematics, shoulder_position, split_arms
 
 SEGMENTS = ('upper_arm', 'forearm', 'hand')
 # Pairs checked: each arm segment against the torso, and every right-left segment pair.
@@ -120,10 +120,10 @@ def pair_distances(robot, lm_right, lm_left):
 
 
 def penetrations(robot, q14):
-    """Return how deep (mm, >= 0) every pair interpenetrates at poses ``q14`` (N, 14) rad."""
-    q14 = np.atleast_2d(np.asarray(q14, dtype=float))
-    d = pair_distances(robot, forward_kinematics(robot, q14[:, :7], 'right'),
-                       forward_kinematics(robot, q14[:, 7:], 'left'))[0]
+    """Return how deep (mm, >= 0) every pair interpenetrates at poses ``q14`` (N, 2n) rad."""
+    right, left = split_arms(robot, np.atleast_2d(np.asarray(q14, dtype=float)))
+    d = pair_distances(robot, forward_kinematics(robot, right, 'right'),
+                       forward_kinematics(robot, left, 'left'))[0]
     return np.maximum(radius_sums(robot.capsules)[None, :] - d, 0.0)
 
 
@@ -185,7 +185,7 @@ class ReferenceContact(NamedTuple):
 
 def undesigned_depth(robot, reference, poses) -> float:
     """
-    Return how deep (mm, >= 0) poses (N, 14) press any pair beyond ``reference``'s design.
+    Return how deep (mm, >= 0) poses (N, 2n) press any pair beyond ``reference``'s design.
 
     A played motion is checked along its whole path, not only at its keyframes: a
     two-handed gesture's designed pairs may go as deep as its reference keyframes do

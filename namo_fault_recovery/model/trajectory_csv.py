@@ -1,8 +1,8 @@
 """
-Dense recorded trajectories: a CSV of ``time, 14 joint angles``, validated on load.
+Dense recorded trajectories: a CSV of ``time, 2n joint angles``, validated on load.
 
 The file has one row per sample: the time from the start of the gesture (s), then the
-angles of all 14 arm joints in the robot's joint order (right arm first).  An optional
+angles of all arm joints (14 on Namo) in the robot's joint order (right arm first).  An optional
 header row names the columns: ``time`` and the joint names, in any order, which then
 map the columns.  Lines starting with ``#`` are comments.  Every error names the file,
 the line and the column, as a ConfigError does for YAML.
@@ -19,7 +19,7 @@ from ..errors import ConfigError
 
 def load_trajectory_csv(path, robot, scale):
     """
-    Read a trajectory CSV; return ``(times (T,), angles (T, 14) in rad)``.
+    Read a trajectory CSV; return ``(times (T,), angles (T, 2n) in rad)``.
 
     ``scale`` converts the file's angle unit to radians.  Times must be non-negative and
     strictly increasing, and every angle finite and within the joint's limits.

@@ -137,12 +137,12 @@ class SimilarityScore:
         """
         Score candidates; return totals (N,) and, with ``breakdown``, the components.
 
-        ``q_right`` and ``q_left`` have shape (N, 7) or (7,) (broadcast); ``q_left=None``
-        uses each target's reference left arm.  Instead of angles, an arm that does not
-        move may be given as per-target ArmLandmarks (leading shape (n_targets,)), which
-        saves its forward kinematics.  ``target`` is an int or an (N,) array of target
-        indices.  The breakdown is a dict of (N,) arrays keyed by COMPONENTS, plus the
-        per-arm parts under ``'right'`` and ``'left'`` as (N, 4) arrays.
+        ``q_right`` and ``q_left`` have shape (N, n) or (n,) (broadcast), n joints per
+        arm; ``q_left=None`` uses each target's reference left arm.  Instead of angles,
+        an arm that does not move may be given as per-target ArmLandmarks (leading shape
+        (n_targets,)), which saves its forward kinematics.  ``target`` is an int or an
+        (N,) array of target indices.  The breakdown is a dict of (N,) arrays keyed by
+        COMPONENTS, plus the per-arm parts under ``'right'`` and ``'left'`` as (N, 4) arrays.
         """
         target = np.asarray(target, dtype=int)
         if target.ndim > 1 or np.any(target < 0) or np.any(target >= len(self.targets)):
@@ -174,7 +174,7 @@ class SimilarityScore:
         """
         Score without input checks: the hot path of the optimisers.
 
-        ``q_right``/``q_left`` are (N, 7) angle arrays, or ArmLandmarks already computed
+        ``q_right``/``q_left`` are (N, n) angle arrays, or ArmLandmarks already computed
         for each of the N rows, or None for the left arm's reference; ``target`` is an
         (N,) index array.
         """
@@ -213,7 +213,7 @@ class SimilarityScore:
     def value_and_grad(self, q_right, q_left, target: np.ndarray,
                        smooth: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """
-        Return totals (N,) and their gradients (N, 7) with respect to each arm's angles.
+        Return totals (N,) and their gradients (N, n) with respect to each arm's angles.
 
         Arguments as for :meth:`evaluate`, and an arm may also be given as a pair
         ``(ArmLandmarks, ArmJacobian)`` computed by the caller; an arm given as landmarks

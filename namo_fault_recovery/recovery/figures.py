@@ -15,8 +15,8 @@ import numpy as np
 
 from . import pacing
 from .result import GestureResult
-from ..model.kinematics import batch_forward
-from ..model.robot import ARMS, N_JOINTS
+from ..model.kinematics import arm_joint_count, batch_forward, split_arms
+from ..model.robot import ARMS
 from ..objective.collision import CollisionModel
 from ..objective.score import gesture_targets
 
@@ -27,9 +27,10 @@ LABELS = {'kriging': '{k} typical points + Kriging',
 COLLIDES_WARNING = 'WARNING: the pose still collides'
 
 
-def columns(side):
-    """Return the columns of ``side``'s joints in a (T, 14) motion."""
-    return slice(0, N_JOINTS) if side == 'right' else slice(N_JOINTS, 2 * N_JOINTS)
+def columns(robot, side):
+    """Return the columns of ``side``'s joints in a (T, 2n) motion, n joints per arm."""
+    n = arm_joint_count(robot)
+    return slice(0, n) if side == 'right' else slice(n, 2 * n)
 
 
 def largest_jump(q):
@@ -43,7 +44,7 @@ def tip_errors(robot, model, gesture, design, q_r, q_l):
     """Return per point the fingertip distance (mm) to the design, the larger hand's."""
     err = np.zeros(len(design))
     for side in gesture.arms:
-        want = batch_forward(robot, design[:, columns(side)], side).tip
+        want = batch_forward(robot, design[:, columns(robot, side)], side).tip
         q = q_r if side == 'right' else q_l
         err = np.maximum(err, np.linalg.norm(batch_forward(model, q, side).tip - want, axis=1))
     return err
@@ -110,7 +111,7 @@ def describe_motion(ctx, motion, picks) -> GestureResult:
 
 
 def motion_speed_ratio(robot, gesture, q):
-    """Return :func:`.pacing.speed_ratio` of angles ``q`` (K, 14) at ``gesture``'s times."""
+    """Return :func:`.pacing.speed_ratio` of angles ``q`` (K, 2n) at ``gesture``'s times."""
     return pacing.speed_ratio(robot.velocity_limits,
                               [kf.time_from_start for kf in gesture.keyframes], q)
 
@@ -159,8 +160,9 @@ def no_worse_than_locked(robot, gesture, result, locks, settings) -> GestureResu
 def contact(model, checker, positions):
     """Return (any point collides, total penetration in mm, the pairs that touch)."""
     q = np.array(positions, dtype=float)
-    lm_r = batch_forward(model, q[:, :N_JOINTS], 'right')
-    lm_l = batch_forward(model, q[:, N_JOINTS:], 'left')
+    q_r, q_l = split_arms(model, q)
+    lm_r = batch_forward(model, q_r, 'right')
+    lm_l = batch_forward(model, q_l, 'left')
     rows = np.arange(len(q))
     collides = bool(np.any(checker.collides(lm_r, lm_l, rows)))
     pen = float(checker.penetration(lm_r, lm_l, rows).sum())

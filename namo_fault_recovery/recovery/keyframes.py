@@ -32,8 +32,9 @@ from .budget import ENGINE_RESERVE, STAGE1_SHARE
 from .figures import COLLIDES_WARNING, largest_jump
 from .locks import clamp_lock, resolve_locks
 from .result import GestureResult, LibraryResult
-from ..model.kinematics import ArmLandmarks, batch_forward, batch_forward_jacobian, take_landmarks
-from ..model.robot import ARMS, N_JOINTS
+from ..model.kinematics import (arm_joint_count, ArmLandmarks, batch_forward,
+                                batch_forward_jacobian, split_arms, take_landmarks)
+from ..model.robot import ARMS
 from ..objective.collision import CollisionModel
 from ..objective.score import gesture_targets, SimilarityScore
 from ..optimize import make_algorithm, minimize, Problem, STATUS_CANCELLED, STATUS_DEADLINE
@@ -80,7 +81,7 @@ class PoseProblem(Problem):
     """
     The free joints of some arms, for a batch of targets, scored against each target.
 
-    ``base`` is the pair (right, left) of (B, 7) starting poses (reference angles with
+    ``base`` is the pair (right, left) of (B, n) starting poses (reference angles with
     failed joints at their locks); ``free`` is a tuple of ``(arm, joint index)`` giving
     the variables.  With a ``collision`` model the capsule penalty is added to the score.
     ``smooth`` (mm or deg) rounds the kinks of the score for the gradient-based polish.
@@ -127,7 +128,7 @@ class PoseProblem(Problem):
         return sub
 
     def assemble(self, x):
-        """Return full (right, left) angles of shape (..., 7) for variables x (B, ..., D)."""
+        """Return full (right, left) angles of shape (..., n) for variables x (B, ..., D)."""
         x = np.asarray(x, dtype=float)
         extra = x.ndim - 2
         out = {}
@@ -406,7 +407,7 @@ def _share_branches(problem, x, f, motions, designed, clock, maxiter, ftol):
 def free_layout(robot, arms_used, locked, moving, allowed=None):
     """Free variables: unlocked joints of moving arms used (and ``allowed``, if given)."""
     return tuple((s, j) for s in ARMS if s in moving and s in arms_used
-                 for j in range(N_JOINTS) if j not in locked[s]
+                 for j in range(arm_joint_count(robot)) if j not in locked[s]
                  and (allowed is None or (s, j) in allowed))
 
 
@@ -521,7 +522,8 @@ class _Setup:
                         if any(robot.locate_joint(j)[0] == side for j in locks)
                         or robot.changed(side)}
         self.locked = locked_sets(robot, locks)
-        self.frozen = tuple(side for side in ARMS if len(self.locked[side]) == N_JOINTS)
+        n_joints = arm_joint_count(robot)
+        self.frozen = tuple(side for side in ARMS if len(self.locked[side]) == n_joints)
         for side in self.frozen:
             self.notes.append(f'all joints of the {side} arm failed: it is frozen at its '
                               f'lock angles')
@@ -637,24 +639,30 @@ def _run(setup, lock_sets, rng, clock, stats):
 
 def pose_values(robot, scorer, checker, q, ids):
     """
-    Return the search's value of poses ``q`` (..., 14) for targets ``ids`` (...,).
+    Return the search's value of poses ``q`` (..., 2n) for targets ``ids`` (...,).
 
     The similarity score, plus the capsule penalty with a collision ``checker``: what
     the keyframe search minimises, without its ``stay_close`` pull.
     """
     shape = q.shape[:-1]
-    q = q.reshape(-1, 2 * N_JOINTS)
+    q_r, q_l = split_arms(robot, q.reshape(-1, q.shape[-1]))
     ids = np.broadcast_to(ids, shape).reshape(-1)
-    lm_r = batch_forward(robot, q[:, :N_JOINTS], 'right')
-    lm_l = batch_forward(robot, q[:, N_JOINTS:], 'left')
+    lm_r = batch_forward(robot, q_r, 'right')
+    lm_l = batch_forward(robot, q_l, 'left')
     f = scorer.evaluate(lm_r, lm_l, ids)
     if checker is not None:
         f = f + checker.penalty(lm_r, lm_l, ids)[0]
     return f.reshape(shape)
 
 
+def layout_columns(robot, layout) -> np.ndarray:
+    """Return the columns of a free ``layout``'s (side, joint) pairs in both arms' angles."""
+    n = arm_joint_count(robot)
+    return np.array([j + (0 if s == 'right' else n) for s, j in layout], dtype=int)
+
+
 def joint_bounds(robot):
-    """Return the (lower, upper) joint limits of both arms, (14,) each, right arm first."""
+    """Return the (lower, upper) joint limits of both arms, (2n,) each, right arm first."""
     return (np.concatenate([robot.arms[s].lower for s in ARMS]),
             np.concatenate([robot.arms[s].upper for s in ARMS]))
 
@@ -697,7 +705,7 @@ def _pace(setup, rows, clock, rng):
         best, _ = pacing.repair(q, base, limits, lower, upper,
                                 lambda c: pose_values(robot, scorer, checker, c, ids),
                                 extra=extra)
-        rows.right[ks], rows.left[ks] = best[:, :N_JOINTS], best[:, N_JOINTS:]
+        rows.right[ks], rows.left[ks] = split_arms(robot, best)
         rows.paced[ks] = True
         repaired.append((owner, ks, pacing.tube(best, limits, lower, upper)))
     if repaired and not clock.expired():
@@ -724,7 +732,7 @@ def _motion_problem(setup, rows, ks, free):
     ids = rows.ids[ks]
     anchor = None
     if setup.stay_close:
-        col = [j + (0 if s == 'right' else N_JOINTS) for s, j in free]
+        col = layout_columns(setup.robot, free)
         anchor = np.concatenate((setup.ref_r[ids], setup.ref_l[ids]), axis=1)[:, col]
     return PoseProblem(setup.robot, setup.scorer, ids, (rows.right[ks], rows.left[ks]), free,
                        collision=setup.checker, anchor=anchor, continuity=setup.stay_close)
@@ -734,7 +742,7 @@ def _within_reach(setup, rows, owner, ks, motion, clock, rng):
     """
     Search every other keyframe again within its neighbours' reach; return the motions.
 
-    ``motion`` is (q (K, 14), step limits, lower, upper).  For each parity, the
+    ``motion`` is (q (K, 2n), step limits, lower, upper).  For each parity, the
     keyframes of that parity are searched again by the run's algorithm, each within the
     box its two kept neighbours allow (:func:`.pacing.reach_boxes`, the problem's
     bounds): a keyframe flipped into another branch finds the best pose its neighbours
@@ -742,7 +750,7 @@ def _within_reach(setup, rows, owner, ks, motion, clock, rng):
     """
     q, limits, lower, upper = motion
     free = _motion_layout(setup, rows, owner, ks)
-    col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in free])
+    col = layout_columns(setup.robot, free)
     out = []
     for parity in (0, 1):
         boxes = pacing.reach_boxes(q, limits, lower, upper, parity)
@@ -771,9 +779,9 @@ def _within_reach(setup, rows, owner, ks, motion, clock, rng):
 
 def _branch_restarts(setup, rows, owner, ks, starts, clock):
     """
-    Polish a motion's keyframes from each feasible start; return the motions (N, K, 14).
+    Polish a motion's keyframes from each feasible start; return the motions (N, K, 2n).
 
-    Every start (N, K, 14) puts the whole motion in one branch (e.g. the design carried
+    Every start (N, K, 2n) puts the whole motion in one branch (e.g. the design carried
     through one solved keyframe); polishing each of its keyframes freely keeps them in
     that branch, so the polished motion is usually feasible, and a much better one than
     the start (the caller clips it into reach).  All starts of all keyframes are one
@@ -782,7 +790,7 @@ def _branch_restarts(setup, rows, owner, ks, starts, clock):
     free = _motion_layout(setup, rows, owner, ks)
     if not free:
         return ()
-    col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in free])
+    col = layout_columns(setup.robot, free)
     problem = _motion_problem(setup, rows, ks, free)
     x, _ = polish(problem, problem.clip(np.swapaxes(starts[:, :, col], 0, 1)), clock,
                   maxiter=RESTART_MAXITER, ftol=getattr(setup.algo, 'polish_ftol', 1e-7))
@@ -802,7 +810,7 @@ def _polish_in_tubes(setup, rows, repaired, clock):
             groups.setdefault(free, []).append((ks, low, high))
     for free, members in groups.items():
         ks = np.concatenate([m[0] for m in members])
-        col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in free])
+        col = layout_columns(setup.robot, free)
         problem = _motion_problem(setup, rows, ks, free)
         problem.restrict(np.concatenate([m[1] for m in members])[:, col],
                          np.concatenate([m[2] for m in members])[:, col])

@@ -36,9 +36,9 @@ from . import keyframes as keyframe_search
 from . import pacing
 from .budget import FINISH_RESERVE, PUBLISH_RESERVE, TYPICAL_SHARE, VQ_SHARE
 from .figures import columns, describe_motion, no_worse_than_locked
-from .keyframes import (apply_locks, free_layout, joint_bounds, joint_set, locked_sets,
-                        PACED_NOTE, pose_values, PoseProblem, reconfigure_library,
-                        SearchOptions)
+from .keyframes import (apply_locks, free_layout, joint_bounds, joint_set, layout_columns,
+                        locked_sets, PACED_NOTE, pose_values, PoseProblem,
+                        reconfigure_library, SearchOptions)
 from .kriging import OrdinaryKriging
 from .locks import frozen_arms, resolve_locks
 from .result import LibraryResult
@@ -46,8 +46,8 @@ from .trajectory_opt import (designed_step_deg, optimise_motion, optimise_trajec
                              TrajectoryProblem)
 from .vq import quantise
 from ..model.gestures import GestureLibrary
-from ..model.kinematics import batch_forward
-from ..model.robot import ARMS, N_JOINTS
+from ..model.kinematics import batch_forward, split_arms
+from ..model.robot import ARMS
 from ..objective.collision import CollisionModel
 from ..objective.score import gesture_targets, SimilarityScore
 from ..optimize import make_algorithm, minimize
@@ -85,7 +85,7 @@ def typical_points(robot, library, vq_distortion_mm=DEFAULT_DISTORTION_MM,
     out = {g.name: None for g in library}
     for n_left, gesture in zip(range(len(todo), 0, -1), todo):
         q = gesture.joint_matrix()
-        tips = np.concatenate([batch_forward(robot, q[:, columns(side)], side).tip
+        tips = np.concatenate([batch_forward(robot, q[:, columns(robot, side)], side).tip
                                for side in gesture.arms], axis=1)
         # Each motion gets an equal share of what is left; unused time rolls over.
         found = quantise(np.degrees(q), vq_distortion_mm, features=tips, seed=seed,
@@ -270,7 +270,7 @@ class _Motion:
     def __init__(self, ctx, gesture, ids):
         self.gesture, self.ids = gesture, ids
         self.design = design = gesture.joint_matrix()
-        base_r, base_l = apply_locks(ctx.robot, design[:, :N_JOINTS], design[:, N_JOINTS:],
+        base_r, base_l = apply_locks(ctx.robot, *split_arms(ctx.robot, design),
                                      ctx.locks)
         self.base_r = ctx.model.arms['right'].clip(base_r)
         self.base_l = ctx.model.arms['left'].clip(base_l)
@@ -378,7 +378,7 @@ def _pace_motion(ctx, m, picks, clock, notes):
     best, _ = pacing.repair(q, base, limits, lower, upper,
                             lambda c: pose_values(model, ctx.scorer, ctx.checker, c, m.ids),
                             picks)
-    m.q_r, m.q_l = best[:, :N_JOINTS], best[:, N_JOINTS:]
+    m.q_r, m.q_l = split_arms(model, best)
     note = f'{m.gesture.name}: {PACED_NOTE}'
     if note not in notes:      # the typical points' search may have said it already
         notes.append(note)
@@ -389,7 +389,7 @@ def _pace_motion(ctx, m, picks, clock, notes):
     problem = TrajectoryProblem(model, ctx.scorer, m.ids, (m.q_r, m.q_l), layout,
                                 step_cap_deg=designed_step_deg(m.design),
                                 collision=ctx.checker)
-    col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in layout])
+    col = layout_columns(model, layout)
     low, high = pacing.tube(best, limits, lower, upper)
     problem.restrict(low[:, col], high[:, col])
     out = optimise_trajectory(problem, clock)
@@ -501,7 +501,7 @@ def _consistent(ctx, ids, design, solved, layout, continuity_weight, clock):
     solved = solved.copy()
     if len(ids) < 2:
         return solved, 0
-    col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in layout])
+    col = layout_columns(ctx.model, layout)
     nfev = 0
     rest = slice(1, None)
     for _ in range(min(len(ids) - 1, _MAX_SWEEPS)):
@@ -510,7 +510,7 @@ def _consistent(ctx, ids, design, solved, layout, continuity_weight, clock):
         before = solved[rest].copy()
         anchor = design[rest, col] + solved[:-1, col] - design[:-1, col]
         problem = PoseProblem(ctx.model, ctx.scorer, ids[rest],
-                              (solved[rest, :N_JOINTS], solved[rest, N_JOINTS:]), layout,
+                              split_arms(ctx.model, solved[rest]), layout,
                               x0=solved[rest][:, col], anchor=anchor,
                               continuity=continuity_weight)
         starts = problem.clip(np.stack((solved[rest][:, col], anchor), axis=1))
@@ -527,7 +527,7 @@ def _consistent(ctx, ids, design, solved, layout, continuity_weight, clock):
 def _spread(robot, gesture, picks, solved, locks):
     """Kriging of the typical points' corrections to every point of one motion."""
     design = gesture.joint_matrix()
-    cols = np.concatenate([np.arange(2 * N_JOINTS)[columns(s)] for s in ARMS])
+    cols = np.concatenate([np.arange(design.shape[1])[columns(robot, s)] for s in ARMS])
     x = np.degrees(design[:, cols])
     r = np.degrees(solved - design[list(picks)])
     if len(picks) == len(design):
@@ -536,7 +536,7 @@ def _spread(robot, gesture, picks, solved, locks):
         est = OrdinaryKriging(x[list(picks)], r).predict(x)
         out = design + np.radians(est.values)
         sigma = tuple(float(s) for s in np.sqrt(est.variance))
-    q_r, q_l = apply_locks(robot, out[:, :N_JOINTS], out[:, N_JOINTS:], locks)
+    q_r, q_l = apply_locks(robot, *split_arms(robot, out), locks)
     q_r = robot.arms['right'].clip(q_r)
     q_l = robot.arms['left'].clip(q_l)
     return apply_locks(robot, q_r, q_l, locks) + (sigma,)
@@ -583,7 +583,7 @@ def _chain(ctx, m, layout, continuity_weight, clock, rng, start_r, start_l):
     """
     scorer, ids, base_r, base_l, design = ctx.scorer, m.ids, m.base_r, m.base_l, m.design
     q_r, q_l = base_r.copy(), base_l.copy()
-    col = np.array([j + (0 if s == 'right' else N_JOINTS) for s, j in layout])
+    col = layout_columns(ctx.model, layout)
     design_free = design[:, col]
     full = np.concatenate((start_r, start_l), axis=1)
     nfev = 0

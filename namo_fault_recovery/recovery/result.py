@@ -33,7 +33,6 @@ from typing import Optional
 import numpy as np
 
 from . import pacing
-from ..model.robot import N_JOINTS
 
 
 class MalformedResult(ValueError):
@@ -68,8 +67,8 @@ class GestureResult:
     Scores are the similarity score (lower is better, 0 = the reference).  Over the
     gesture's keyframes (every point of a motion, Kriging-interpolated ones included):
 
-    - ``times``: time_from_start (s) per keyframe; ``positions``: per keyframe the 14
-      joint angles (rad), right arm joints 1-7 then left arm joints 1-7, as published;
+    - ``times``: time_from_start (s) per keyframe; ``positions``: per keyframe the 2n
+      joint angles (rad), right arm joints 1-n then left arm joints 1-n, as published;
     - ``score_before`` / ``score_before_mean``: worst / mean keyframe score as designed
       with the locks applied and nothing re-optimised;
     - ``score_after`` / ``score_mean``: worst / mean keyframe score as published;
@@ -139,7 +138,8 @@ class GestureResult:
     def keyframes(self) -> tuple:
         """Return the published keyframes as :class:`~..model.gestures.Keyframe` objects."""
         from ..model.gestures import Keyframe
-        return tuple(Keyframe(t, np.array(p[:N_JOINTS]), np.array(p[N_JOINTS:]))
+        # Both arms have one joint count (profile_robot refuses others): halves.
+        return tuple(Keyframe(t, np.array(p[:len(p) // 2]), np.array(p[len(p) // 2:]))
                      for t, p in zip(self.times, self.positions))
 
     def to_dict(self) -> dict:

@@ -66,7 +66,7 @@ class TrajectoryProblem:
     """
     The free joints of one motion's T points as one bounded problem of T x D variables.
 
-    ``start`` is the pair (right, left) of (T, 7) warm starts (the Kriging result, locks
+    ``start`` is the pair (right, left) of (T, n) warm starts (the Kriging result, locks
     applied): they also give every joint that is not free, so that the locked joints
     keep their lock.  ``layout`` is a tuple of ``(arm, joint index)``, the free joints
     (the same at every point).  ``target_ids`` (T,) are the points' rows in ``scorer``,
@@ -127,7 +127,7 @@ class TrajectoryProblem:
         self.x0 = np.clip(self.x0, self.lower, self.upper)
 
     def gather(self, q_right, q_left):
-        """Return the free joints (T, D) of full angles (T, 7) per arm."""
+        """Return the free joints (T, D) of full angles (T, n) per arm."""
         x = np.empty((len(q_right), self.dim))
         for side, q in (('right', q_right), ('left', q_left)):
             k, j = self.columns[side]
@@ -135,7 +135,7 @@ class TrajectoryProblem:
         return x
 
     def assemble(self, x):
-        """Return the full (right, left) angles (T, 7) of the stacked variables ``x``."""
+        """Return the full (right, left) angles (T, n) of the stacked variables ``x``."""
         x = np.asarray(x, dtype=float).reshape(self.n_points, self.dim)
         out = []
         for side in ARMS:
@@ -293,8 +293,8 @@ class TrajectoryProblem:
 class TrajectoryResult:
     """The outcome of one whole-trajectory optimisation."""
 
-    q_right: np.ndarray   # (T, 7) rad
-    q_left: np.ndarray    # (T, 7) rad
+    q_right: np.ndarray   # (T, n) rad
+    q_left: np.ndarray    # (T, n) rad
     value: float          # objective at the result
     value_start: float    # objective at the (clipped) warm start
     nfev: int
@@ -538,7 +538,7 @@ def optimise_motion(robot, scorer, target_ids, start_right, start_left, layout, 
     """
     Optimise one whole motion from its warm start; return a :class:`TrajectoryResult`.
 
-    ``design`` (T, 14) is the designed motion (both arms, rad): its largest step is the
+    ``design`` (T, 2n) is the designed motion (both arms, rad): its largest step is the
     cap of the step hinge.  The other arguments are those of :class:`TrajectoryProblem`
     (with the default smoothness and step penalty) and :func:`optimise_trajectory`.
     Solved by :func:`banded_newton`, once per rounding of :data:`MOTION_SMOOTHING`, each

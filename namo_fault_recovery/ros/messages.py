@@ -18,8 +18,8 @@ from std_msgs.msg import ColorRGBA
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker
 
-from ..model.kinematics import forward_kinematics, shoulder_position
-from ..model.robot import ARMS, N_JOINTS
+from ..model.kinematics import forward_kinematics, shoulder_position, split_arms
+from ..model.robot import ARMS
 from ..recovery.result import reference_result, summary  # noqa: F401 - re-exported
 
 DIAG_PREFIX = 'recovery_node: '
@@ -147,8 +147,7 @@ def _figure_frames(n):
 
 def _landmarks(robot, positions, side):
     """Batched forward kinematics of one arm over every keyframe of a gesture."""
-    index = ARMS.index(side)
-    q = np.asarray(positions, dtype=float)[:, index * N_JOINTS:(index + 1) * N_JOINTS]
+    q = split_arms(robot, np.asarray(positions, dtype=float))[ARMS.index(side)]
     return forward_kinematics(robot, q, side)
 
 

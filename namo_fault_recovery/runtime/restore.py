@@ -10,8 +10,6 @@ can be republished after a restart or must be recomputed, and why.
 from dataclasses import dataclass, field
 import math
 
-from ..model.robot import ARMS
-
 
 def within_exactly(robot, side, index, angle):
     """Return True if ``angle`` is within the joint's limits with no tolerance."""
@@ -36,7 +34,7 @@ def check_result(robot, library, result, faults=None):
             return exc.args[0]
         if not (math.isfinite(angle) and within_exactly(robot, side, index, angle)):
             return f'lock angle {angle!r} of {joint} is not usable'
-        columns[ARMS.index(side) * 7 + index] = angle
+        columns[joint_names.index(robot.arms[side].joint_names[index])] = angle
     for gesture in result.gestures:
         if len(gesture.times) != len(library[gesture.name].keyframes):
             return f'{gesture.name}: wrong number of keyframes'

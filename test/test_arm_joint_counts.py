@@ -1,0 +1,254 @@
+"""
+Arms of 5 to 8 joints: Talos with 5, 6 or 8 joints per arm (issue 17).
+
+The 5- and 6-joint robots (test/data/talos5.yaml, talos6.yaml) list fewer of Talos's
+joints in ``joints``; the profile loader holds the others at 0.  The 8-joint robot
+(talos8.yaml) is Talos with one more revolute joint per arm, inserted into the URDF
+text here (:func:`talos8_urdf`).  Their gesture libraries were retargeted from
+config/gestures.yaml.  Kinematics are checked against Pinocchio on the full URDF
+(the held joints at 0), and the engine, the player's planning and the simulator's
+physics must take these arms as they take Talos's seven.
+"""
+
+import math
+from pathlib import Path
+import re
+
+from namo_fault_recovery.errors import ConfigError
+from namo_fault_recovery.model.gestures import load_library
+from namo_fault_recovery.model.kinematics import (arm_joint_count, forward_kinematics,
+                                                  forward_kinematics_jacobian, split_arms)
+from namo_fault_recovery.model.profile_robot import ENGINE_ARM_JOINTS, robot_from_profile
+from namo_fault_recovery.model.robot_profile import load_profile
+from namo_fault_recovery.model.self_contact import penetrations, undesigned_depth
+from namo_fault_recovery.optimize.base import Clock
+from namo_fault_recovery.playback.clearance import PathClearance
+from namo_fault_recovery.playback.timing import plan_motion
+from namo_fault_recovery.recovery.engine import recover
+from namo_fault_recovery.recovery.locks import resolve_locks
+from namo_fault_recovery.recovery.settings import RecoverySettings
+from namo_fault_recovery.resources import distribution_file
+from namo_fault_recovery.sim.physics import designed_allowances, NamoSim
+import numpy as np
+import pinocchio as pin
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+DATA = Path(__file__).resolve().parent / 'data'
+COUNTS = (5, 6, 8)
+TALOS_URDF = 'talos_data/robots/talos_reduced.urdf'
+_LOADED = {}
+
+
+def talos8_urdf():
+    """Return Talos's URDF text with a joint ``arm_<side>_4b_joint`` added in each forearm."""
+    text = Path(distribution_file('example-robot-data', TALOS_URDF)).read_text()
+    for side in ('right', 'left'):
+        joint5 = f'<joint name="arm_{side}_5_joint" type="revolute">\n    <parent link='
+        old = f'{joint5}"arm_{side}_4_link"/>'
+        assert text.count(old) == 1
+        text = text.replace(old, f"""<link name="arm_{side}_4b_link">
+    <inertial>
+      <origin rpy="0 0 0" xyz="0 0 0"/>
+      <mass value="0.1"/>
+      <inertia ixx="0.0001" ixy="0" ixz="0" iyy="0.0001" iyz="0" izz="0.0001"/>
+    </inertial>
+  </link>
+  <joint name="arm_{side}_4b_joint" type="revolute">
+    <parent link="arm_{side}_4_link"/>
+    <child link="arm_{side}_4b_link"/>
+    <origin rpy="0 0 0" xyz="0 0 0"/>
+    <axis xyz="1 0 0"/>
+    <limit effort="3" lower="-0.5" upper="0.5" velocity="2.0"/>
+  </joint>
+  {joint5}"arm_{side}_4b_link"/>""")
+    return text
+
+
+def urdf_text(n):
+    """Return the URDF text of the Talos test robot with ``n`` joints per arm."""
+    if n == 8:
+        return talos8_urdf()
+    return Path(distribution_file('example-robot-data', TALOS_URDF)).read_text()
+
+
+def talos(n):
+    """Return (robot, library) of the Talos test robot with ``n`` joints per arm (once)."""
+    try:
+        distribution_file('example-robot-data', TALOS_URDF)
+    except FileNotFoundError:
+        pytest.skip('example-robot-data (the Talos URDF) is not installed')
+    if n not in _LOADED:
+        urdf = urdf_text(n) if n == 8 else None
+        robot = robot_from_profile(load_profile(DATA / f'talos{n}.yaml', urdf=urdf))
+        _LOADED[n] = robot, load_library(robot, DATA / f'talos{n}_gestures.yaml')
+    return _LOADED[n]
+
+
+def profile_text(n_right, n_left):
+    """Return Talos's profile text with the first ``n_right``/``n_left`` arm joints."""
+    text = (ROOT / 'config' / 'robots' / 'talos.yaml').read_text()
+    for side, n in (('right', n_right), ('left', n_left)):
+        names = ', '.join(f'arm_{side}_{k}_joint' for k in range(1, n + 1))
+        text = re.sub(rf'joints: \[arm_{side}_[^\]]*\]', f'joints: [{names}]', text)
+    return text
+
+
+@pytest.mark.parametrize('n', COUNTS)
+def test_a_robot_of_5_6_or_8_arm_joints_loads_in_chain_order(n):
+    robot, library = talos(n)
+    assert arm_joint_count(robot) == n and len(robot.joint_names) == 2 * n
+    assert len(robot.velocity_limits) == n
+    for side in ('right', 'left'):
+        arm = robot.profile.arms[side]
+        want = [f'arm_{side}_{k}_joint' for k in range(1, min(n, 7) + 1)]
+        if n == 8:
+            want.insert(4, f'arm_{side}_4b_joint')
+        assert robot.arms[side].joint_names == tuple(want)
+        assert (f'arm_{side}_7_joint' in arm.held) == (n < 7)
+        assert len(robot.arms[side].lower) == n
+    assert [g.name for g in library] == ['wai', 'bye', 'salute', 'side_invite']
+    assert library['wai'].joint_matrix().shape == (1, 2 * n)
+
+
+def test_arm_joint_counts_outside_the_range_or_unequal_are_refused(tmp_path):
+    assert ENGINE_ARM_JOINTS == (5, 8)
+    four = tmp_path / 'talos4.yaml'
+    four.write_text(profile_text(4, 4))
+    with pytest.raises(ConfigError) as err:
+        robot_from_profile(four)
+    text = str(err.value)
+    assert 'talos4.yaml' in text and 'arms.right.joints' in text
+    assert '4 joints' in text and '5 to 8' in text and '\n' not in text
+    unequal = tmp_path / 'talos67.yaml'
+    unequal.write_text(profile_text(6, 7))
+    with pytest.raises(ConfigError) as err:
+        robot_from_profile(unequal)
+    text = str(err.value)
+    assert 'talos67.yaml' in text and 'arms' in text and '6 and 7 joints' in text
+
+
+def pinocchio_landmarks(robot, side, q):
+    """Return {role: (N, 3) mm or palm (N, 3, 3)} of one arm by Pinocchio on the URDF."""
+    profile = robot.profile
+    arm = profile.arms[side]
+    model = pin.buildModelFromXML(urdf_text(arm_joint_count(robot)))
+    data = model.createData()
+    out = {role: [] for role in arm.marks}
+    for row in q:
+        cfg = pin.neutral(model)                    # every other joint at 0
+        for name, angle in zip(robot.arms[side].joint_names, row):
+            cfg[model.joints[model.getJointId(name)].idx_q] = angle
+        pin.framesForwardKinematics(model, data, cfg)
+        base = data.oMf[model.getFrameId(arm.chain.base)].inverse()
+        for role, mark in arm.marks.items():
+            link, offset = mark if isinstance(mark, tuple) else (mark, (0.0, 0.0, 0.0))
+            frame = base * data.oMf[model.getFrameId(link)]
+            out[role].append(frame.rotation.copy() if role == 'palm'
+                             else 1e3 * frame.act(np.asarray(offset, dtype=float)))
+    return {role: np.array(v) for role, v in out.items()}
+
+
+@pytest.mark.parametrize('n', COUNTS)
+def test_the_reduced_arm_chain_matches_pinocchio_and_its_jacobian_differences(n):
+    robot, _ = talos(n)
+    for side in ('right', 'left'):
+        arm = robot.arms[side]
+        q = np.random.default_rng(17).uniform(arm.lower, arm.upper, (20, n))
+        ours = forward_kinematics(robot, q, side)
+        ref = pinocchio_landmarks(robot, side, q)
+        for role in ('elbow', 'wrist', 'tip'):
+            assert np.abs(getattr(ours, role) - ref[role]).max() < 1e-6, (side, role)   # mm
+        assert np.abs(ours.palm - ref['palm']).max() < 1e-9
+        _, jac = forward_kinematics_jacobian(robot, q[:3], side)
+        assert jac.positions.shape == (3, 3, n, 3) and jac.axes.shape == (3, n, 3)
+        for j in range(n):
+            step = np.zeros(n)
+            step[j] = 1e-6
+            num = (forward_kinematics(robot, q[:3] + step, side).tip
+                   - forward_kinematics(robot, q[:3] - step, side).tip) / 2e-6
+            assert np.abs(num - jac.positions[:, 2, j]).max() < 1e-4
+
+
+@pytest.mark.parametrize('n', COUNTS)
+def test_every_single_fault_is_recovered_with_the_joint_held(n):
+    robot, library = talos(n)
+    for joint in robot.joint_names:
+        res = recover(robot, library, {joint: None}, RecoverySettings(), seed=1,
+                      clock=Clock(None))
+        assert res.success, joint
+        column, lock = robot.joint_names.index(joint), res.locks[joint]
+        assert [g.name for g in res.gestures] == [g.name for g in library]
+        for gesture in res.gestures:
+            q = np.array(gesture.positions)
+            assert q.shape == (len(library[gesture.name].keyframes), 2 * n)
+            assert np.all(q[:, column] == lock), (joint, gesture.name)
+            assert len(gesture.keyframes[0].right) == n
+            # No worse than the locked design, unless that design collides (then the
+            # best clear motion is published, and the message says why).
+            assert (gesture.score_after <= gesture.score_before + 1e-9
+                    or 'collides' in gesture.message), (joint, gesture.name)
+            assert not gesture.collides, (joint, gesture.name, gesture.colliding_pairs)
+
+
+def test_the_player_plans_and_bends_a_path_clear_on_six_joint_arms():
+    robot, library = talos(6)
+    names = robot.joint_names
+    limits = np.array(robot.velocity_limits * 2)
+    clearance = PathClearance(robot, names)
+    wai = library['wai']
+    # Left joint 1 held at its average lock: the straight approach to Wai presses the
+    # arms 54 mm into each other; the bent path does not.
+    locks = resolve_locks(robot, library, {'arm_left_1_joint': None})[0]
+    frames = [kf.positions() for kf in wai.keyframes]
+    times = [kf.time_from_start for kf in wai.keyframes]
+    plans = [plan_motion(names, np.zeros(12), times, frames, limits, locks=locks,
+                         clearance=c) for c in (None, clearance)]
+    depth = []
+    for plan in plans:
+        t = np.arange(0.0, plan.duration + 0.01, 0.01)
+        depth.append(undesigned_depth(robot, wai, plan.command_at(t)))
+        assert plan.positions.shape[1] == 12
+        assert np.ptp(plan.positions[:, names.index('arm_left_1_joint')]) == 0.0
+        assert np.all(np.abs(plan.velocities) <= limits + 1e-9)
+    assert depth[0] > 10.0 and depth[1] <= 1.0
+    np.testing.assert_allclose(clearance.depths(frames[0][None]),
+                               penetrations(robot, frames[0][None]))
+
+
+@pytest.mark.parametrize('n', COUNTS)
+def test_the_simulator_holds_the_key_poses_and_a_stuck_joint(n):
+    robot, library = talos(n)
+    sim = NamoSim(robot, allowances=designed_allowances(robot, library),
+                  urdf=urdf_text(n) if n == 8 else None)
+    assert sim.model.nq == sim.model.nu == 2 * n
+    for gesture in library:
+        q = gesture.keyframes[-1].positions()
+        sim.set_positions(q)
+        sim.reset_contact_count()
+        sim.set_targets(q)
+        sim.step(100)
+        assert np.abs(sim.positions() - q).max() < math.radians(0.01), gesture.name
+        assert sim.contact_steps == 0, (gesture.name, sim.pairs_seen)
+    sim.set_positions(np.zeros(2 * n))
+    sim.stick(robot.joint_names[3], math.radians(-40.0))
+    sim.set_targets(np.zeros(2 * n))
+    sim.step(500)
+    target = library['salute'].keyframes[-1].positions()
+    worst = 0.0
+    for _ in range(150):
+        sim.set_targets(target)
+        sim.step(10)
+        worst = max(worst, abs(sim.positions()[3] - math.radians(-40.0)))
+    assert worst < math.radians(0.05), math.degrees(worst)
+    moved = np.delete(np.arange(2 * n), 3)
+    assert np.abs(sim.positions()[moved] - target[moved]).max() < math.radians(0.1)
+
+
+def test_both_arms_split_at_the_robots_joint_count():
+    robot, _ = talos(6)
+    q = np.arange(24.0).reshape(2, 12)
+    right, left = split_arms(robot, q)
+    assert right.shape == left.shape == (2, 6) and left[0, 0] == 6.0
+    with pytest.raises(ValueError, match=r'\(\.\.\., 12\)'):
+        split_arms(robot, np.zeros((2, 14)))
