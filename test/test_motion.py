@@ -419,7 +419,12 @@ def test_the_circle_ends_on_the_same_motion_whatever_the_seed(robot, demo_librar
 
 
 def test_a_whole_trajectory_pass_cut_by_the_deadline_says_so(robot, demo_library, monkeypatch):
-    """The circle's pass ran out of time: its status is the deadline's, not 'converged'."""
+    """
+    The circle's pass ran out of time: its message says so.
+
+    The library was still made within the deadline with finite scores, which is what
+    the contract's ``success`` means, so its status and success stay.
+    """
     from dataclasses import replace
     real = motion_module.optimise_motion
 
@@ -431,6 +436,5 @@ def test_a_whole_trajectory_pass_cut_by_the_deadline_says_so(robot, demo_library
                         clock=Clock(None), seed=0)
     circle = res['circle']
     assert circle.method == 'trajectory'
-    assert circle.status == 'deadline' and not res.deadline_met
-    assert 'deadline reached' in circle.message
-    assert res['wai'].status != 'deadline'
+    assert 'the whole-trajectory pass was cut short (deadline)' in circle.message
+    assert res.deadline_met and res['wai'].status != 'deadline'

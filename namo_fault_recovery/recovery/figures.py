@@ -84,6 +84,9 @@ def describe_motion(ctx, motion, picks) -> GestureResult:
                    f'mean score {after.mean():.2f}')
         if m.status == 'deadline':
             message += '; deadline reached, best result so far used'
+        elif m.cut:
+            message += (f'; the whole-trajectory pass was cut short ({m.cut}), the best '
+                        f'trajectory so far used')
         if collides:                  # as the keyframe search's message says it
             message += f'; {COLLIDES_WARNING}'
     return GestureResult(

@@ -280,6 +280,7 @@ class _Motion:
         self.free = ()
         self.q_r, self.q_l = self.base_r.copy(), self.base_l.copy()
         self.searched = None   # the keyframe search's GestureResult of its typical points
+        self.cut = None        # 'deadline' or 'cancelled': the whole-trajectory pass cut short
 
 
 def _adapt(job, locks, seed, search):
@@ -426,7 +427,7 @@ def _whole_trajectory(ctx, m, budget, notes):
                 m.stage, m.free = level, tuple(robot.arms[s].joint_names[j] for s, j in lay)
         m.nfev += out.nfev
         if out.status in ('deadline', 'cancelled'):
-            m.status = out.status       # the motion is what was reached, not converged
+            m.cut = out.status          # the message says so; the library's status stays
             notes.append(f'{m.gesture.name}: the whole-trajectory pass was cut short '
                          f'({out.status}) after {out.nfev} evaluations; the best '
                          f'trajectory so far is used')
