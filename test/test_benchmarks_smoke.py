@@ -324,3 +324,17 @@ def test_playability_counts_straight_paths_that_touch_and_the_played_ones_bent_c
     assert part['straight_path_contacts'] >= 1 and part['max_straight_depth_mm'] > 1.0
     assert part['path_contacts'] == 0 and part['max_path_depth_mm'] <= 1.0
     assert 'played paths touch beyond their design' in out.getvalue()
+
+
+def test_playability_runs_on_a_profile_robot_and_its_bent_paths_are_clear():
+    """Talos, left joint 1 locked: Wai's straight approach presses 62 mm, the played 0."""
+    from namo_fault_recovery.benchmarks.playability import run_playability
+    from namo_fault_recovery.cli.main import main as cli_main
+    summary = run_playability(io.StringIO(), seeds=1, joints=['arm_left_1_joint'], jobs=1,
+                              progress=False, robot_name='talos')
+    part = summary['parts']['budget']
+    assert summary['robot'] == 'talos' and part['gestures'] == 4
+    assert part['straight_path_contacts'] >= 1 and part['max_straight_depth_mm'] > 10.0
+    assert part['path_contacts'] == 0 and part['unplayable'] == 0
+    argv = ['bench', 'playability', '--robot', 'talos', '--library', 'demo', '--seeds', '1']
+    assert cli_main(argv, out=io.StringIO()) == 2

@@ -36,6 +36,7 @@ import numpy as np
 
 from . import common
 from .product import load_models, node_settings
+from .robots import robot_models, ROBOTS
 from ..model.self_contact import TOLERANCE_MM, undesigned_depth
 from ..optimize.base import Clock
 from ..playback.clearance import PathClearance
@@ -53,6 +54,17 @@ STRETCHED = 1.0 + 1e-9
 PATH_STEP = 0.02       # s between the checked poses of a played path
 
 _WORKER = {}
+ROBOT_CHOICES = ('namo',) + ROBOTS
+
+
+def playability_models(which='product', robot='namo'):
+    """Return ``(robot, library)``: Namo's ``which`` library, or a shipped profile robot's."""
+    if robot == 'namo':
+        return load_models(which)
+    if which != 'product':
+        raise ValueError(f'--library {which}: only Namo has a demo library; expected product '
+                         f'with --robot {robot}')
+    return robot_models(robot)
 
 
 def play_figures(robot, gesture, locks, timing=PlayTiming(), reference=None):
@@ -86,8 +98,8 @@ def play_figures(robot, gesture, locks, timing=PlayTiming(), reference=None):
     return float(played.stretch), peak, *depths
 
 
-def _init_worker(which):
-    robot, lib = load_models(which)
+def _init_worker(which, robot_name='namo'):
+    robot, lib = playability_models(which, robot_name)
     settings = node_settings()
     _WORKER.update(robot=robot, lib=lib, settings=settings,
                    quant=typical_points(robot, lib, settings.vq_distortion_mm))
@@ -147,12 +159,12 @@ def _count_by(rows):
     return dict(sorted(counts.items()))
 
 
-def _part(out, which, tasks, jobs, label, progress):
+def _part(out, models, tasks, jobs, label, progress):
     prog = common.Progress(len(tasks), label) if progress else None
     runs = []
     began = time.monotonic()
     ctx = multiprocessing.get_context('spawn')
-    with ctx.Pool(max(1, int(jobs)), initializer=_init_worker, initargs=(which,)) as pool:
+    with ctx.Pool(max(1, int(jobs)), initializer=_init_worker, initargs=models) as pool:
         for run in pool.imap_unordered(_run_one, tasks, chunksize=8):
             runs.append(run)
             if prog:
@@ -163,25 +175,28 @@ def _part(out, which, tasks, jobs, label, progress):
 
 
 def run_playability(out, which='product', seeds=2000, deadline_seeds=0, joints=None,
-                    jobs=2, seed_base=0, progress=True):
+                    jobs=2, seed_base=0, progress=True, robot_name='namo'):
     """
     Run the parts (see the module docstring); print the figures, return the summary.
 
     ``seeds`` runs per single fault at the fixed budget (0: skip), ``deadline_seeds``
     at the node's deadline (0: skip; run it with ``jobs=1`` on a quiet machine).
+    ``robot_name``: Namo, or one of the shipped profile robots (:data:`ROBOT_CHOICES`)
+    with its retargeted library.
     """
-    robot, _ = load_models(which)
+    robot, _ = playability_models(which, robot_name)
     joints = list(joints or robot.joint_names)
     deadline = node_settings().deadline_sec
-    summary = {'library': which, 'joints': joints, 'budget_overrides': BUDGET_OVERRIDES,
+    summary = {'library': which if robot_name == 'namo' else f'{robot_name} product',
+               'robot': robot_name, 'joints': joints, 'budget_overrides': BUDGET_OVERRIDES,
                'machine': common.machine_info(), 'parts': {}}
     plan = [('budget', seeds, None, jobs), ('deadline', deadline_seeds, deadline, 1)]
     for name, n, limit, n_jobs in plan:
         if n <= 0:
             continue
         tasks = [(j, seed_base + s, limit) for j in joints for s in range(n)]
-        summary['parts'][name] = _part(out, which, tasks, n_jobs, f'playability {name}',
-                                       progress)
+        summary['parts'][name] = _part(out, (which, robot_name), tasks, n_jobs,
+                                       f'playability {name}', progress)
     print_playability(out, summary, deadline)
     return summary
 

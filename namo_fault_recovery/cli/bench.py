@@ -142,11 +142,13 @@ def cmd_bench_deadline(args, out):
 def cmd_bench_playability(args, out):
     """Count the libraries the player would have to stretch (benchmarks.playability)."""
     from ..benchmarks import common, playability
-    from ..benchmarks.product import load_models
     _positive_int('--seeds', args.seeds, 0)
     _positive_int('--deadline-seeds', args.deadline_seeds, 0)
     _positive_int('--jobs', args.jobs)
-    robot = load_models(args.library)[0]
+    try:
+        robot = playability.playability_models(args.library, args.robot)[0]
+    except ValueError as exc:
+        raise _usage(str(exc)) from None
     unknown = [j for j in args.joints or () if j not in robot.joint_names]
     if unknown:
         raise _usage(f'--joints: unknown joint {unknown[0]!r}; expected names such as '
@@ -154,7 +156,7 @@ def cmd_bench_playability(args, out):
     summary = playability.run_playability(
         out, args.library, seeds=args.seeds, deadline_seeds=args.deadline_seeds,
         joints=args.joints, jobs=args.jobs, seed_base=args.seed_base,
-        progress=not args.quiet)
+        progress=not args.quiet, robot_name=args.robot)
     path = out_dir_of(args, 'playability') / 'summary.json'
     common.write_json(path, summary)
     out.write(f'written: {path}\n')
@@ -363,6 +365,9 @@ def _add_playability(bench_sub):
                                   '(joint velocity limits), every single fault')
     p.add_argument('--library', default='product', choices=['product', 'demo'],
                    help='the packaged library or the demo one (default product)')
+    p.add_argument('--robot', default='namo', choices=['namo', 'talos', 'tiago_dual'],
+                   help='Namo, or a shipped profile robot with its retargeted library '
+                        '(example-robot-data; default namo)')
     p.add_argument('--seeds', type=int, default=2000,
                    help='seeds per single fault at the fixed small budget (default 2000; '
                         '0: skip)')
