@@ -252,3 +252,22 @@ def test_retarget_reads_the_global_robot_file(tmp_path, capsys):
     argv = ['--robot-file', str(missing), 'retarget', '--from', 'x.yaml', '--to', str(NAMO)]
     assert cli_main(argv, out=io.StringIO()) == 2
     assert 'no_such_robot.yaml: cannot read file' in capsys.readouterr().err
+
+
+def test_a_retargeted_motion_too_fast_for_the_player_is_paced():
+    """A wave twice as fast as designed: the player would stretch it, the library does not."""
+    from namo_fault_recovery.cli.retarget_command import paced_times
+    from namo_fault_recovery.playback.timing import plan_motion
+    robot = load_robot()
+    bye = load_library(robot)['bye']
+    fast = [kf.time_from_start / 2.0 for kf in bye.keyframes]
+    frames = bye.joint_matrix()
+    limits = np.tile(np.asarray(robot.velocity_limits, dtype=float), 2)
+
+    def stretch(times):
+        return plan_motion(robot.joint_names, np.zeros(14), times, frames, limits).stretch
+
+    assert stretch(fast) > 1.05
+    paced = paced_times(robot, fast, frames)
+    assert paced[0] == fast[0] and stretch(paced) == pytest.approx(1.0)
+    assert paced_times(robot, paced, frames) == paced      # a paced one is left as it is

@@ -28,11 +28,37 @@ def _degrees(robot, side, q):
     return [min(max(round(math.degrees(v), 4), a), b) for v, a, b in zip(q, lo, hi)]
 
 
+PACE_MARGIN = 1.01      # keyframes paced a little slower than the player's bound needs
+
+
+def paced_times(robot, times, positions) -> list:
+    """
+    Return keyframe times (s) that the player plays on ``robot`` without stretching.
+
+    A retargeted motion keeps the source's timing, but the target's joints may travel
+    further, or be slower: the player (:func:`~..playback.timing.plan_motion`, from rest)
+    would then slow its segments down.  Those segments are slowed down here instead, as
+    the player would (and by :data:`PACE_MARGIN` more), so the library is played as
+    timed.  The first keyframe keeps its time (the approach is the player's rule).
+    """
+    from ..playback.timing import plan_motion
+    times = [float(t) for t in times]
+    limits = np.tile(np.asarray(robot.velocity_limits, dtype=float), 2)
+    names = robot.joint_names
+    plan = plan_motion(names, np.zeros(len(names)), times, positions, limits)
+    later = plan.waypoint_times[1:]
+    if plan.stretch <= 1.0 or len(later) != len(times):
+        return times
+    return [times[0] + float(t - later[0]) * PACE_MARGIN for t in later]
+
+
 def library_text(result, library, profile_path, source_path, robot):
     """Return the YAML text of a retargeted library (angles in degrees)."""
     gestures = []
     for gesture, done in zip(library, result):
-        frames = [{'time_from_start': float(kf.time_from_start),
+        times = paced_times(robot, [kf.time_from_start for kf in gesture.keyframes],
+                            np.concatenate([done.right, done.left], axis=1))
+        frames = [{'time_from_start': round(times[k], 4),
                    'right': _degrees(robot, 'right', done.right[k]),
                    'left': _degrees(robot, 'left', done.left[k])}
                   for k, kf in enumerate(gesture.keyframes)]
