@@ -69,31 +69,34 @@ class PathClearance:
         """Return how much deeper (mm, >= 0) than ``allowed`` poses press, (N,)."""
         return np.max(np.maximum(self.depths(poses) - allowed, 0.0), axis=1)
 
-    def bend(self, times, points, plan, locked=()):
+    def bend(self, motion, points, plan, locked=()):
         """
-        Return (times, points, via) with via poses where the path of ``plan`` is too deep.
+        Return (motion, via): ``motion`` with via poses where its path is too deep.
 
-        ``plan(times, points)`` returns the PlannedMotion of those waypoints (the
-        player's timing, its speed limits and locks); ``locked`` are column indices
-        that never move; ``via`` marks the added rows.  Each via pose clears its part
-        of the path, or at least halves its excess (a deep pass through the torso may
-        take several); the bent path is returned only if it is shallower than the
-        straight one, else the waypoints as they were.
+        ``motion`` is ``plan(times, points)`` for the waypoints ``points``: ``plan``
+        returns the PlannedMotion of waypoints (the player's timing, its speed limits
+        and locks); ``locked`` are column indices that never move; ``via`` marks the
+        added rows of the returned motion's waypoints.  Each via pose clears its part of
+        the path, or at least halves its excess (a deep pass through the torso may take
+        several); the bent motion is returned only if it is shallower than the straight
+        one, else ``motion`` itself.
         """
-        times, points = np.asarray(times, float), np.asarray(points, float)
-        via = np.zeros(len(times), dtype=bool)
+        current, points = motion, np.asarray(points, float)
+        via = np.zeros(len(points), dtype=bool)
         allowed = self.depths(points).max(axis=0) + SLACK_MM
-        straight = found = self._deepest(plan(times, points), allowed)
+        straight = found = self._deepest(motion, allowed)
         for _ in range(_MAX_VIAS):
-            bent = found[0] > 0.0 and self._via(times, points, plan, allowed, found, locked)
+            bent = found[0] > 0.0 and self._via(
+                current.waypoint_times, points, plan, allowed, found, locked)
             if not bent:
                 break
             times, points, s = bent
             via = np.insert(via, s, True)
-            found = self._deepest(plan(times, points), allowed)
+            current = plan(times, points)
+            found = self._deepest(current, allowed)
         if found[0] >= straight[0]:
-            return times[~via], points[~via], np.zeros(np.count_nonzero(~via), dtype=bool)
-        return times, points, via
+            return motion, np.zeros(len(motion.waypoint_times), dtype=bool)
+        return current, via
 
     def _deepest(self, motion, allowed, between=None):
         """

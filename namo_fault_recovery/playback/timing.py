@@ -199,12 +199,11 @@ def plan_motion(joint_names, start, keyframe_times, keyframes, velocity_limits,
     if clearance is None:
         return motion
     locked = [names.index(j) for j in locks]
-    knots, poses, via = clearance.bend(motion.waypoint_times, points, timed, locked)
+    bent, via = clearance.bend(motion, points, timed, locked)
     if not np.any(via):
         return motion
-    bent = timed(knots, poses)
-    return replace(bent, waypoint_times=bent.waypoint_times[~via], waypoints=poses[~via],
-                   spline_knots=bent.waypoint_times)
+    return replace(bent, waypoint_times=bent.waypoint_times[~via],
+                   waypoints=bent.waypoints[~via], spline_knots=bent.waypoint_times)
 
 
 def _check_shapes(names, start, frames, kf_times, limits):
