@@ -36,7 +36,7 @@ import numpy as np
 
 from . import common
 from .product import load_models, node_settings
-from .robots import robot_models, ROBOTS
+from .robots import robot_models
 from ..model.self_contact import TOLERANCE_MM, undesigned_depth
 from ..optimize.base import Clock
 from ..playback.clearance import PathClearance
@@ -54,7 +54,6 @@ STRETCHED = 1.0 + 1e-9
 PATH_STEP = 0.02       # s between the checked poses of a played path
 
 _WORKER = {}
-ROBOT_CHOICES = ('namo',) + ROBOTS
 
 
 def playability_models(which='product', robot='namo'):
@@ -181,8 +180,8 @@ def run_playability(out, which='product', seeds=2000, deadline_seeds=0, joints=N
 
     ``seeds`` runs per single fault at the fixed budget (0: skip), ``deadline_seeds``
     at the node's deadline (0: skip; run it with ``jobs=1`` on a quiet machine).
-    ``robot_name``: Namo, or one of the shipped profile robots (:data:`ROBOT_CHOICES`)
-    with its retargeted library.
+    ``robot_name``: ``namo``, or one of the shipped profile robots
+    (:data:`.robots.ROBOTS`) with its retargeted library.
     """
     robot, _ = playability_models(which, robot_name)
     joints = list(joints or robot.joint_names)
