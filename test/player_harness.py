@@ -248,9 +248,19 @@ class FakeArms(Recorder):
         self.node.create_timer(0.01, self._step)
 
     def _on_command(self, controller, msg):
+        """
+        Take a trajectory on as a joint_trajectory_controller does: from its stamp.
+
+        A stamped trajectory runs on its own timeline (a late one joins mid-way, from
+        the pose the arm had when it arrived); an unstamped one starts on arrival.
+        """
+        now = time.monotonic()
+        stamp = _seconds(msg.header.stamp)
+        if stamp:
+            now -= self.node.get_clock().now().nanoseconds * 1e-9 - stamp
         with self.lock:
             self.commands.append((controller, msg))
-            self.active[controller] = (time.monotonic(), self.q.copy(), msg)
+            self.active[controller] = (now, self.q.copy(), msg)
 
     def _on_state(self, msg):
         with self.lock:
@@ -268,4 +278,6 @@ class FakeArms(Recorder):
             for joint, angle in self.stuck.items():
                 self.q[NAMES.index(joint)] = angle
             q = self.q.copy()
-        self.state_pub.publish(JointState(name=NAMES, position=list(q)))
+        msg = JointState(name=NAMES, position=list(q))
+        msg.header.stamp = self.node.get_clock().now().to_msg()    # when it was read
+        self.state_pub.publish(msg)

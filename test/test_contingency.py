@@ -374,3 +374,33 @@ def test_an_entry_is_checked_and_prepared_as_it_joins_a_failing_one_is_not_serve
     assert hit is not None and any(p.gestures is hit.gestures for p in prepared)
     assert len(prepared) >= len(table) - 1
     assert any('not served' in text and 'right_arm_joint2' in text for _, text in logs), logs
+
+
+def test_the_table_serves_its_entries_when_the_log_says_they_are_loaded(tmp_path):
+    """The log line a caller waits for comes after the entries were checked and installed."""
+    from namo_fault_recovery.runtime.contingency_keeper import ContingencyKeeper
+    table = ct.ContingencyTable(ct.table_fingerprint(ROBOT, LIBRARY, SETTINGS))
+    for faults in ct.fault_sets(ROBOT, LIBRARY, SETTINGS):
+        table.add(servable_result(ct.table_locks(ROBOT, LIBRARY, faults, SETTINGS),
+                                  faults=dict(faults)))
+    path = tmp_path / 'offline.json'
+    table.save(path)
+    seen = []
+    keeper = None
+
+    def log(level, text):
+        seen.append((text, keeper.entries))
+
+    keeper = ContingencyKeeper(ROBOT, LIBRARY, tmp_path / 'state', log,
+                               offline_file=str(path), prepare=lambda result: time.sleep(0.01))
+    try:
+        keeper.configure(SETTINGS)
+        wait_for_entries(keeper, len(table))
+        for _ in range(100):
+            if any('entries loaded from' in text for text, _ in seen):
+                break
+            time.sleep(0.05)
+    finally:
+        keeper.stop()
+    loaded = [entries for text, entries in seen if 'entries loaded from' in text]
+    assert loaded == [len(table)], seen

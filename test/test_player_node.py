@@ -3,8 +3,8 @@ The real ``gesture_player`` process over DDS, against fake arms.
 
 The fake arms (``player_harness.FakeArms``) are two trajectory "controllers" in the
 test's rclpy node: each follows the last trajectory it received (interpolating its
-points from the moment it arrived) and publishes /joint_states at 100 Hz; a joint can be
-stuck.  The library and the
+points on the timeline its stamp sets, as a joint_trajectory_controller does) and
+publishes stamped /joint_states at 100 Hz; a joint can be stuck.  The library and the
 recovery node's diagnostics are published by the test, so every input is known.
 """
 

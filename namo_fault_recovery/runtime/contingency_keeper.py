@@ -167,9 +167,11 @@ class ContingencyKeeper:
         with self._lock:
             table = self._table
         if table is None or table.fingerprint != fingerprint:
-            table = self._load(fingerprint)          # checked and prepared, off the lock
+            table, said = self._load(fingerprint)    # checked and prepared, off the lock
             with self._lock:
                 self._table, self._plan_keys = table, ()
+            for text in said:                        # in use from now on: say so
+                self._log('info', text)
         try:
             plan = fault_sets(self._robot, self._library, settings, active=active)
         except ValueError as exc:
@@ -195,23 +197,30 @@ class ContingencyKeeper:
         return fingerprint
 
     def _load(self, fingerprint):
+        """
+        Return (the table kept for ``fingerprint``, the lines to log once it is in use).
+
+        Its entries are checked and prepared here, before the table serves a hit: a
+        log line read as "in use" must be true when it is read.
+        """
         table, reason = ContingencyTable.load(self._path, fingerprint)
-        if reason is None:
-            self._log('info', f'contingency table: {len(table)} entries reused from '
-                              f'{self._path}')
+        kept = len(table) if reason is None else 0
+        said = []
         if self._offline:
             offline, why = ContingencyTable.load(self._offline, fingerprint)
             if why is None:
                 for key, (locks, result) in offline.entries.items():
                     table.entries.setdefault(key, (locks, result))
-                self._log('info', f'contingency table: {len(offline)} entries loaded from '
-                                  f'{self._offline}')
+                said.append(f'contingency table: {len(offline)} entries loaded from '
+                            f'{self._offline}')
             else:
                 self._log('warning', why)
         for key, (locks, result) in list(table.entries.items()):
             if not self._admit(locks, result):
                 del table.entries[key]
-        return table
+        if kept:
+            said.insert(0, f'contingency table: {kept} entries reused from {self._path}')
+        return table, said
 
     def _admit(self, locks, result):
         """Return True if an entry may be served (checked, then prepared); log why not."""
