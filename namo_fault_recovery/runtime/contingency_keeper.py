@@ -197,12 +197,7 @@ class ContingencyKeeper:
         return fingerprint
 
     def _load(self, fingerprint):
-        """
-        Return (the table kept for ``fingerprint``, the lines to log once it is in use).
-
-        Its entries are checked and prepared here, before the table serves a hit: a
-        log line read as "in use" must be true when it is read.
-        """
+        """Return (the table for ``fingerprint``, checked and prepared; lines to log once used)."""
         table, reason = ContingencyTable.load(self._path, fingerprint)
         kept = len(table) if reason is None else 0
         said = []
