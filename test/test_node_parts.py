@@ -333,15 +333,15 @@ def test_a_fault_set_being_written_starts_the_run_but_is_published_only_once_on_
     state = Persistence(tmp_path, robot, library, book, on_error=lambda text: None)
     saving, release, order = threading.Event(), threading.Event(), []
     journal = state.store.journal
-    real_append = journal.append
+    real_sync = journal.sync
 
-    def slow_append(*args, **kwargs):
+    def slow_sync(*args, **kwargs):
         saving.set()
         assert release.wait(5.0)
-        real_append(*args, **kwargs)
+        real_sync(*args, **kwargs)
         order.append('synced')
 
-    journal.append = slow_append
+    journal.sync = slow_sync
     faults = {'right_arm_joint1': Fault(0.1)}
     committer = threading.Thread(target=state.commit_faults, args=(faults, 0.0))
     committer.start()

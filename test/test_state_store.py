@@ -205,3 +205,14 @@ def test_a_write_between_the_reads_never_hides_the_newest_fault_set(tmp_path, mo
     state, problem = store.load()
     assert problem is None and state.faults == {}
     store.journal.close()
+
+
+def test_a_record_written_and_not_yet_synced_is_never_emptied_away(tmp_path):
+    """The state file catching up meanwhile must not truncate a record on its way to disk."""
+    store = StateStore(tmp_path)
+    store.journal.write(7, FAULTS)
+    store.journal.empty_if_covered(5)          # the state file holds change 5 only
+    store.journal.sync()
+    assert store.journal.records() == [(7, FAULTS)]
+    store.journal.empty_if_covered(7)
+    assert store.journal.records() == []

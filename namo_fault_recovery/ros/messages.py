@@ -8,12 +8,14 @@ command line import this module; the numerical core stays free of ROS.
 
 from collections import OrderedDict
 import math
+import struct
 import threading
 
 from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point
 import numpy as np
+from rclpy.serialization import serialize_message
 from std_msgs.msg import ColorRGBA
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker
@@ -23,6 +25,10 @@ from ..model.robot import ARMS
 from ..recovery.result import reference_result, summary  # noqa: F401 - re-exported
 
 DIAG_PREFIX = 'recovery_node: '
+# A serialized JointTrajectory: the CDR encapsulation (little-endian), then its header's
+# stamp (int32 sec, uint32 nanosec) at once.
+CDR_LITTLE_ENDIAN = b'\x00\x01\x00\x00'
+STAMP_OFFSET = len(CDR_LITTLE_ENDIAN)
 _MM = 1e-3
 
 
@@ -57,41 +63,47 @@ def library_to_msgs(joint_names, result, stamp):
 
 class PreparedMessages:
     """
-    The messages of library versions converted in advance: a table hit only publishes.
+    The messages of library versions serialized in advance: a table hit only publishes.
 
     :meth:`prepare` (the contingency table's entries, as they join it, in the table's
-    own threads) converts a result's gestures once; :meth:`messages` returns them with
-    the header stamp of this publication, matched by the very ``gestures`` tuple (a hit
-    is the entry's result with other fields replaced), else converts at once.  The
-    messages returned are reused: publish them before the next call (the node publishes
-    under its run book's lock, one version at a time).  At most ``limit`` versions are
-    kept, the oldest prepared dropped first.
+    own threads) converts and serializes a result's gestures once; :meth:`messages`
+    returns them with the header stamp of this publication written into their bytes
+    (the stamp leads a JointTrajectory's CDR payload, :data:`STAMP_OFFSET`), matched by
+    the very ``gestures`` tuple (a hit is the entry's result with other fields
+    replaced), else converts at once (message objects).  Either kind is what
+    ``Publisher.publish`` takes.  At most ``limit`` versions are kept, the oldest
+    prepared dropped first.
     """
 
     def __init__(self, joint_names, limit=1024):
         self._joint_names = tuple(joint_names)
         self._limit = limit
         self._lock = threading.Lock()
-        self._prepared = OrderedDict()     # id(gestures) -> (gestures, [JointTrajectory])
+        self._prepared = OrderedDict()     # id(gestures) -> (gestures, [bytes])
 
     def prepare(self, result):
-        """Convert ``result``'s gestures now, for a later :meth:`messages` (thread-safe)."""
-        msgs = library_to_msgs(self._joint_names, result, Time())
+        """Serialize ``result``'s gestures now, for a later :meth:`messages` (thread-safe)."""
+        raws = [serialize_message(m) for m in library_to_msgs(self._joint_names, result, Time())]
+        if any(raw[:STAMP_OFFSET] != CDR_LITTLE_ENDIAN for raw in raws):
+            return                         # another encoding: converted when published
         with self._lock:
-            self._prepared[id(result.gestures)] = (result.gestures, msgs)
+            self._prepared[id(result.gestures)] = (result.gestures, raws)
             self._prepared.move_to_end(id(result.gestures))
             while len(self._prepared) > self._limit:
                 self._prepared.popitem(last=False)
 
     def messages(self, result, stamp):
-        """Return one JointTrajectory per gesture of ``result``, stamped ``stamp``."""
+        """Return one JointTrajectory (or its serialized bytes) per gesture, stamped."""
         with self._lock:
             found = self._prepared.get(id(result.gestures))
         if found is None or found[0] is not result.gestures:
             return library_to_msgs(self._joint_names, result, stamp)
-        for msg in found[1]:
-            msg.header.stamp = stamp
-        return found[1]
+        out = []
+        for raw in found[1]:
+            data = bytearray(raw)
+            struct.pack_into('<iI', data, STAMP_OFFSET, stamp.sec, stamp.nanosec)
+            out.append(bytes(data))
+        return out
 
 
 def stamp_key(stamp):

@@ -289,6 +289,10 @@ class RecoveryNode(Node):
             return
         if not self._intake.submit(Report(parsed, received)):
             self._inputs.reject('/actuator_fault', 'the fault queue is full; report dropped')
+            return
+        # Hand the interpreter lock to the intake thread now: the executor's own work
+        # after a callback (its next wait set) would hold it for up to a switch interval.
+        time.sleep(0)
 
     def _on_accepted(self, reports, cleared, faults):
         self._inputs.accepted()

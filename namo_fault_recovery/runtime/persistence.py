@@ -51,14 +51,19 @@ class Persistence:
 
         The run book may start its run at once, but nothing is published before the
         write ends (publication takes this lock), and this returns only after it.
-        ``received_at`` is when its first report arrived (``time.monotonic()``).
+        ``received_at`` is when its first report arrived (``time.monotonic()``).  The
+        journal line is written before the run is requested and synced right after, so
+        that the run's first work (a table look-up) overlaps the disk's wait instead of
+        holding the interpreter lock that the write needs to get there (measured: the
+        sync began 0.43 ms after the request, p50, with the write after it).
         """
         with self._lock:
             library = self._book.current
-            self._book.set_faults(faults, durable=False, received_at=received_at)
             seq = next(self._seq)
             began = time.monotonic()
-            self._journal(faults, library, seq)
+            problem = self._write_journal(seq, faults)
+            self._book.set_faults(faults, durable=False, received_at=received_at)
+            self._sync_journal(problem, faults, library, seq)
             self._book.faults_durable(time.monotonic() - began)
 
     def publish_and_queue(self, generation, faults, result, publish, in_hand=None):
@@ -109,10 +114,20 @@ class Persistence:
             self.problem = shorten(plan.problem, 500)
         return plan
 
-    def _journal(self, faults, library, seq):
-        """Append the fault set to the journal, synced; else rewrite the state file."""
+    def _write_journal(self, seq, faults):
+        """Write the fault set to the journal, not synced; return the error, or None."""
         try:
-            self.store.journal.append(seq, faults)
+            self.store.journal.write(seq, faults)
+        except (OSError, ValueError) as exc:
+            return exc
+        return None
+
+    def _sync_journal(self, problem, faults, library, seq):
+        """Sync the journal written (``problem``: its write's error); else rewrite the file."""
+        try:
+            if problem is not None:
+                raise problem
+            self.store.journal.sync()
             self._journal_failed = False
         except (OSError, ValueError) as exc:
             if not self._journal_failed:           # reported once, like a write failure

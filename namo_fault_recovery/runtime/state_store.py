@@ -185,17 +185,33 @@ class FaultJournal:
         self._lock = threading.Lock()
         self._fd = None
         self._newest = -1            # the newest seq appended by this process, not emptied
+        self._written = -1           # the newest seq written (synced or not)
 
     def append(self, seq, faults):
         """Append the fault set of change ``seq`` and sync it; raise OSError on failure."""
+        self.write(seq, faults)
+        self.sync()
+
+    def write(self, seq, faults):
+        """
+        Append the fault set of change ``seq``, not yet synced (OSError, ValueError).
+
+        :meth:`sync` makes it durable: a caller can start other work in between (the
+        run of that fault set) and wait for the disk while that work runs.
+        """
         line = encode_record(seq, faults)
         with self._lock:
             fd = self._open()
             view = memoryview(line)
             while view:
                 view = view[os.write(fd, view):]
-            os.fdatasync(fd)
-            self._newest = max(self._newest, seq)
+            self._written = max(self._written, seq)
+
+    def sync(self):
+        """Make every record written so far durable (``fdatasync``; OSError)."""
+        with self._lock:
+            os.fdatasync(self._open())
+            self._newest = max(self._newest, self._written)
 
     def empty_if_covered(self, seq):
         """
@@ -205,13 +221,14 @@ class FaultJournal:
         file's ``seq``, and :meth:`StateStore.load` ignores it.
         """
         with self._lock:
-            if self._newest > seq or not self.path.exists():
+            # a record written and not yet synced counts: its sync must find it there
+            if max(self._newest, self._written) > seq or not self.path.exists():
                 return
             try:
                 os.ftruncate(self._open(), 0)
             except OSError:
                 return               # kept: its records are older, read back and ignored
-            self._newest = -1
+            self._newest = self._written = -1
 
     def records(self):
         """Return the valid records ``(seq, faults)`` in file order ([] without a file)."""
