@@ -572,3 +572,17 @@ def test_demand_tick_never_loses_a_change_made_while_it_decides():
     changers[0].join()
     assert (timer.cancels, timer.resets) == (1, 1) and not tick.idle
     assert tick.take_change()
+
+
+def test_a_start_up_signal_turned_into_an_import_error_is_still_a_clean_stop():
+    """An extension being imported wraps the handler's SystemExit (pybind11's ImportError)."""
+    from namo_fault_recovery.ros.recovery_node import cut_short_by_signal as cut_short
+    try:
+        try:
+            raise SystemExit(0)
+        except SystemExit as stop:
+            raise ImportError('initialization failed') from stop
+    except ImportError as exc:
+        wrapped = exc
+    assert cut_short(wrapped) and cut_short(SystemExit(0))
+    assert not cut_short(ImportError('a real one')) and not cut_short(ValueError())

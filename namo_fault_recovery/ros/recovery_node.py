@@ -76,10 +76,26 @@ def main(args=None):
         signal.signal(signum, _on_signal)
     try:
         return _run(args)
-    except SystemExit as exc:
-        if _SIGNALS:
+    except BaseException as exc:
+        if _SIGNALS and cut_short_by_signal(exc):
             return 0                 # stopped during start-up: a clean exit
         raise exc
+
+
+def cut_short_by_signal(exc):
+    """
+    Return True if ``exc`` is, or was caused by, the SystemExit of a start-up signal.
+
+    An extension module being imported when the signal came turns it into an error of
+    its own (pybind11's ``ImportError: initialization failed``, caused by it).
+    """
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, SystemExit):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
 
 
 def _run(args):
