@@ -2,8 +2,9 @@
 Fault -> library latency of a running (or private) node (``namo-recovery bench latency``).
 
 For each of ``--count`` single-joint faults (cycling over the joints): clear the faults,
-publish the fault, time the arrival of the complete new library, then time a
-reconfigure_gestures round trip.  Prints p50/p95/max, and splits the latency into the
+publish the fault, time the arrival of the complete new library (as the client's callback
+has it, and as its middleware received the last gesture: ``received_timestamp``, before the
+client's own executor took it), then time a reconfigure_gestures round trip.  Prints p50/p95/max, and splits the latency into the
 engine's wall time (from ``/diagnostics``; none for a contingency-table hit) and what the
 node and DDS add, with the node's own figures of each library: ``publish_path_sec``
 (result in hand -> last gesture published), ``fault_to_request_sec``,
@@ -39,13 +40,16 @@ class _Samples:
 
     def __init__(self):
         self.latencies, self.round_trips, self.engine, self.overhead = [], [], [], []
+        self.delivered = []           # fault published -> last gesture at the client's rmw
         self.figures = {key: [] for key, _ in NODE_FIGURES}
         self.failures = []
         self.origins = {}                  # library_origin -> count ('' if not described)
 
-    def add_library(self, client, library, t0):
+    def add_library(self, client, library, t0, t0_ns=None):
         """Add the latency of a fault's ``library`` (published at ``t0``) and its split."""
         self.latencies.append(library.received - t0)
+        if library.delivered_ns and t0_ns:
+            self.delivered.append((library.delivered_ns - t0_ns) * 1e-9)
         origin = _node_figures(client, library, self)
         self.origins[origin] = self.origins.get(origin, 0) + 1
         if library.described:
@@ -60,6 +64,8 @@ class _Samples:
         report = {'faults': count, 'fault_to_library': percentiles(self.latencies),
                   'reconfigure_service': percentiles(self.round_trips),
                   'origins': dict(self.origins), 'failures': self.failures}
+        if self.delivered:
+            report['fault_to_delivery'] = percentiles(self.delivered)
         if self.engine:
             report['engine_wall_time'] = percentiles(self.engine)
             report['node_and_dds_overhead'] = percentiles(self.overhead)
@@ -110,7 +116,10 @@ def clear_faults(client, timeout, stamp=None):
 
 def fault_library(client, joints, angles, timeout, diagnostics_timeout=3.0):
     """
-    Publish a fault; return (its first library or None, publication time).
+    Publish a fault; return (its first library or None, publication time, the same in ns).
+
+    The publication time is ``time.monotonic()`` (the library's ``received``) and
+    ``time.time_ns()`` (the middleware's reception time, ``delivered_ns``).
 
     Called after the library of a clear arrived: the next version is the fault's.  A
     version whose ``/diagnostics`` never came (superseded at once by a refined one) is
@@ -118,14 +127,14 @@ def fault_library(client, joints, angles, timeout, diagnostics_timeout=3.0):
     the fault went out is not the fault's).
     """
     stamp = client.inbox.newest_stamp()
-    t0 = time.monotonic()
+    t0, t0_ns = time.monotonic(), time.time_ns()
     client.publish_fault(joints, angles, timeout)
     while True:
         library = client.next_library(stamp, max(t0 + timeout - time.monotonic(), 0.0),
                                       diagnostics_timeout=diagnostics_timeout)
         if library is None or not library.described or set(joints) <= set(
                 library.result.locks):
-            return library, t0
+            return library, t0, t0_ns
         stamp = library.stamp
 
 
@@ -138,12 +147,12 @@ def _measure(client, samples, count, joints, timeout, out, verbose=False, settle
         joint = joints[i % len(joints)]
         stamp = clear_faults(client, timeout, stamp)
         time.sleep(settle)          # the node at rest (its work after the clear done)
-        library, t0 = fault_library(client, [joint], None, timeout)
+        library, t0, t0_ns = fault_library(client, [joint], None, timeout)
         if library is None:
             samples.failures.append(f'{joint}: no library within {timeout:g} s')
             continue
         stamp = library.stamp
-        samples.add_library(client, library, t0)
+        samples.add_library(client, library, t0, t0_ns)
         t1 = time.monotonic()
         answer = client.reconfigure(timeout)
         samples.round_trips.append(time.monotonic() - t1)
@@ -203,6 +212,7 @@ def run_latency(out, count=50, joints=None, timeout=30.0, namespace='/',
 def write_latency(out, report, failures):
     """Print a latency report: p50 / p95 / max of every figure, then the failures."""
     for label, key in (('fault publish -> full library received', 'fault_to_library'),
+                       ("  the last gesture at the client's rmw", 'fault_to_delivery'),
                        ('reconfigure_gestures round trip', 'reconfigure_service'),
                        ('  of which optimisation (engine wall time)', 'engine_wall_time'),
                        ('  of which node + DDS (latency - engine)', 'node_and_dds_overhead'),

@@ -135,7 +135,7 @@ def _latency_rounds(client, joints, timeout, burner):
         for joint in joints:
             clear_faults(client, timeout)
             time.sleep(0.2)
-            library, t0 = fault_library(client, [joint], None, timeout, 1.0)
+            library, t0, _ = fault_library(client, [joint], None, timeout, 1.0)
             if library is None:
                 samples.append({'joint': joint, 'latency_s': None, 'origin': None})
                 continue
@@ -178,7 +178,7 @@ def _refine_case(client, name, best, timeout, window):
         angles = [faults[j] for j in joints]
     clear_faults(client, timeout)
     time.sleep(0.2)
-    library, t0 = fault_library(client, joints, angles, timeout, 1.0)
+    library, t0, _ = fault_library(client, joints, angles, timeout, 1.0)
     versions = []
     while library is not None and library.received - t0 <= window:
         # Scored from the published positions: every version counts, described or not.

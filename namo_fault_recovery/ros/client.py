@@ -108,6 +108,9 @@ class PublishedLibrary:
     received: float          # time.monotonic() when its last gesture arrived
     described: bool          # False: no /diagnostics of it, scores NaN, locks unknown
     library_version: int = None
+    # the middleware's reception time of its last gesture (system clock, ns), before the
+    # client's executor took it; None if the messages came without their info
+    delivered_ns: int = None
 
     @property
     def names(self):
@@ -177,7 +180,7 @@ def _gesture(name, msg, values):
         max_jump_deg=_number(values, keys.gesture_key(name, keys.MAX_JUMP_DEG)))
 
 
-def rebuild_library(stamp, msgs, diagnostics, received):
+def rebuild_library(stamp, msgs, diagnostics, received, delivered_ns=None):
     """
     Return a PublishedLibrary from one version's messages and its /diagnostics.
 
@@ -215,7 +218,8 @@ def rebuild_library(stamp, msgs, diagnostics, received):
     version = values.get(keys.LIBRARY_VERSION)
     return PublishedLibrary(stamp=stamp, joint_names=tuple(first.joint_names), result=result,
                             received=received, described=diagnostics is not None,
-                            library_version=int(version) if version else None)
+                            library_version=int(version) if version else None,
+                            delivered_ns=delivered_ns)
 
 
 class Inbox:
@@ -234,6 +238,7 @@ class Inbox:
         self._cond = threading.Condition()
         self._versions = {}       # stamp ns -> {gesture: JointTrajectory}
         self._arrivals = {}       # stamp ns -> monotonic time of its latest message
+        self._delivered = {}      # stamp ns -> the middleware's latest reception time, ns
         self._last_arrival = None
         self._gesture_count = None
         self._diagnostics = deque(maxlen=_MAX_DIAGNOSTICS)
@@ -251,6 +256,20 @@ class Inbox:
                 self._cond.notify_all()
         if self._on_library is not None:
             self._on_library(key, msg)
+
+    def add_delivered(self, msg, info):
+        """
+        Take a gesture_library message with its MessageInfo (the subscription's callback).
+
+        Keeps the middleware's ``received_timestamp`` too: when the message reached this
+        process, before the executor took it (the client's own delay is not the node's).
+        """
+        received = info.get('received_timestamp') if isinstance(info, dict) else None
+        if received:
+            key = stamp_key(msg.header.stamp)
+            with self._cond:
+                self._delivered[key] = max(self._delivered.get(key, 0), int(received))
+        self.add_library(msg)
 
     def add_diagnostics(self, array):
         """Take one DiagnosticArray; keep it if it holds statuses of our node."""
@@ -335,7 +354,8 @@ class Inbox:
         with self._cond:
             msgs = dict(self._versions[stamp])
             received = self._arrivals[stamp]
-        return rebuild_library(stamp, msgs, diagnostics, received)
+            delivered = self._delivered.get(stamp)
+        return rebuild_library(stamp, msgs, diagnostics, received, delivered)
 
 
 class RecoveryClient(SpunClient):
@@ -367,7 +387,7 @@ class RecoveryClient(SpunClient):
                              reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._library_sub = self.node.create_subscription(
-            JointTrajectory, LIBRARY_TOPIC, self.inbox.add_library, latched)
+            JointTrajectory, LIBRARY_TOPIC, self.inbox.add_delivered, latched)
         self.node.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC,
                                       self.inbox.add_diagnostics, 50)
         self._fault_pub = self.node.create_publisher(JointState, FAULT_TOPIC, 10)
