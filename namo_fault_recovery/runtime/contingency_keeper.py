@@ -199,7 +199,7 @@ class ContingencyKeeper:
     def _load(self, fingerprint):
         """Return (the table for ``fingerprint``, checked and prepared; lines to log once used)."""
         table, reason = ContingencyTable.load(self._path, fingerprint)
-        kept = len(table) if reason is None else 0
+        kept = len(table) if reason is None else None
         said = []
         if self._offline:
             offline, why = ContingencyTable.load(self._offline, fingerprint)
@@ -213,7 +213,7 @@ class ContingencyKeeper:
         for key, (locks, result) in list(table.entries.items()):
             if not self._admit(locks, result):
                 del table.entries[key]
-        if kept:
+        if kept is not None:
             said.insert(0, f'contingency table: {kept} entries reused from {self._path}')
         return table, said
 
