@@ -22,14 +22,17 @@ class ABC(Algorithm):
     ``n_sources`` food sources (as many employed and onlooker bees), ``max_cycles``
     cycles, abandonment ``limit``; ``stall_cycles`` ends the run early after that many
     cycles without improvement of any sub-problem's best (None: never); ``polish`` is the
-    number of best distinct sources per sub-problem refined locally at the end (0: none);
+    number of best distinct sources per sub-problem refined locally at the end (0: none),
+    with steepest-descent restarts if ``polish_restart`` (see :func:`~.polish.polish`);
     ``use_x0`` places the problem's known-good start (if any) among the first sources.
+    The first sources are the problem's :meth:`~.base.Problem.starts` (uniform draws
+    unless the problem knows better).
     """
 
     name = 'abc'
 
     def __init__(self, n_sources=5, max_cycles=500, limit=150, stall_cycles=None, polish=0,
-                 polish_maxiter=100, polish_ftol=1e-10, use_x0=False):
+                 polish_maxiter=100, polish_ftol=1e-10, use_x0=False, polish_restart=False):
         self.n_sources = check_int('ABC n_sources', n_sources, 2)
         self.max_cycles = check_int('ABC max_cycles', max_cycles, 1)
         self.limit = check_int('ABC limit', limit, 1)
@@ -41,6 +44,10 @@ class ABC(Algorithm):
         if not isinstance(use_x0, bool):
             raise ValueError(f'ABC use_x0: expected true or false, got {use_x0!r}')
         self.use_x0 = use_x0
+        if not isinstance(polish_restart, bool):
+            raise ValueError(f'ABC polish_restart: expected true or false, got '
+                             f'{polish_restart!r}')
+        self.polish_restart = polish_restart
 
     @classmethod
     def paper(cls):
@@ -64,7 +71,7 @@ class ABC(Algorithm):
     def run(self, problem, rng, clock):
         """Run the colony on ``problem`` within ``clock``; see :class:`~.base.Algorithm`."""
         batch, sn = problem.batch, self.n_sources
-        x = problem.random(rng, sn)
+        x = problem.starts(rng, sn)
         if self.use_x0 and problem.x0 is not None:
             x[:, 0] = problem.x0
         f = problem.evaluate(x)
@@ -100,7 +107,7 @@ class ABC(Algorithm):
                 # The known-good start is always refined too, whatever became of it.
                 starts[:, -1] = problem.x0
             px, pf = polish(problem, starts, clock, maxiter=self.polish_maxiter,
-                            ftol=self.polish_ftol)
+                            ftol=self.polish_ftol, restart=self.polish_restart)
             remember_best(px, pf, best_x, best_f)
             history.append(best_f.copy())
         return best_x, best_f, nit, history

@@ -11,9 +11,11 @@ PRESETS = ('default', 'paper')
 
 # The product default: a small colony seeded with the reference pose, run on all gestures
 # at once, then a batched quasi-Newton polish of the best two sources (one of them the
-# reference start).  Chosen with `namo-recovery bench speed`; see README "Product default".
+# reference start), restarted from steepest descent where it stalls on a kink.  Chosen with
+# `namo-recovery bench speed`; see README "Product default".
 DEFAULT_ABC = {'n_sources': 8, 'max_cycles': 8, 'limit': 20, 'polish': 2,
-               'polish_maxiter': 100, 'polish_ftol': 1e-7, 'use_x0': True}
+               'polish_maxiter': 100, 'polish_ftol': 1e-7, 'use_x0': True,
+               'polish_restart': True}
 
 
 def make_algorithm(optimizer: str, optimizer_preset: str = 'default',
