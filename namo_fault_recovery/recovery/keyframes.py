@@ -115,10 +115,14 @@ class PoseProblem(Problem):
         self.continuity = float(continuity) * _DEG2 if anchor is not None else 0.0
         super().__init__(lower, upper, self._objective, n_batch=len(self.target_ids), x0=x0,
                          value_and_grad=self._value_and_grad)
+        # The colony starts from kinematic starts (see starts) where a moving arm is scored
+        # (an idle arm moved clear of the body is not: its draws would only be pulled home).
+        self.seeded = any(side in scorer.targets[t].arms for t in self.target_ids
+                          for side in ARMS if self.columns[side])
 
     def starts(self, rng, n):
-        """Return ``n`` starts per keyframe from the kinematics (:mod:`.seeding`)."""
-        return kinematic_starts(self, rng, n)
+        """Return ``n`` starts per keyframe: from the kinematics (:mod:`.seeding`) if seeded."""
+        return kinematic_starts(self, rng, n) if self.seeded else self.random(rng, n)
 
     def subset(self, rows):
         """Return the same problem for some of its rows only (``rows``: indices)."""
@@ -779,6 +783,7 @@ def _within_reach(setup, rows, owner, ks, motion, clock, rng):
         picked, low, high = boxes
         problem = _motion_problem(setup, rows, ks[picked], free)
         problem.restrict(low[:, col], high[:, col])
+        problem.seeded = False   # uniform draws in a box this small start near already
         res = minimize(problem, _reach_algorithm(setup.algo), clock=clock,
                        seed=int(rng.integers(2 ** 63)))
         x, f = np.atleast_2d(res.x), np.atleast_1d(res.fun)

@@ -78,17 +78,20 @@ def _normal_equations(problem, x):
             lms[side], jacs[side] = batch_forward_jacobian(problem.robot, flat, side)
         else:
             lms[side] = batch_forward(problem.robot, flat, side)
-    target = np.repeat(problem.target_ids, n)
-    h = np.zeros((batch * n, dim, dim))
-    g = np.zeros((batch * n, dim))
-    for r, d_r, w in problem.scorer.residuals(lms, jacs, target):
-        jac = np.zeros(r.shape + (dim,))
+    cols = {side: tuple(np.array(c, dtype=int).reshape(-1, 2).T)
+            for side, c in problem.columns.items()}
+    res, jac, weight = [], [], []
+    for r, d_r, w in problem.scorer.residuals(lms, jacs, np.repeat(problem.target_ids, n)):
+        block = np.zeros(r.shape + (dim,))
         for side, d in d_r.items():
-            for k, j in problem.columns[side]:
-                jac[..., k] = d[..., j]
+            block[..., cols[side][0]] = d[..., cols[side][1]]
+        res.append(r)
+        jac.append(block)
         c = w / np.maximum(np.linalg.norm(r, axis=-1), IRLS_FLOOR)
-        h += c[:, None, None] * np.einsum('nmi,nmj->nij', jac, jac)
-        g += c[:, None] * np.einsum('nmi,nm->ni', jac, r)
+        weight.append(np.repeat(c[:, None], r.shape[1], axis=1))
+    res, jac, weight = (np.concatenate(a, axis=1) for a in (res, jac, weight))
+    h = np.einsum('nmi,nmj->nij', jac * weight[..., None], jac)
+    g = np.einsum('nmi,nm->ni', jac, weight * res)
     if problem.continuity:
         h += 2.0 * problem.continuity * np.eye(dim)
         g += 2.0 * problem.continuity * (x - problem.anchor[:, None]).reshape(batch * n, dim)
