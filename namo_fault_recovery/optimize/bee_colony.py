@@ -14,6 +14,8 @@ import numpy as np
 from .base import Algorithm, best_of, check_float, check_int, remember_best, StepTimer
 from .polish import polish
 
+DISTINCT_RAD = 0.2   # rad: a source this close to the best (every angle) is the same start
+
 
 class ABC(Algorithm):
     """
@@ -158,7 +160,13 @@ class ABC(Algorithm):
 
 
 def _distinct_best(x, f, best_x, k):
-    """Return the best memorised point plus the k - 1 best current sources, (batch, k, D)."""
-    order = np.argsort(f, axis=1)[:, :max(k - 1, 0)]
+    """
+    Return the best memorised point plus the k - 1 best current sources, (batch, k, D).
+
+    A source within ``DISTINCT_RAD`` (every angle) of the best memorised point is the
+    same start polished twice: the other sources are taken first.
+    """
+    near = np.all(np.abs(x - best_x[:, None, :]) <= DISTINCT_RAD, axis=-1)
+    order = np.lexsort((f, near), axis=1)[:, :max(k - 1, 0)]
     rows = np.arange(x.shape[0])[:, None]
     return np.concatenate((best_x[:, None, :], x[rows, order]), axis=1)
