@@ -196,3 +196,31 @@ def test_the_old_name_of_options_still_answers_with_a_warning():
     with pytest.warns(DeprecationWarning, match='use Algorithm.options'):
         assert algo.settings() == algo.options()
     assert algo.options()['max_cycles'] == 7
+
+
+def kinked_problem():
+    """Return 10 |x0 - x1| + (x0 + x1 - 2)^2: its floor (1, 1) lies on the kink x0 = x1."""
+    def value(x):
+        return 10.0 * np.abs(x[..., 0] - x[..., 1]) + (x[..., 0] + x[..., 1] - 2.0) ** 2
+
+    def value_and_grad(x):
+        kink = 10.0 * np.sign(x[..., 0] - x[..., 1])
+        bowl = 2.0 * (x[..., 0] + x[..., 1] - 2.0)
+        return value(x), np.stack((kink + bowl, bowl - kink), axis=-1)
+    return Problem([-5.0, -5.0], [5.0, 5.0], value, n_batch=1, value_and_grad=value_and_grad)
+
+
+def test_a_polish_stalled_on_a_kink_goes_on_from_steepest_descent():
+    start = np.array([[[3.0, -2.0]]])
+    _, stalled = polish(kinked_problem(), start, Clock(None), maxiter=200, ftol=1e-12)
+    _, restarted = polish(kinked_problem(), start, Clock(None), maxiter=200, ftol=1e-12,
+                          restart=True)
+    assert stalled[0, 0] > 0.1          # the quasi-Newton estimate went bad on the kink
+    assert restarted[0, 0] < 0.01
+
+
+def test_the_product_colony_restarts_its_polish_and_the_papers_does_not():
+    assert make_algorithm('abc').polish_restart
+    assert not ABC.paper().polish_restart
+    with pytest.raises(ValueError, match='ABC polish_restart: expected true or false'):
+        ABC(polish_restart=1)

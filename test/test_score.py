@@ -88,3 +88,36 @@ def test_bad_weights(kwargs, message):
 def test_unknown_weight_key():
     with pytest.raises(ValueError, match="unknown component 'knee'"):
         ScoreWeights.from_mapping({'knee': 1.0})
+
+
+@pytest.mark.parametrize('gesture', ['wai', 'bye'])
+def test_the_residuals_recombine_to_the_score_with_their_jacobians(robot, library, gesture):
+    """The least-squares blocks sum (w |r|) to the score, their Jacobians match differences."""
+    from namo_fault_recovery.model.kinematics import batch_forward_jacobian
+    scorer = SimilarityScore(robot, gesture_targets(library[gesture]))
+    q = {side: np.random.default_rng(k).uniform(-0.8, 0.8, (4, 7))
+         for k, side in enumerate(('right', 'left'))}
+    target = np.arange(4) % len(scorer.targets)
+
+    def blocks(q):
+        pairs = {side: batch_forward_jacobian(robot, q[side], side) for side in q}
+        lms = {side: pair[0] for side, pair in pairs.items()}
+        return scorer.residuals(lms, {side: pair[1] for side, pair in pairs.items()}, target)
+
+    base = blocks(q)
+    total = sum(w * np.linalg.norm(r, axis=-1) for r, _, w in base)
+    exact, parts = scorer.evaluate(q['right'], q['left'], target, breakdown=True)
+    # The palm blocks carry sin(angle) about the rotation's axis; all else is the score's.
+    w_palm = ScoreWeights().vector(library[gesture].two_handed)[3]
+    arms = [s for s in ('right', 'left') if s in library[gesture].arms]
+    sag = sum(parts[s][:, 3] - np.degrees(np.sin(np.radians(parts[s][:, 3]))) for s in arms)
+    assert np.allclose(total, exact - w_palm * sag, rtol=1e-9, atol=1e-9)
+    h = 1e-6
+    for side in ('right', 'left'):
+        for j in range(7):
+            moved = {s: v.copy() for s, v in q.items()}
+            moved[side][:, j] += h
+            for (r0, d_r, _), (r1, _, _) in zip(base, blocks(moved)):
+                fd = (r1 - r0) / h
+                analytic = d_r[side][..., j] if side in d_r else np.zeros_like(fd)
+                assert np.allclose(analytic, fd, atol=1e-3 * (1.0 + np.abs(fd).max()))

@@ -263,6 +263,49 @@ class SimilarityScore:
                             'nc,nic->ni', unit, jacs[side].positions[:, row])
         return total, grads['right'], grads['left']
 
+    def residuals(self, lms: dict, jacs: dict, target: np.ndarray) -> list:
+        """
+        Return the score's terms as residual vectors: ``[(r (N, m), {side: J}, w (N,))]``.
+
+        The score is ``sum w |r|`` over these blocks (each arm's elbow, wrist and
+        fingertip offsets in mm and its palm rotation vector in deg, ``sin`` of the
+        angle about its axis; a two-handed gesture's left-right gaps), which is what
+        a least-squares method needs.  ``lms`` maps both arms to their landmarks (N
+        rows), ``jacs`` the arms that move to their :class:`ArmJacobian`; ``J`` (N, m,
+        n) is the block's Jacobian with respect to that arm's angles.
+        """
+        w = self._w[target]
+        blocks = []
+        for k, side in enumerate(('right', 'left')):
+            mask = self._arm_mask[target, k]
+            ref_pos, ref_rot = self._ref_stack[side]
+            lm, jac = lms[side], jacs.get(side)
+            pts = np.stack((lm.elbow, lm.wrist, lm.tip), axis=1) - ref_pos[target]
+            for c in range(3):
+                blocks.append((pts[:, c], {} if jac is None else
+                               {side: np.swapaxes(jac.positions[:, c], 1, 2)}, w[:, c] * mask))
+            a = lm.palm @ np.swapaxes(ref_rot[target], -1, -2)
+            vec = 0.5 * np.stack((a[:, 2, 1] - a[:, 1, 2], a[:, 0, 2] - a[:, 2, 0],
+                                  a[:, 1, 0] - a[:, 0, 1]), axis=-1)
+            d_vec = {}
+            if jac is not None:   # d vee(skew(R Rr^T)) / dq_i = (tr(A) I - A) z_i / 2
+                m = 0.5 * (np.trace(a, axis1=1, axis2=2)[:, None, None] * np.eye(3) - a)
+                d_vec[side] = np.degrees(np.einsum('nij,nkj->nik', m, jac.axes))
+            blocks.append((np.degrees(vec), d_vec, w[:, 3] * mask))
+        two = self._two[target]
+        if self._uses_left and np.any(two):
+            for c, row, ref in ((4, 1, self._ref_wlr), (5, 2, self._ref_tlr)):
+                attr = ('elbow', 'wrist', 'tip')[row]
+                diff = getattr(lms['right'], attr) - getattr(lms['left'], attr)
+                dist = np.sqrt(np.einsum('ni,ni->n', diff, diff))
+                unit = diff / np.where(dist > 0, dist, 1.0)[:, None]
+                d_gap = {side: sign * np.einsum('nc,nic->ni', unit,
+                                                jacs[side].positions[:, row])[:, None, :]
+                         for side, sign in (('right', 1.0), ('left', -1.0)) if side in jacs}
+                blocks.append(((dist - ref[target])[:, None], d_gap,
+                               np.where(two, w[:, c], 0.0)))
+        return blocks
+
     def _landmarks_and_jacobians(self, q_right, q_left, target):
         """Return each arm's landmarks, and the Jacobians of the arms that move."""
         lms, jacs = {}, {}

@@ -106,6 +106,15 @@ class Problem:
             return rng.uniform(low[:, None], high[:, None], size=(self.batch, n, self.dim))
         return rng.uniform(self.lower, self.upper, size=(self.batch, n, self.dim))
 
+    def starts(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """
+        Return ``n`` starting points per sub-problem (batch, n, D) for a population.
+
+        Uniform draws (:meth:`random`) here; a problem that knows more of its structure
+        (:class:`~namo_fault_recovery.recovery.keyframes.PoseProblem`) returns better ones.
+        """
+        return self.random(rng, n)
+
     def clip(self, x: np.ndarray) -> np.ndarray:
         """Clip into the bounds (each sub-problem's own, after :meth:`restrict`)."""
         if self.row_bounds is None:

@@ -14,6 +14,8 @@ import numpy as np
 from .base import Algorithm, best_of, check_float, check_int, remember_best, StepTimer
 from .polish import polish
 
+DISTINCT_RAD = 0.2   # rad: a source this close to the best (every angle) is the same start
+
 
 class ABC(Algorithm):
     """
@@ -22,14 +24,17 @@ class ABC(Algorithm):
     ``n_sources`` food sources (as many employed and onlooker bees), ``max_cycles``
     cycles, abandonment ``limit``; ``stall_cycles`` ends the run early after that many
     cycles without improvement of any sub-problem's best (None: never); ``polish`` is the
-    number of best distinct sources per sub-problem refined locally at the end (0: none);
+    number of best distinct sources per sub-problem refined locally at the end (0: none),
+    with steepest-descent restarts if ``polish_restart`` (see :func:`~.polish.polish`);
     ``use_x0`` places the problem's known-good start (if any) among the first sources.
+    The first sources are the problem's :meth:`~.base.Problem.starts` (uniform draws
+    unless the problem knows better).
     """
 
     name = 'abc'
 
     def __init__(self, n_sources=5, max_cycles=500, limit=150, stall_cycles=None, polish=0,
-                 polish_maxiter=100, polish_ftol=1e-10, use_x0=False):
+                 polish_maxiter=100, polish_ftol=1e-10, use_x0=False, polish_restart=False):
         self.n_sources = check_int('ABC n_sources', n_sources, 2)
         self.max_cycles = check_int('ABC max_cycles', max_cycles, 1)
         self.limit = check_int('ABC limit', limit, 1)
@@ -41,6 +46,10 @@ class ABC(Algorithm):
         if not isinstance(use_x0, bool):
             raise ValueError(f'ABC use_x0: expected true or false, got {use_x0!r}')
         self.use_x0 = use_x0
+        if not isinstance(polish_restart, bool):
+            raise ValueError(f'ABC polish_restart: expected true or false, got '
+                             f'{polish_restart!r}')
+        self.polish_restart = polish_restart
 
     @classmethod
     def paper(cls):
@@ -64,7 +73,7 @@ class ABC(Algorithm):
     def run(self, problem, rng, clock):
         """Run the colony on ``problem`` within ``clock``; see :class:`~.base.Algorithm`."""
         batch, sn = problem.batch, self.n_sources
-        x = problem.random(rng, sn)
+        x = problem.starts(rng, sn)
         if self.use_x0 and problem.x0 is not None:
             x[:, 0] = problem.x0
         f = problem.evaluate(x)
@@ -100,7 +109,7 @@ class ABC(Algorithm):
                 # The known-good start is always refined too, whatever became of it.
                 starts[:, -1] = problem.x0
             px, pf = polish(problem, starts, clock, maxiter=self.polish_maxiter,
-                            ftol=self.polish_ftol)
+                            ftol=self.polish_ftol, restart=self.polish_restart)
             remember_best(px, pf, best_x, best_f)
             history.append(best_f.copy())
         return best_x, best_f, nit, history
@@ -151,7 +160,13 @@ class ABC(Algorithm):
 
 
 def _distinct_best(x, f, best_x, k):
-    """Return the best memorised point plus the k - 1 best current sources, (batch, k, D)."""
-    order = np.argsort(f, axis=1)[:, :max(k - 1, 0)]
+    """
+    Return the best memorised point plus the k - 1 best current sources, (batch, k, D).
+
+    A source within ``DISTINCT_RAD`` (every angle) of the best memorised point is the
+    same start polished twice: the other sources are taken first.
+    """
+    near = np.all(np.abs(x - best_x[:, None, :]) <= DISTINCT_RAD, axis=-1)
+    order = np.lexsort((f, near), axis=1)[:, :max(k - 1, 0)]
     rows = np.arange(x.shape[0])[:, None]
     return np.concatenate((best_x[:, None, :], x[rows, order]), axis=1)

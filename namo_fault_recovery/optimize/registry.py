@@ -9,11 +9,16 @@ from .gd import GradientDescent
 ALGORITHMS = {'abc': ABC, 'ga': GA, 'bfoa': BFOA, 'gd': GradientDescent}
 PRESETS = ('default', 'paper')
 
-# The product default: a small colony seeded with the reference pose, run on all gestures
-# at once, then a batched quasi-Newton polish of the best two sources (one of them the
-# reference start).  Chosen with `namo-recovery bench speed`; see README "Product default".
+# The product default: a small colony started from the problem's own sources (kinematic
+# ones for the keyframe search), run on all gestures at once, then a batched
+# quasi-Newton polish of the best two starts (one of them the reference start), restarted
+# from steepest descent where it stalls on a kink.  Chosen with `namo-recovery bench
+# speed` and `bench robots`; see README "Product default".  (``'polish': 3`` adds the
+# best source of another basin: more quality on Talos and TIAGo++, but slower; README,
+# "Other robots".)
 DEFAULT_ABC = {'n_sources': 8, 'max_cycles': 8, 'limit': 20, 'polish': 2,
-               'polish_maxiter': 100, 'polish_ftol': 1e-7, 'use_x0': True}
+               'polish_maxiter': 100, 'polish_ftol': 1e-7, 'use_x0': True,
+               'polish_restart': True}
 
 
 def make_algorithm(optimizer: str, optimizer_preset: str = 'default',

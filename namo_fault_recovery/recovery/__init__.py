@@ -14,6 +14,8 @@ From a fault set to an adapted gesture library, free of ROS.
 - :mod:`.locks`: lock strategies (``average``, ``measured``, ``optimal``) and lock angles;
 - :mod:`.keyframes`: the batched pose problems of every keyframe, solved within one
   deadline (the first paper's method, with stage 2 and the collision term);
+- :mod:`.seeding`: the keyframe search's starting sources, random draws taken a few
+  damped least-squares steps towards the landmarks (so the colony starts in good basins);
 - :mod:`.motion`: whole-motion adaptation (the second paper: typical points and Kriging,
   point by point, or Kriging then the whole trajectory at once);
 - :mod:`.figures`: an adapted motion's figures as a ``GestureResult`` (scores, fingertip
