@@ -8,8 +8,8 @@ before the client's own executor took it), then time a reconfigure_gestures roun
 Prints p50/p95/max, and splits the latency into the engine's wall time (from
 ``/diagnostics``; none for a contingency-table hit) and what the node and DDS add,
 with the node's own figures of each library: ``publish_path_sec`` (result in hand ->
-last gesture published), ``fault_to_request_sec``, ``fault_sync_sec`` and ``fault_to_publish_sec`` (fault received -> last gesture
-published: the node's whole share; the rest is DDS and the client), and the libraries'
+last gesture published), ``fault_to_request_sec``, ``fault_sync_sec`` and
+``fault_to_publish_sec`` (fault received -> last gesture published: the node's whole share; the rest is DDS and the client), and the libraries'
 origins (``table`` for a contingency-table hit).  ``--settle`` waits between a clear and
 the next fault.  ``--joint-states-hz`` streams ``/joint_states`` from another process
 meanwhile; ``--node-param`` sets a parameter of the private node (e.g.
