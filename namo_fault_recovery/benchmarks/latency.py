@@ -3,17 +3,18 @@ Fault -> library latency of a running (or private) node (``namo-recovery bench l
 
 For each of ``--count`` single-joint faults (cycling over the joints): clear the faults,
 publish the fault, time the arrival of the complete new library (as the client's
-callback has it, and as its middleware received the last gesture: ``received_timestamp``,
-before the client's own executor took it), then time a reconfigure_gestures round trip.
-Prints p50/p95/max, and splits the latency into the engine's wall time (from
-``/diagnostics``; none for a contingency-table hit) and what the node and DDS add,
-with the node's own figures of each library: ``publish_path_sec`` (result in hand ->
-last gesture published), ``fault_to_request_sec``, ``fault_sync_sec`` and
-``fault_to_publish_sec`` (fault received -> last gesture published: the node's whole share; the rest is DDS and the client), and the libraries'
-origins (``table`` for a contingency-table hit).  ``--settle`` waits between a clear and
-the next fault.  ``--joint-states-hz`` streams ``/joint_states`` from another process
-meanwhile; ``--node-param`` sets a parameter of the private node (e.g.
-``contingency_table:=false`` to time the engine path only).  Everything goes through
+callback has it, and as its middleware received the last gesture:
+``received_timestamp``, before the client's own executor took it), then time a
+reconfigure_gestures round trip. Prints p50/p95/max, and splits the latency into the
+engine's wall time (from ``/diagnostics``; none for a contingency-table hit) and what
+the node and DDS add, with the node's own figures of each library: ``publish_path_sec``
+(result in hand -> last gesture published), ``fault_to_request_sec``, ``fault_sync_sec``
+and ``fault_to_publish_sec`` (fault received -> last gesture published: the node's whole
+share; the rest is DDS and the client), and the libraries' origins (``table`` for a
+contingency-table hit). ``--settle`` waits between a clear and the next fault.
+``--joint-states-hz`` streams ``/joint_states`` from another process meanwhile;
+``--node-param`` sets a parameter of the private node (e.g. ``contingency_table:=false``
+to time the engine path only). Everything goes through
 :class:`~namo_fault_recovery.ros.client.RecoveryClient`; ROS is imported only when the
 benchmark runs.
 """
