@@ -220,7 +220,28 @@ def test_a_polish_stalled_on_a_kink_goes_on_from_steepest_descent():
 
 
 def test_the_product_colony_restarts_its_polish_and_the_papers_does_not():
-    assert make_algorithm('abc').polish_restart
-    assert not ABC.paper().polish_restart
+    assert make_algorithm('abc').polish_restart and make_algorithm('abc').informed_starts
+    # the paper's colony starts from uniform draws: its comparison with GA and BFOA holds
+    assert not ABC.paper().polish_restart and not ABC.paper().informed_starts
+    assert not make_algorithm('abc', 'paper').informed_starts
+    with pytest.raises(ValueError, match='ABC informed_starts: expected true or false'):
+        ABC(informed_starts=1)
     with pytest.raises(ValueError, match='ABC polish_restart: expected true or false'):
         ABC(polish_restart=1)
+
+
+def test_only_an_informed_colony_asks_the_problem_for_its_starts():
+    """The paper's colony draws its sources uniformly, whatever the problem offers."""
+    class Offering(Problem):
+        asked = 0
+
+        def starts(self, rng, n):
+            Offering.asked += 1
+            return self.random(rng, n)
+
+    problem = Offering([-1.0, -1.0], [1.0, 1.0], lambda x: np.sum(x ** 2, axis=-1), n_batch=1)
+    ABC(n_sources=4, max_cycles=2, limit=5).run(problem, np.random.default_rng(0), Clock(None))
+    assert Offering.asked == 0
+    ABC(n_sources=4, max_cycles=2, limit=5, informed_starts=True).run(
+        problem, np.random.default_rng(0), Clock(None))
+    assert Offering.asked == 1

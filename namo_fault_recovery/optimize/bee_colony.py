@@ -27,14 +27,17 @@ class ABC(Algorithm):
     number of best distinct sources per sub-problem refined locally at the end (0: none),
     with steepest-descent restarts if ``polish_restart`` (see :func:`~.polish.polish`);
     ``use_x0`` places the problem's known-good start (if any) among the first sources.
-    The first sources are the problem's :meth:`~.base.Problem.starts` (uniform draws
-    unless the problem knows better).
+    The first sources are uniform draws, as in the paper; with ``informed_starts`` they
+    are the problem's :meth:`~.base.Problem.starts` (the same, unless the problem knows
+    better: the keyframe search's kinematic starts), so that the paper's preset stays the
+    paper's colony in its comparison with GA and BFOA.
     """
 
     name = 'abc'
 
     def __init__(self, n_sources=5, max_cycles=500, limit=150, stall_cycles=None, polish=0,
-                 polish_maxiter=100, polish_ftol=1e-10, use_x0=False, polish_restart=False):
+                 polish_maxiter=100, polish_ftol=1e-10, use_x0=False, polish_restart=False,
+                 informed_starts=False):
         self.n_sources = check_int('ABC n_sources', n_sources, 2)
         self.max_cycles = check_int('ABC max_cycles', max_cycles, 1)
         self.limit = check_int('ABC limit', limit, 1)
@@ -50,6 +53,10 @@ class ABC(Algorithm):
             raise ValueError(f'ABC polish_restart: expected true or false, got '
                              f'{polish_restart!r}')
         self.polish_restart = polish_restart
+        if not isinstance(informed_starts, bool):
+            raise ValueError(f'ABC informed_starts: expected true or false, got '
+                             f'{informed_starts!r}')
+        self.informed_starts = informed_starts
 
     @classmethod
     def paper(cls):
@@ -73,7 +80,7 @@ class ABC(Algorithm):
     def run(self, problem, rng, clock):
         """Run the colony on ``problem`` within ``clock``; see :class:`~.base.Algorithm`."""
         batch, sn = problem.batch, self.n_sources
-        x = problem.starts(rng, sn)
+        x = problem.starts(rng, sn) if self.informed_starts else problem.random(rng, sn)
         if self.use_x0 and problem.x0 is not None:
             x[:, 0] = problem.x0
         f = problem.evaluate(x)

@@ -18,7 +18,7 @@ PRESETS = ('default', 'paper')
 # "Other robots".)
 DEFAULT_ABC = {'n_sources': 8, 'max_cycles': 8, 'limit': 20, 'polish': 2,
                'polish_maxiter': 100, 'polish_ftol': 1e-7, 'use_x0': True,
-               'polish_restart': True}
+               'polish_restart': True, 'informed_starts': True}
 
 
 def make_algorithm(optimizer: str, optimizer_preset: str = 'default',
