@@ -244,23 +244,16 @@ class SimilarityScore:
                                 * np.einsum('nc,nci->ni', w[:, :ARM_COMPONENTS], d_terms))
         two = self._two[target]
         if self._uses_left and np.any(two):
-            for c, attr, ref in ((4, 'wrist', self._ref_wlr), (5, 'tip', self._ref_tlr)):
-                diff = getattr(lms['right'], attr) - getattr(lms['left'], attr)
-                dist = np.sqrt(np.einsum('ni,ni->n', diff, diff))
-                gap = dist - ref[target]
+            for c, gap, d_dist in self._gap_terms(lms, jacs, target):
                 if smooth:
                     soft = np.sqrt(gap ** 2 + smooth ** 2)
                     value, slope = soft - smooth, gap / soft
                 else:
                     value, slope = np.abs(gap), np.sign(gap)
                 total += np.where(two, w[:, c] * value, 0.0)
-                unit = diff / np.where(dist > 0, dist, 1.0)[:, None]
                 coef = np.where(two, w[:, c] * slope, 0.0)[:, None]
-                row = 1 if attr == 'wrist' else 2
-                for side, sign in (('right', 1.0), ('left', -1.0)):
-                    if side in jacs:
-                        grads[side] += sign * coef * np.einsum(
-                            'nc,nic->ni', unit, jacs[side].positions[:, row])
+                for side, d in d_dist.items():
+                    grads[side] += coef * d
         return total, grads['right'], grads['left']
 
     def residuals(self, lms: dict, jacs: dict, target: np.ndarray) -> list:
@@ -294,17 +287,27 @@ class SimilarityScore:
             blocks.append((np.degrees(vec), d_vec, w[:, 3] * mask))
         two = self._two[target]
         if self._uses_left and np.any(two):
-            for c, row, ref in ((4, 1, self._ref_wlr), (5, 2, self._ref_tlr)):
-                attr = ('elbow', 'wrist', 'tip')[row]
-                diff = getattr(lms['right'], attr) - getattr(lms['left'], attr)
-                dist = np.sqrt(np.einsum('ni,ni->n', diff, diff))
-                unit = diff / np.where(dist > 0, dist, 1.0)[:, None]
-                d_gap = {side: sign * np.einsum('nc,nic->ni', unit,
-                                                jacs[side].positions[:, row])[:, None, :]
-                         for side, sign in (('right', 1.0), ('left', -1.0)) if side in jacs}
-                blocks.append(((dist - ref[target])[:, None], d_gap,
+            for c, gap, d_dist in self._gap_terms(lms, jacs, target):
+                blocks.append((gap[:, None], {side: d[:, None, :] for side, d in d_dist.items()},
                                np.where(two, w[:, c], 0.0)))
         return blocks
+
+    def _gap_terms(self, lms, jacs, target):
+        """
+        Yield a two-handed gesture's left-right gaps: ``(component, gap, {side: dgap})``.
+
+        ``gap`` (N,) is the distance between the hands' wrists (then fingertips) less the
+        reference's; ``dgap`` (N, n) its gradient with respect to each moving arm's
+        angles (0 where the distance is exactly 0: a subgradient).
+        """
+        for c, row, ref in ((4, 1, self._ref_wlr), (5, 2, self._ref_tlr)):
+            attr = ('elbow', 'wrist', 'tip')[row]
+            diff = getattr(lms['right'], attr) - getattr(lms['left'], attr)
+            dist = np.sqrt(np.einsum('ni,ni->n', diff, diff))
+            unit = diff / np.where(dist > 0, dist, 1.0)[:, None]
+            yield c, dist - ref[target], {
+                side: sign * np.einsum('nc,nic->ni', unit, jacs[side].positions[:, row])
+                for side, sign in (('right', 1.0), ('left', -1.0)) if side in jacs}
 
     def _landmarks_and_jacobians(self, q_right, q_left, target):
         """Return each arm's landmarks, and the Jacobians of the arms that move."""
