@@ -42,7 +42,7 @@ from ..optimize.base import Clock
 from ..playback.clearance import PathClearance
 from ..playback.timing import plan_motion, PlayTiming
 from ..recovery.engine import recover
-from ..recovery.keyframes import PACED_NOTE
+from ..recovery.keyframes import joint_bounds, PACED_NOTE
 from ..recovery.motion import typical_points
 
 # One employed/onlooker cycle and a 5-step polish: a search cut after a handful of
@@ -80,8 +80,7 @@ def play_figures(robot, gesture, locks, timing=PlayTiming(), reference=None):
     """
     names = robot.joint_names
     limits = np.tile(np.asarray(robot.velocity_limits, dtype=float), 2)
-    lower = np.concatenate([robot.arms[s].lower for s in ('right', 'left')])
-    upper = np.concatenate([robot.arms[s].upper for s in ('right', 'left')])
+    lower, upper = joint_bounds(robot)
     args = (names, np.zeros(len(names)), gesture.times, np.asarray(gesture.positions))
     options = {'locks': locks, 'lower': lower, 'upper': upper, 'timing': timing}
     clearance = PathClearance(robot, names)

@@ -121,8 +121,15 @@ class PoseProblem(Problem):
                           for side in ARMS if self.columns[side])
 
     def starts(self, rng, n):
-        """Return ``n`` starts per keyframe: from the kinematics (:mod:`.seeding`) if seeded."""
-        return kinematic_starts(self, rng, n) if self.seeded else self.random(rng, n)
+        """
+        Return ``n`` starts per keyframe: from the kinematics (:mod:`.seeding`) if seeded.
+
+        A problem restricted to boxes (:meth:`restrict`: a paced motion's reach) draws
+        uniformly in them: in a box that small a draw starts near already.
+        """
+        if self.seeded and self.row_bounds is None:
+            return kinematic_starts(self, rng, n)
+        return self.random(rng, n)
 
     def subset(self, rows):
         """Return the same problem for some of its rows only (``rows``: indices)."""
@@ -783,7 +790,6 @@ def _within_reach(setup, rows, owner, ks, motion, clock, rng):
         picked, low, high = boxes
         problem = _motion_problem(setup, rows, ks[picked], free)
         problem.restrict(low[:, col], high[:, col])
-        problem.seeded = False   # uniform draws in a box this small start near already
         res = minimize(problem, _reach_algorithm(setup.algo), clock=clock,
                        seed=int(rng.integers(2 ** 63)))
         x, f = np.atleast_2d(res.x), np.atleast_1d(res.fun)
