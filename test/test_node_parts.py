@@ -368,6 +368,26 @@ def test_a_fault_set_being_written_starts_the_run_but_is_published_only_once_on_
     assert StateStore(tmp_path).load()[0].faults == faults
 
 
+@pytest.mark.parametrize('step', ['write', 'sync'])
+def test_a_journal_that_fails_falls_back_to_the_state_file_and_says_so_once(
+        tmp_path, robot, library, step):
+    """Either half of the journal's append failing: the state file is rewritten instead."""
+    from namo_fault_recovery.runtime.persistence import Persistence
+    from namo_fault_recovery.runtime.state_store import StateStore
+    errors = []
+    state = Persistence(tmp_path, robot, library, RunBook(), on_error=errors.append)
+
+    def broken(*args):
+        raise OSError('disk full')
+
+    setattr(state.store.journal, step, broken)
+    for angle in (0.1, 0.2):
+        state.commit_faults({'right_arm_joint1': Fault(angle)})
+        assert StateStore(tmp_path).load()[0].faults == {'right_arm_joint1': Fault(angle)}
+    assert len(errors) == 1 and 'cannot append to the fault journal' in errors[0]
+    assert 'disk full; rewriting the state file instead' in errors[0]
+
+
 def test_fault_to_publish_spans_a_report_to_the_first_library_after_it(library):
     import time
     book = RunBook()

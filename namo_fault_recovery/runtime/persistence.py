@@ -124,18 +124,18 @@ class Persistence:
 
     def _sync_journal(self, problem, faults, library, seq):
         """Sync the journal written (``problem``: its write's error); else rewrite the file."""
-        try:
-            if problem is not None:
-                raise problem
-            self.store.journal.sync()
-            self._journal_failed = False
-        except (OSError, ValueError) as exc:
-            if not self._journal_failed:           # reported once, like a write failure
-                self._on_error(f'cannot append to the fault journal '
-                               f'{self.store.journal.path}: {exc}; rewriting the state file '
-                               f'instead')
-            self._journal_failed = True
-            self._save(faults, library, seq)
+        if problem is None:
+            try:
+                self.store.journal.sync()
+                self._journal_failed = False
+                return
+            except (OSError, ValueError) as exc:
+                problem = exc
+        if not self._journal_failed:           # reported once, like a write failure
+            self._on_error(f'cannot append to the fault journal {self.store.journal.path}: '
+                           f'{problem}; rewriting the state file instead')
+        self._journal_failed = True
+        self._save(faults, library, seq)
 
     def _save(self, faults, library, seq=None):
         try:
