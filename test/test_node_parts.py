@@ -606,3 +606,17 @@ def test_a_start_up_signal_turned_into_an_import_error_is_still_a_clean_stop():
         wrapped = exc
     assert cut_short(wrapped) and cut_short(SystemExit(0))
     assert not cut_short(ImportError('a real one')) and not cut_short(ValueError())
+
+
+def test_a_start_up_signal_swallowed_where_it_landed_prints_nothing():
+    """A weakref callback's ignored SystemExit of a start-up signal is not a traceback."""
+    from types import SimpleNamespace
+
+    from namo_fault_recovery.ros.recovery_node import swallowed_stop_hook
+    passed = []
+    stop = SimpleNamespace(exc_type=SystemExit, exc_value=SystemExit(0))
+    other = SimpleNamespace(exc_type=ValueError, exc_value=ValueError('a real one'))
+    swallowed_stop_hook([2], passed.append)(stop)
+    swallowed_stop_hook([2], passed.append)(other)
+    swallowed_stop_hook([], passed.append)(stop)        # no signal came: not ours
+    assert passed == [other, stop]

@@ -70,8 +70,25 @@ def _check_params_files(argv):
     return None
 
 
+def swallowed_stop_hook(signals, default):
+    """
+    Return a ``sys.unraisablehook`` that drops the SystemExit of a start-up signal.
+
+    A signal's SystemExit that lands in code whose exceptions Python ignores (a weakref
+    callback such as importlib's module-lock one) is printed as "Exception ignored"
+    with a traceback, and start-up goes on; its next check of ``signals`` then ends it
+    with exit 0.  Anything else goes to ``default``.
+    """
+    def hook(info):
+        if signals and isinstance(info.exc_value, SystemExit):
+            return
+        default(info)
+    return hook
+
+
 def main(args=None):
     """Run the node until Ctrl-C or SIGTERM; return the exit code."""
+    sys.unraisablehook = swallowed_stop_hook(_SIGNALS, sys.__unraisablehook__)
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, _on_signal)
     try:
