@@ -1,8 +1,11 @@
 """
-Arms of 5 to 8 joints: Talos with 5, 6 or 8 joints per arm (issue 17).
+Arms of 5 to 8 joints: Talos with 5, 6 or 8 joints per arm, or 7 and 6 (issue 17).
 
 The 5- and 6-joint robots (test/data/talos5.yaml, talos6.yaml) list fewer of Talos's
-joints in ``joints``; the profile loader holds the others at 0.  The 8-joint robot
+joints in ``joints``; the profile loader holds the others at 0.  The robot with arms
+of unequal joint counts (talos76.yaml) moves all seven of its right arm's joints and
+six of its left arm's, so the whole-robot angles have 13 columns: the right arm's 7,
+then the left arm's 6.  The 8-joint robot
 (talos8.yaml) is Talos with one more revolute joint per arm, inserted into the URDF
 text here (:func:`talos8_urdf`).  Their gesture libraries were retargeted from
 config/gestures.yaml.  Kinematics are checked against Pinocchio on the full URDF
@@ -10,13 +13,15 @@ config/gestures.yaml.  Kinematics are checked against Pinocchio on the full URDF
 physics must take these arms as they take Talos's seven.
 """
 
+import json
 import math
 from pathlib import Path
 import re
 
 from namo_fault_recovery.errors import ConfigError
 from namo_fault_recovery.model.gestures import load_library
-from namo_fault_recovery.model.kinematics import (arm_joint_count, forward_kinematics,
+from namo_fault_recovery.model.kinematics import (arm_columns, arm_joint_count,
+                                                  forward_kinematics,
                                                   forward_kinematics_jacobian, split_arms)
 from namo_fault_recovery.model.profile_robot import ENGINE_ARM_JOINTS, robot_from_profile
 from namo_fault_recovery.model.robot_profile import load_profile
@@ -26,6 +31,7 @@ from namo_fault_recovery.playback.clearance import PathClearance
 from namo_fault_recovery.playback.timing import plan_motion
 from namo_fault_recovery.recovery.engine import recover
 from namo_fault_recovery.recovery.locks import resolve_locks
+from namo_fault_recovery.recovery.result import LibraryResult
 from namo_fault_recovery.recovery.settings import RecoverySettings
 from namo_fault_recovery.resources import distribution_file
 from namo_fault_recovery.sim.physics import designed_allowances, NamoSim
@@ -36,6 +42,9 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 DATA = Path(__file__).resolve().parent / 'data'
 COUNTS = (5, 6, 8)
+# Test robot -> joints of its (right, left) arm; 76 is the one of unequal arms.
+ARM_COUNTS = {5: (5, 5), 6: (6, 6), 8: (8, 8), 76: (7, 6)}
+ROBOTS = tuple(ARM_COUNTS)
 TALOS_URDF = 'talos_data/robots/talos_reduced.urdf'
 _LOADED = {}
 
@@ -73,7 +82,7 @@ def urdf_text(n):
 
 
 def talos(n):
-    """Return (robot, library) of the Talos test robot with ``n`` joints per arm (once)."""
+    """Return (robot, library) of the Talos test robot ``n`` (:data:`ARM_COUNTS`), once."""
     try:
         distribution_file('example-robot-data', TALOS_URDF)
     except FileNotFoundError:
@@ -94,45 +103,57 @@ def profile_text(n_right, n_left):
     return text
 
 
-@pytest.mark.parametrize('n', COUNTS)
-def test_a_robot_of_5_6_or_8_arm_joints_loads_in_chain_order(n):
+@pytest.mark.parametrize('n', ROBOTS)
+def test_a_robot_of_5_to_8_arm_joints_loads_in_chain_order(n):
     robot, library = talos(n)
-    assert arm_joint_count(robot) == n and len(robot.joint_names) == 2 * n
-    assert len(robot.velocity_limits) == n
-    for side in ('right', 'left'):
+    counts = dict(zip(('right', 'left'), ARM_COUNTS[n]))
+    total = sum(counts.values())
+    assert len(robot.joint_names) == total
+    assert arm_columns(robot) == {'right': slice(0, counts['right']),
+                                  'left': slice(counts['right'], total)}
+    # One speed per joint, the URDF's own (TALOS gives every arm joint one).
+    model = pin.buildModelFromXML(urdf_text(n))
+    urdf = {j: float(model.velocityLimit[model.joints[model.getJointId(j)].idx_v])
+            for j in robot.joint_names}
+    assert robot.joint_velocity_limits == tuple(urdf[j] for j in robot.joint_names)
+    assert len(robot.velocity_limits) == (counts['right'] if n != 76 else 0)
+    for side, count in counts.items():
         arm = robot.profile.arms[side]
-        want = [f'arm_{side}_{k}_joint' for k in range(1, min(n, 7) + 1)]
-        if n == 8:
+        want = [f'arm_{side}_{k}_joint' for k in range(1, min(count, 7) + 1)]
+        if count == 8:
             want.insert(4, f'arm_{side}_4b_joint')
+        assert arm_joint_count(robot, side) == count
         assert robot.arms[side].joint_names == tuple(want)
-        assert (f'arm_{side}_7_joint' in arm.held) == (n < 7)
-        assert len(robot.arms[side].lower) == n
+        assert (f'arm_{side}_7_joint' in arm.held) == (count < 7)
+        assert len(robot.arms[side].lower) == count
+        assert robot.arm_velocity_limits(side) == tuple(urdf[j] for j in want)
     assert [g.name for g in library] == ['wai', 'bye', 'salute', 'side_invite']
-    assert library['wai'].joint_matrix().shape == (1, 2 * n)
+    assert library['wai'].joint_matrix().shape == (1, total)
+    wai = library['wai'].keyframes[0]
+    assert (len(wai.right), len(wai.left)) == ARM_COUNTS[n]
 
 
-def test_arm_joint_counts_outside_the_range_or_unequal_are_refused(tmp_path):
+def test_arm_joint_counts_outside_the_range_are_refused_per_arm(tmp_path):
     assert ENGINE_ARM_JOINTS == (5, 8)
-    four = tmp_path / 'talos4.yaml'
-    four.write_text(profile_text(4, 4))
-    with pytest.raises(ConfigError) as err:
-        robot_from_profile(four)
-    text = str(err.value)
-    assert 'talos4.yaml' in text and 'arms.right.joints' in text
-    assert '4 joints' in text and '5 to 8' in text and '\n' not in text
+    for n_right, n_left, side in ((4, 4, 'right'), (7, 4, 'left')):
+        four = tmp_path / f'talos{n_right}{n_left}.yaml'
+        four.write_text(profile_text(n_right, n_left))
+        with pytest.raises(ConfigError) as err:
+            robot_from_profile(four)
+        text = str(err.value)
+        assert four.name in text and f'arms.{side}.joints' in text
+        assert '4 joints' in text and '5 to 8' in text and '\n' not in text
     unequal = tmp_path / 'talos67.yaml'
     unequal.write_text(profile_text(6, 7))
-    with pytest.raises(ConfigError) as err:
-        robot_from_profile(unequal)
-    text = str(err.value)
-    assert 'talos67.yaml' in text and 'arms' in text and '6 and 7 joints' in text
+    robot = robot_from_profile(unequal)          # arms of unequal counts are taken
+    assert [arm_joint_count(robot, s) for s in ('right', 'left')] == [6, 7]
 
 
 def pinocchio_landmarks(robot, side, q):
     """Return {role: (N, 3) mm or palm (N, 3, 3)} of one arm by Pinocchio on the URDF."""
     profile = robot.profile
     arm = profile.arms[side]
-    model = pin.buildModelFromXML(urdf_text(arm_joint_count(robot)))
+    model = pin.buildModelFromXML(urdf_text(8 if arm_joint_count(robot, side) == 8 else 7))
     data = model.createData()
     out = {role: [] for role in arm.marks}
     for row in q:
@@ -149,11 +170,12 @@ def pinocchio_landmarks(robot, side, q):
     return {role: np.array(v) for role, v in out.items()}
 
 
-@pytest.mark.parametrize('n', COUNTS)
+@pytest.mark.parametrize('n', ROBOTS)
 def test_the_reduced_arm_chain_matches_pinocchio_and_its_jacobian_differences(n):
     robot, _ = talos(n)
     for side in ('right', 'left'):
         arm = robot.arms[side]
+        n = arm_joint_count(robot, side)
         q = np.random.default_rng(17).uniform(arm.lower, arm.upper, (20, n))
         ours = forward_kinematics(robot, q, side)
         ref = pinocchio_landmarks(robot, side, q)
@@ -170,7 +192,7 @@ def test_the_reduced_arm_chain_matches_pinocchio_and_its_jacobian_differences(n)
             assert np.abs(num - jac.positions[:, 2, j]).max() < 1e-4
 
 
-@pytest.mark.parametrize('n', COUNTS)
+@pytest.mark.parametrize('n', ROBOTS)
 def test_every_single_fault_is_recovered_with_the_joint_held(n):
     robot, library = talos(n)
     for joint in robot.joint_names:
@@ -181,9 +203,10 @@ def test_every_single_fault_is_recovered_with_the_joint_held(n):
         assert [g.name for g in res.gestures] == [g.name for g in library]
         for gesture in res.gestures:
             q = np.array(gesture.positions)
-            assert q.shape == (len(library[gesture.name].keyframes), 2 * n)
+            assert q.shape == (len(library[gesture.name].keyframes), sum(ARM_COUNTS[n]))
             assert np.all(q[:, column] == lock), (joint, gesture.name)
-            assert len(gesture.keyframes[0].right) == n
+            kf = gesture.keyframes[0]
+            assert (len(kf.right), len(kf.left)) == ARM_COUNTS[n]
             # No worse than the locked design, unless that design collides (then the
             # best clear motion is published, and the message says why).
             assert (gesture.score_after <= gesture.score_before + 1e-9
@@ -194,7 +217,7 @@ def test_every_single_fault_is_recovered_with_the_joint_held(n):
 def test_the_player_plans_and_bends_a_path_clear_on_six_joint_arms():
     robot, library = talos(6)
     names = robot.joint_names
-    limits = np.array(robot.velocity_limits * 2)
+    limits = np.array(robot.joint_velocity_limits)
     clearance = PathClearance(robot, names)
     wai = library['wai']
     # Left joint 1 held at its average lock: the straight approach to Wai presses the
@@ -216,12 +239,13 @@ def test_the_player_plans_and_bends_a_path_clear_on_six_joint_arms():
                                penetrations(robot, frames[0][None]))
 
 
-@pytest.mark.parametrize('n', COUNTS)
+@pytest.mark.parametrize('n', ROBOTS)
 def test_the_simulator_holds_the_key_poses_and_a_stuck_joint(n):
     robot, library = talos(n)
     sim = NamoSim(robot, allowances=designed_allowances(robot, library),
                   urdf=urdf_text(n) if n == 8 else None)
-    assert sim.model.nq == sim.model.nu == 2 * n
+    total = sum(ARM_COUNTS[n])
+    assert sim.model.nq == sim.model.nu == total
     for gesture in library:
         q = gesture.keyframes[-1].positions()
         sim.set_positions(q)
@@ -230,9 +254,9 @@ def test_the_simulator_holds_the_key_poses_and_a_stuck_joint(n):
         sim.step(100)
         assert np.abs(sim.positions() - q).max() < math.radians(0.01), gesture.name
         assert sim.contact_steps == 0, (gesture.name, sim.pairs_seen)
-    sim.set_positions(np.zeros(2 * n))
+    sim.set_positions(np.zeros(total))
     sim.stick(robot.joint_names[3], math.radians(-40.0))
-    sim.set_targets(np.zeros(2 * n))
+    sim.set_targets(np.zeros(total))
     sim.step(500)
     target = library['salute'].keyframes[-1].positions()
     worst = 0.0
@@ -241,7 +265,7 @@ def test_the_simulator_holds_the_key_poses_and_a_stuck_joint(n):
         sim.step(10)
         worst = max(worst, abs(sim.positions()[3] - math.radians(-40.0)))
     assert worst < math.radians(0.05), math.degrees(worst)
-    moved = np.delete(np.arange(2 * n), 3)
+    moved = np.delete(np.arange(total), 3)
     assert np.abs(sim.positions()[moved] - target[moved]).max() < math.radians(0.1)
 
 
@@ -252,3 +276,52 @@ def test_both_arms_split_at_the_robots_joint_count():
     assert right.shape == left.shape == (2, 6) and left[0, 0] == 6.0
     with pytest.raises(ValueError, match=r'\(\.\.\., 12\)'):
         split_arms(robot, np.zeros((2, 14)))
+
+
+def test_arms_of_unequal_joint_counts_split_at_each_arm():
+    robot, library = talos(76)
+    q = np.arange(26.0).reshape(2, 13)
+    right, left = split_arms(robot, q)
+    assert right.shape == (2, 7) and left.shape == (2, 6) and left[0, 0] == 7.0
+    with pytest.raises(ValueError, match=r'\(\.\.\., 13\)'):
+        split_arms(robot, np.zeros((2, 14)))
+    # The left arm's 6 angles reach its own chain, not the right arm's 7.
+    wai = library['wai'].keyframes[0]
+    np.testing.assert_array_equal(split_arms(robot, wai.positions())[1], wai.left)
+    lm = forward_kinematics(robot, wai.left, 'left')
+    with pytest.raises(ValueError, match=r'\(\.\.\., 6\)'):
+        forward_kinematics(robot, wai.right, 'left')
+    assert lm.tip.shape == (3,)
+
+
+def test_the_player_plans_arms_of_unequal_joint_counts_within_each_joints_speed():
+    robot, library = talos(76)
+    names = robot.joint_names
+    limits = np.array(robot.joint_velocity_limits)
+    assert len(limits) == 13 and len(set(limits.round(6))) > 1     # per joint, not per arm
+    locks = resolve_locks(robot, library, {'arm_left_6_joint': None})[0]
+    res = recover(robot, library, locks, RecoverySettings(), seed=1, clock=Clock(None))
+    column = names.index('arm_left_6_joint')
+    for gesture in res.gestures:
+        plan = plan_motion(names, np.zeros(13), list(gesture.times),
+                           [np.array(p) for p in gesture.positions], limits, locks=locks)
+        assert plan.positions.shape[1] == 13
+        assert np.ptp(plan.positions[:, column]) == 0.0
+        assert np.all(np.abs(plan.velocities) <= limits + 1e-9), gesture.name
+        assert gesture.speed_ratio <= 1.0 + 1e-9, gesture.name
+
+
+def test_a_result_of_unequal_arms_keeps_its_split_through_json():
+    robot, library = talos(76)
+    res = recover(robot, library, {'arm_right_2_joint': -0.3}, RecoverySettings(), seed=2,
+                  clock=Clock(None))
+    back = LibraryResult.from_dict(json.loads(json.dumps(res.to_dict())))
+    for gesture, again in zip(res.gestures, back.gestures):
+        assert gesture.right_joints == again.right_joints == 7
+        for kf, kf2 in zip(gesture.keyframes, again.keyframes):
+            assert (len(kf2.right), len(kf2.left)) == (7, 6)
+            np.testing.assert_array_equal(kf.left, kf2.left)
+    doc = res.to_dict()
+    doc['gestures'][0]['right_joints'] = 14
+    with pytest.raises(ValueError, match='right_joints: expected .* 0 to 13, got 14'):
+        LibraryResult.from_dict(doc)

@@ -95,7 +95,7 @@ class Bench:
         self.robot, self.library, self.sim = robot, library, sim
         self.reconfigure, self.monitor, self.timing = reconfigure, monitor, timing
         self.names = list(robot.joint_names)
-        self.velocity = np.array(robot.velocity_limits * 2, dtype=float)
+        self.velocity = np.array(robot.joint_velocity_limits, dtype=float)
         self.lower = np.concatenate([robot.arms[s].lower for s in ('right', 'left')])
         self.upper = np.concatenate([robot.arms[s].upper for s in ('right', 'left')])
         self.limits = BlendLimits(self.velocity, np.full(len(self.names), acceleration))

@@ -20,7 +20,8 @@ import numpy as np
 
 from ..errors import ReportedError
 from ..model.gestures import GestureLibrary, load_library
-from ..model.robot import ARMS, load_robot, N_JOINTS
+from ..model.kinematics import arm_joint_count
+from ..model.robot import ARMS, load_robot
 from ..objective.score import gesture_targets, SimilarityScore
 from ..optimize.base import Clock
 from ..recovery.engine import recover, RecoverySettings
@@ -122,8 +123,8 @@ def select_cases(robot, library, gestures=None, joints=None):
     for j in (joints or all_joints):
         if isinstance(j, (int, np.integer)) or (isinstance(j, str) and j.isdigit()):
             k = int(j)
-            if not 1 <= k <= N_JOINTS:
-                raise ValueError(f'joint number {k}: expected 1..{N_JOINTS}')
+            if not 1 <= k <= len(all_joints):
+                raise ValueError(f'joint number {k}: expected 1..{len(all_joints)}')
             j = all_joints[k - 1]
         robot.locate_joint(j)   # raises KeyError naming the choices
         chosen.append(j)
@@ -205,7 +206,8 @@ def case_problems(robot, library, gesture, faults, weights=None):
         base[side][:, j] = angle
         locked[side].append(j)
     moving = [s for s in ARMS if s in targets[0].arms and locked[s]]
-    free = tuple((s, j) for s in moving for j in range(N_JOINTS) if j not in locked[s])
+    free = tuple((s, j) for s in moving for j in range(arm_joint_count(robot, s))
+                 if j not in locked[s])
     problem = PoseProblem(robot, scorer, np.arange(len(targets)),
                           (base['right'], base['left']), free)
     return problem, locks

@@ -49,7 +49,7 @@ def play_on_sim(sim, robot, times, frames, locks=None, monitor=MonitorThresholds
     The trace is a list of (t, commanded, measured) at every control tick.
     """
     names = robot.joint_names
-    limits = np.array(robot.velocity_limits * 2)
+    limits = np.array(robot.joint_velocity_limits)
     lower = np.concatenate([robot.arms[s].lower for s in ('right', 'left')])
     upper = np.concatenate([robot.arms[s].upper for s in ('right', 'left')])
     plan = plan_motion(names, sim.positions(), times, frames, limits, locks=locks,

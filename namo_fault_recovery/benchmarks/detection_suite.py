@@ -100,7 +100,7 @@ class Arrival:
 def _limits(robot):
     lower = np.concatenate([robot.arms[s].lower for s in ('right', 'left')])
     upper = np.concatenate([robot.arms[s].upper for s in ('right', 'left')])
-    return np.array(robot.velocity_limits * 2), lower, upper
+    return np.array(robot.joint_velocity_limits), lower, upper
 
 
 def play(sim, robot, gesture, arrival, options, limit=30.0):

@@ -91,7 +91,7 @@ class PhysicsTrialRobot:
         self.rng = np.random.default_rng(seed)
         arm = robot.arms[side]
         self.joint_names, self.lower, self.upper = arm.joint_names, arm.lower, arm.upper
-        self.velocity = np.asarray(robot.velocity_limits, dtype=float)
+        self.velocity = np.asarray(robot.arm_velocity_limits(side), dtype=float)
         full = np.zeros(len(self.sim.joint_names))
         full[self.cols] = start
         self.sim.set_positions(full)
@@ -165,9 +165,9 @@ def _session(robot, case, kind, sigma, seed):
         bot = PhysicsTrialRobot(robot, case.urdf, case.truth, case.locks, sigma, seed, start)
     else:
         bot = KinematicTrialRobot(case.truth, nominal.lower, nominal.upper,
-                                  robot.velocity_limits, case.lock_idx, sigma, seed,
+                                  robot.arm_velocity_limits(SIDE), case.lock_idx, sigma, seed,
                                   timing=(KINEMATIC_SETTLE, LATENCY), start=start)
-    safety = SafetyCheck(nominal.lower, nominal.upper, np.asarray(robot.velocity_limits),
+    safety = SafetyCheck(nominal.lower, nominal.upper, np.asarray(robot.arm_velocity_limits(SIDE)),
                          case.clearance, 5.0)
     return TrialSession(bot, safety)
 

@@ -34,7 +34,7 @@ def plan_from_rest(robot, gesture):
     frames = [np.concatenate([kf.right, kf.left]) for kf in gesture.keyframes]
     return plan_motion(robot.joint_names, np.zeros(len(robot.joint_names)),
                        [kf.time_from_start for kf in gesture.keyframes], frames,
-                       list(robot.velocity_limits) * 2)
+                       list(robot.joint_velocity_limits))
 
 
 def play_watched(robot, plan, urdf, tracker_settings, thresholds=DeviationThresholds(),

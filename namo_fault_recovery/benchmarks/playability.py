@@ -79,7 +79,7 @@ def play_figures(robot, gesture, locks, timing=PlayTiming(), reference=None):
     without a reference).
     """
     names = robot.joint_names
-    limits = np.tile(np.asarray(robot.velocity_limits, dtype=float), 2)
+    limits = np.asarray(robot.joint_velocity_limits, dtype=float)
     lower, upper = joint_bounds(robot)
     args = (names, np.zeros(len(names)), gesture.times, np.asarray(gesture.positions))
     options = {'locks': locks, 'lower': lower, 'upper': upper, 'timing': timing}

@@ -31,7 +31,8 @@ import numpy as np
 from . import common
 from .deadline import CpuBurner
 from ..model.gestures import load_library
-from ..model.robot import load_robot, N_JOINTS
+from ..model.kinematics import split_arms
+from ..model.robot import load_robot
 from ..objective.score import gesture_targets, SimilarityScore
 from ..recovery.contingency import (build_table, entry_key, fault_sets, measure_entry,
                                     table_fingerprint, table_locks)
@@ -95,7 +96,7 @@ def published_scores(robot, lib, joint_names, gestures, settings=None):
         q = np.asarray(g.positions, dtype=float)[:, order]
         scorer = SimilarityScore(robot, gesture_targets(lib[g.name]), settings.weights,
                                  reference_robot=robot)
-        total = scorer.evaluate(q[:, :N_JOINTS], q[:, N_JOINTS:], np.arange(len(q)))
+        total = scorer.evaluate(*split_arms(robot, q), np.arange(len(q)))
         out[g.name] = float(np.max(total))
     return out
 
@@ -157,11 +158,11 @@ def playable(robot, gesture):
     Return True if a GestureResult's keyframes respect the joints' velocity limits.
 
     Between successive keyframes no joint may need more than its limit
-    (``robot.velocity_limits``, per arm joint); the approach to the first keyframe is
+    (``robot.joint_velocity_limits``); the approach to the first keyframe is
     the player's to plan.  A gesture that breaks it is not played as designed (the
     player stretches it), so it cannot be a best-known optimum.
     """
-    limits = np.tile(np.asarray(robot.velocity_limits, dtype=float), 2)
+    limits = np.asarray(robot.joint_velocity_limits, dtype=float)
     q = np.asarray(gesture.positions, dtype=float)
     t = np.asarray(gesture.times, dtype=float)
     if len(t) < 2:

@@ -43,7 +43,7 @@ def paced_times(robot, times, positions) -> list:
     """
     from ..playback.timing import plan_motion
     times = [float(t) for t in times]
-    limits = np.tile(np.asarray(robot.velocity_limits, dtype=float), 2)
+    limits = np.asarray(robot.joint_velocity_limits, dtype=float)
     names = robot.joint_names
     plan = plan_motion(names, np.zeros(len(names)), times, positions, limits)
     later = plan.waypoint_times[1:]

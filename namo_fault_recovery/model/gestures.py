@@ -17,6 +17,7 @@ import re
 import numpy as np
 
 from . import yaml_checks as chk
+from .kinematics import split_arms
 from .robot import ARMS, RobotModel
 from .self_contact import reference_contact
 from .trajectory_csv import load_trajectory_csv
@@ -290,8 +291,7 @@ def _csv_keyframes(value, robot, scale, file, key):
                           'unknown key; expected file and units')
     csv_path = Path(file).parent / csv_name
     times, angles = load_trajectory_csv(csv_path, robot, scale)
-    n = len(robot.arms['right'].joint_names)
-    return tuple(Keyframe(float(t), q[:n].copy(), q[n:].copy())
+    return tuple(Keyframe(float(t), *(arm.copy() for arm in split_arms(robot, q)))
                  for t, q in zip(times, angles))
 
 

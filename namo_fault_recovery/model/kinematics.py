@@ -27,23 +27,38 @@ class ArmLandmarks(NamedTuple):
     palm: np.ndarray    # (..., 3, 3) rotation of frame 7 (palm orientation)
 
 
-def arm_joint_count(robot) -> int:
-    """Return the number of joints per arm: 7 on Namo, the profile's on a URDF robot."""
+def arm_joint_count(robot, side: str = 'right') -> int:
+    """Return the number of joints of one arm: 7 on Namo, the profile's on a URDF robot."""
     chains = getattr(robot, 'chains', None)
-    return N_JOINTS if chains is None else len(robot.arms['right'].joint_names)
+    return N_JOINTS if chains is None else len(robot.arms[side].joint_names)
+
+
+def arm_columns(robot) -> dict:
+    """
+    Return ``{side: slice}``: each arm's columns in whole-robot angles, right arm first.
+
+    The arms may differ in joint count (a 7-joint right arm and a 6-joint left one): the
+    right arm's ``n_r`` columns come first, then the left arm's, as in
+    :attr:`~.robot.RobotJoints.joint_names`.
+    """
+    n_right = arm_joint_count(robot, 'right')
+    return {'right': slice(0, n_right),
+            'left': slice(n_right, n_right + arm_joint_count(robot, 'left'))}
 
 
 def split_arms(robot, q) -> tuple:
     """
-    Return the (right, left) columns of whole-robot angles ``q`` (..., 2n), right arm first.
+    Return the (right, left) columns of whole-robot angles ``q`` (..., J), right arm first.
 
-    ``n`` is :func:`arm_joint_count` (7 on Namo); both are views of ``q`` as an array.
+    ``J`` is the robot's joint count (14 on Namo; :func:`arm_columns`); both are views of
+    ``q`` as an array.
     """
     q = np.asarray(q, dtype=float)
-    n = arm_joint_count(robot)
-    if q.ndim == 0 or q.shape[-1] != 2 * n:
-        raise ValueError(f"expected both arms' angles, shape (..., {2 * n}), got {q.shape}")
-    return q[..., :n], q[..., n:]
+    cols = arm_columns(robot)
+    total = cols['left'].stop
+    if q.ndim == 0 or q.shape[-1] != total:
+        raise ValueError(f"expected both arms' angles, shape (..., {total}), got {q.shape}")
+    return q[..., cols['right']], q[..., cols['left']]
 
 
 def as_joint_array(q, name='q', n_joints=N_JOINTS):
@@ -141,13 +156,13 @@ def forward_kinematics(robot: RobotModel, q: ArrayLike, arm: str = 'right') -> A
     """
     Return the elbow, wrist, fingertip and palm rotation of ``arm`` for angles ``q``.
 
-    ``q`` has shape (..., 7) in radians; each output has the same leading shape.  The
-    left arm is the mirror image of the right one, so the same angles give the mirrored
-    pose.
+    ``q`` has shape (..., n) in radians, n the arm's joints (7 on Namo); each output has
+    the same leading shape.  On Namo the left arm is the mirror image of the right one,
+    so the same angles give the mirrored pose.
     """
     if arm not in ARMS:
         raise ValueError(f'arm: expected one of {ARMS}, got {arm!r}')
-    q = as_joint_array(q, n_joints=arm_joint_count(robot))
+    q = as_joint_array(q, n_joints=arm_joint_count(robot, arm))
     return batch_forward(robot, q, arm)
 
 
@@ -196,7 +211,7 @@ def forward_kinematics_jacobian(robot, q, arm='right'):
     ``z_i x (p - o_i)`` and the palm rotates about z_i.  For the mirrored left arm the
     axes become ``-M z_i`` (a reflection reverses the sense of rotation).
     """
-    q = np.atleast_2d(as_joint_array(q, n_joints=arm_joint_count(robot)))
+    q = np.atleast_2d(as_joint_array(q, n_joints=arm_joint_count(robot, arm)))
     return batch_forward_jacobian(robot, q, arm)
 
 

@@ -91,9 +91,12 @@ class ProfileRobot(RobotJoints):
     """
     A robot from its URDF and recovery profile, with the engine's robot interface.
 
-    Lengths in millimetres, angles in radians.  ``velocity_limits`` holds one speed
-    per arm joint, the slower of the two arms' (the engine times both arms with one
-    row, as on Namo); each arm's own speeds are in :attr:`arm_velocity`.
+    Lengths in millimetres, angles in radians.  Each arm's own speeds are in
+    :attr:`arm_velocity` (:meth:`arm_velocity_limits`), and :attr:`joint_velocity_limits`
+    lists them joint by joint,
+    as the engine and the player use them.  ``velocity_limits`` (one speed per arm
+    joint, the slower of the two arms', as on Namo) is kept for arms of one joint count;
+    it is empty when the counts differ.
     """
 
     name: str
@@ -107,6 +110,10 @@ class ProfileRobot(RobotJoints):
     learned: tuple = field(default=(), compare=False, repr=False)
     arm_velocity: dict = field(default_factory=dict)
     profile: RobotProfile | None = field(default=None, compare=False, repr=False)
+
+    def arm_velocity_limits(self, side: str) -> tuple:
+        """Speed limit (rad/s) of each joint of one arm, base first (the URDF's or profile's)."""
+        return tuple(self.arm_velocity[side])
 
     def geometry_key(self) -> bytes:
         """Return bytes that change with any kinematic constant (for fingerprints)."""
@@ -142,8 +149,8 @@ def robot_from_profile(profile: RobotProfile | str | os.PathLike,
 
     ``capsules`` overrides the self-collision capsules, which are otherwise fitted to
     the URDF's collision geometry (:mod:`.robot_capsules`).  Raises ConfigError (one
-    line) for a profile the engine cannot take: it needs both arms, with the same
-    number of joints.
+    line) for a profile the engine cannot take: it needs both arms, each of 5 to 8
+    joints (the two counts may differ).
     """
     from .robot_capsules import fit_capsules
     if not isinstance(profile, RobotProfile):
@@ -153,17 +160,14 @@ def robot_from_profile(profile: RobotProfile | str | os.PathLike,
         raise ConfigError(profile.source, 'arms', f'no {" or ".join(missing)} arm; the '
                           'recovery engine takes two-armed robots for now')
     chains = {side: _reduced_arm(profile, side) for side in ARMS}
-    counts = {chains[side].n_joints for side in ARMS}
-    if len(counts) != 1:
-        raise ConfigError(profile.source, 'arms',
-                          f'the arms have {" and ".join(map(str, sorted(counts)))} joints; the '
-                          'recovery engine takes arms of one joint count for now')
     arms = {side: ArmModel(side, chains[side].chain.joint_names,
                            chains[side].chain.lower.copy(), chains[side].chain.upper.copy(),
                            mirrored=False) for side in ARMS}
     speeds = {side: tuple(profile.velocity_limits[j] for j in arms[side].joint_names)
               for side in ARMS}
-    slowest = tuple(float(v) for v in np.min([speeds[s] for s in ARMS], axis=0))
+    counts = {len(speeds[side]) for side in ARMS}
+    slowest = (tuple(float(v) for v in np.min([speeds[s] for s in ARMS], axis=0))
+               if len(counts) == 1 else ())
     robot = ProfileRobot(profile.name, arms, chains, profile.source, CapsuleModel(),
                          velocity_limits=slowest, arm_velocity=speeds, profile=profile)
     return replace(robot, capsules=capsules if capsules is not None else fit_capsules(robot))

@@ -115,6 +115,15 @@ class RobotJoints:
         """Return True if one arm's structure differs from the design: a tool or a correction."""
         return self.tool_length(side) > 0 or self.corrected_arm(side) is not None
 
+    def arm_velocity_limits(self, side: str) -> tuple:
+        """Speed limit (rad/s) of each joint of one arm, base first (Namo: the same two)."""
+        return tuple(self.velocity_limits)
+
+    @property
+    def joint_velocity_limits(self) -> tuple:
+        """Speed limit (rad/s) of every joint, in :attr:`joint_names` order (right first)."""
+        return sum((self.arm_velocity_limits(side) for side in ARMS if side in self.arms), ())
+
     @property
     def joint_names(self) -> tuple:
         """All joint names, arm by arm in ARMS order (right first): 14 on Namo."""

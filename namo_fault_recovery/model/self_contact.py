@@ -33,7 +33,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .kinematics import forward_kinematics, shoulder_position, split_arms
+from .kinematics import arm_columns, forward_kinematics, shoulder_position, split_arms
 
 SEGMENTS = ('upper_arm', 'forearm', 'hand')
 # Pairs checked: each arm segment against the torso, and every right-left segment pair.
@@ -139,13 +139,13 @@ def pressed_joints(robot, joint_names, q, tolerance_mm=TOLERANCE_MM):
     q = np.atleast_2d(np.asarray(q, dtype=float))
     names = list(joint_names)
     out = np.zeros(q.shape, dtype=bool)
-    q14 = np.zeros((len(q), 2 * len(robot.arms['right'].joint_names)))
+    q14 = np.zeros((len(q), len(robot.joint_names)))
     whole = {}
-    for k, side in enumerate(('right', 'left')):
+    for side in ('right', 'left'):
         arm = list(robot.arms[side].joint_names)
         whole[side] = all(j in names for j in arm)
         if whole[side]:
-            q14[:, k * len(arm):(k + 1) * len(arm)] = q[:, [names.index(j) for j in arm]]
+            q14[:, arm_columns(robot)[side]] = q[:, [names.index(j) for j in arm]]
     if not any(whole.values()):
         return out
     pen = penetrations(robot, q14)

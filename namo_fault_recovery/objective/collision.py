@@ -42,9 +42,8 @@ class CollisionModel:
         self.torso = (np.array(self.capsules.torso_top, dtype=float),
                       np.array(self.capsules.torso_bottom, dtype=float))
         self.radius_sum = radius_sums(self.capsules)
-        n = arm_joint_count(robot)
-        qr = np.array([t.q_right for t in targets]).reshape(-1, n)
-        ql = np.array([t.q_left for t in targets]).reshape(-1, n)
+        qr = np.array([t.q_right for t in targets]).reshape(-1, arm_joint_count(robot, 'right'))
+        ql = np.array([t.q_left for t in targets]).reshape(-1, arm_joint_count(robot, 'left'))
         ref = self.distances(forward_kinematics(robot, qr, 'right'),
                              forward_kinematics(robot, ql, 'left'))[0]
         designed = np.array([designed_pairs(t.two_handed) for t in targets],

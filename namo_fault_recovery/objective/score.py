@@ -72,7 +72,7 @@ class SimilarityScore:
         if not targets:
             raise ValueError('SimilarityScore: expected at least one target, got none')
         self.robot = robot
-        self._n = arm_joint_count(robot)       # joints per arm (7 on Namo)
+        self._n = {side: arm_joint_count(robot, side) for side in ('right', 'left')}
         self.targets = targets
         self.weights = weights if weights is not None else ScoreWeights()
         qr = np.array([t.q_right for t in targets])
@@ -149,9 +149,9 @@ class SimilarityScore:
             raise ValueError(f'target: expected indices in 0..{len(self.targets) - 1}, '
                              f'got {target!r}')
         if not isinstance(q_right, ArmLandmarks):
-            q_right = np.atleast_2d(as_joint_array(q_right, 'q_right', self._n))
+            q_right = np.atleast_2d(as_joint_array(q_right, 'q_right', self._n['right']))
         if q_left is not None and not isinstance(q_left, ArmLandmarks):
-            q_left = np.atleast_2d(as_joint_array(q_left, 'q_left', self._n))
+            q_left = np.atleast_2d(as_joint_array(q_left, 'q_left', self._n['left']))
         rows = [target.size]
         for q in (q_right, q_left):
             if q is not None and not isinstance(q, ArmLandmarks):
@@ -227,7 +227,7 @@ class SimilarityScore:
         lms, jacs = self._landmarks_and_jacobians(q_right, q_left, target)
         w = self._w[target]
         total = np.zeros(n)
-        grads = {side: np.zeros((n, self._n)) for side in ('right', 'left')}
+        grads = {side: np.zeros((n, self._n[side])) for side in ('right', 'left')}
         for k, side in enumerate(('right', 'left')):
             if k == 1 and not self._uses_left:
                 break

@@ -76,7 +76,7 @@ def recover(robot: 'RobotModel', library: 'GestureLibrary', faults: Optional[dic
     if not structure_changed(faults, settings, robot):
         budget = None if clock.end is None else float(clock.end - clock.start)
         return reference_result(library, budget, settings.public(), seed,
-                                velocity_limits=robot.velocity_limits)
+                                velocity_limits=robot.joint_velocity_limits)
     began = time.monotonic()
     if quantisations is None:
         quantisations = typical_points(robot, library, settings.vq_distortion_mm, clock=clock)

@@ -15,7 +15,7 @@ import numpy as np
 
 from . import pacing
 from .result import GestureResult
-from ..model.kinematics import arm_joint_count, batch_forward, split_arms
+from ..model.kinematics import arm_columns, batch_forward, split_arms
 from ..model.robot import ARMS
 from ..objective.collision import CollisionModel
 from ..objective.score import gesture_targets
@@ -28,9 +28,8 @@ COLLIDES_WARNING = 'WARNING: the pose still collides'
 
 
 def columns(robot, side):
-    """Return the columns of ``side``'s joints in a (T, 2n) motion, n joints per arm."""
-    n = arm_joint_count(robot)
-    return slice(0, n) if side == 'right' else slice(n, 2 * n)
+    """Return the columns of ``side``'s joints in a (T, J) motion (right arm first)."""
+    return arm_columns(robot)[side]
 
 
 def largest_jump(q):
@@ -93,6 +92,7 @@ def describe_motion(ctx, motion, picks) -> GestureResult:
         name=gesture.name, times=tuple(float(kf.time_from_start) for kf in gesture.keyframes),
         positions=tuple(tuple(float(a) for a in row)
                         for row in np.concatenate((m.q_r, m.q_l), axis=1)),
+        right_joints=int(m.q_r.shape[1]),
         score_before=float(before.max()), score_after=float(after.max()),
         status=str(m.status), message=message, collides=collides,
         breakdown={c: float(v[worst]) for c, v in parts.items() if c not in ARMS},
@@ -114,8 +114,8 @@ def describe_motion(ctx, motion, picks) -> GestureResult:
 
 
 def motion_speed_ratio(robot, gesture, q):
-    """Return :func:`.pacing.speed_ratio` of angles ``q`` (K, 2n) at ``gesture``'s times."""
-    return pacing.speed_ratio(robot.velocity_limits,
+    """Return :func:`.pacing.speed_ratio` of angles ``q`` (K, J) at ``gesture``'s times."""
+    return pacing.speed_ratio(robot.joint_velocity_limits,
                               [kf.time_from_start for kf in gesture.keyframes], q)
 
 

@@ -33,7 +33,7 @@ from .figures import COLLIDES_WARNING, largest_jump
 from .locks import clamp_lock, resolve_locks
 from .result import GestureResult, LibraryResult
 from .seeding import kinematic_starts
-from ..model.kinematics import (arm_joint_count, ArmLandmarks, batch_forward,
+from ..model.kinematics import (arm_columns, arm_joint_count, ArmLandmarks, batch_forward,
                                 batch_forward_jacobian, split_arms, take_landmarks)
 from ..model.robot import ARMS
 from ..objective.collision import CollisionModel
@@ -438,7 +438,7 @@ def _share_branches(problem, x, f, motions, designed, clock, maxiter, ftol):
 def free_layout(robot, arms_used, locked, moving, allowed=None):
     """Free variables: unlocked joints of moving arms used (and ``allowed``, if given)."""
     return tuple((s, j) for s in ARMS if s in moving and s in arms_used
-                 for j in range(arm_joint_count(robot)) if j not in locked[s]
+                 for j in range(arm_joint_count(robot, s)) if j not in locked[s]
                  and (allowed is None or (s, j) in allowed))
 
 
@@ -553,8 +553,8 @@ class _Setup:
                         if any(robot.locate_joint(j)[0] == side for j in locks)
                         or robot.changed(side)}
         self.locked = locked_sets(robot, locks)
-        n_joints = arm_joint_count(robot)
-        self.frozen = tuple(side for side in ARMS if len(self.locked[side]) == n_joints)
+        self.frozen = tuple(side for side in ARMS
+                            if len(self.locked[side]) == arm_joint_count(robot, side))
         for side in self.frozen:
             self.notes.append(f'all joints of the {side} arm failed: it is frozen at its '
                               f'lock angles')
@@ -688,12 +688,12 @@ def pose_values(robot, scorer, checker, q, ids):
 
 def layout_columns(robot, layout) -> np.ndarray:
     """Return the columns of a free ``layout``'s (side, joint) pairs in both arms' angles."""
-    n = arm_joint_count(robot)
-    return np.array([j + (0 if s == 'right' else n) for s, j in layout], dtype=int)
+    first = {side: cols.start for side, cols in arm_columns(robot).items()}
+    return np.array([first[s] + j for s, j in layout], dtype=int)
 
 
 def joint_bounds(robot):
-    """Return the (lower, upper) joint limits of both arms, (2n,) each, right arm first."""
+    """Return the (lower, upper) joint limits of both arms, (J,) each, right arm first."""
     return (np.concatenate([robot.arms[s].lower for s in ARMS]),
             np.concatenate([robot.arms[s].upper for s in ARMS]))
 
@@ -723,7 +723,7 @@ def _pace(setup, rows, clock, rng):
         times = [kf.time_from_start for kf in rows.selected[owner].keyframes]
         ids = rows.ids[ks]
         design = np.concatenate((setup.ref_r[ids], setup.ref_l[ids]), axis=1)
-        limits = pacing.step_limits(robot.velocity_limits, times, design)
+        limits = pacing.step_limits(robot.joint_velocity_limits, times, design)
         q = np.concatenate((rows.right[ks], rows.left[ks]), axis=1)
         if pacing.feasible(q, limits):
             continue
@@ -985,7 +985,7 @@ def _path_figures(setup, out, ks):
     err_before = scorer.tip_error(out['base_right'][rows], out['base_left'][rows], rows)
     err_after = scorer.tip_error(out['right'][rows], out['left'][rows], rows)
     times = [kf.time_from_start for kf in setup.selected[setup.owners[rows[0]]].keyframes]
-    return {'speed_ratio': pacing.speed_ratio(setup.robot.velocity_limits, times, best),
+    return {'speed_ratio': pacing.speed_ratio(setup.robot.joint_velocity_limits, times, best),
             'tip_error_before_mm': float(err_before.mean()),
             'tip_error_mm': float(err_after.mean()), 'tip_error_max_mm': float(err_after.max()),
             'max_jump_designed_deg': largest_jump(design),
@@ -1020,6 +1020,7 @@ def _library_result(setup, locks, out, notes, wall, nfev):
             times=tuple(float(kf.time_from_start) for kf in gesture.keyframes),
             positions=tuple(tuple(float(a) for a in np.concatenate((best_r[k], best_l[k])))
                             for k in ks),
+            right_joints=len(best_r[ks[0]]),
             score_before=float(max(before[k] for k in ks)),
             score_after=float(after[worst]),
             breakdown={c: float(v[worst]) for c, v in parts.items()

@@ -369,7 +369,7 @@ def _pace_motion(ctx, m, picks, clock, notes):
     :func:`.pacing.tube` box, where every choice stays feasible.
     """
     robot, model = ctx.robot, ctx.model
-    limits = pacing.step_limits(robot.velocity_limits,
+    limits = pacing.step_limits(robot.joint_velocity_limits,
                                 [kf.time_from_start for kf in m.gesture.keyframes], m.design)
     lower, upper = joint_bounds(model)
     q = np.clip(np.concatenate((m.q_r, m.q_l), axis=1), lower, upper)

@@ -4,7 +4,7 @@ The joints' velocity limits between keyframes, as constraints of the search.
 The player (:mod:`~namo_fault_recovery.playback.timing`) joins a gesture's keyframes
 by a C1 cubic Hermite spline, with PCHIP slopes at the inner waypoints and zero
 velocity at both ends, and stretches every segment on which a joint's speed exceeds
-its limit (``robot.velocity_limits``): such a gesture is not played as designed.  The
+its limit (``robot.joint_velocity_limits``): such a gesture is not played as designed.  The
 engine publishes only gestures the player does not stretch, at any seed and budget.
 
 Why a step bound suffices: a PCHIP slope at an inner waypoint is zero or a weighted
@@ -43,7 +43,8 @@ def step_limits(velocity_limits, times, design):
     """
     Return the largest step (rad) each joint may take between keyframes, (K - 1, J).
 
-    ``velocity_limits`` (n per arm, rad/s; tiled over the ``J`` columns of ``design``),
+    ``velocity_limits`` (rad/s: one per column of ``design``, as
+    :attr:`~..model.robot.RobotJoints.joint_velocity_limits`; n per arm are tiled),
     ``times`` (K,) the keyframes' time_from_start and ``design`` (K, J) the designed
     angles: ``dt * limit / PEAK_FACTOR``, or the designed step where that is larger.
     """

@@ -59,6 +59,15 @@ def optional_number(value):
     return None if value is None else number(value)
 
 
+def arm_split(value, positions) -> int:
+    """Return a stored ``right_joints``: an int from 0 to a row's length (ValueError)."""
+    if isinstance(value, bool) or not isinstance(value, int) or not (
+            0 <= value <= min(len(p) for p in positions)):
+        raise ValueError(f'right_joints: expected a whole number of columns from 0 to '
+                         f'{min(len(p) for p in positions)}, got {value!r}')
+    return value
+
+
 @dataclass(frozen=True)
 class GestureResult:
     """
@@ -101,7 +110,10 @@ class GestureResult:
       published;
     - ``speed_ratio``: playability, the bound on the player's peak joint speed over the
       joint's velocity limit (:func:`.pacing.speed_ratio`; at most 1: played as timed,
-      not stretched; 0 for a single keyframe).
+      not stretched; 0 for a single keyframe);
+    - ``right_joints``: how many of a row's columns are the right arm's (the rest are
+      the left arm's; the arms may differ in joint count); 0 when not known, read as
+      half of them (arms of one joint count).
     """
 
     name: str
@@ -133,14 +145,17 @@ class GestureResult:
     max_jump_designed_deg: float = 0.0
     max_jump_before_deg: float = 0.0
     speed_ratio: float = 0.0
+    right_joints: int = 0
 
     @property
     def keyframes(self) -> tuple:
         """Return the published keyframes as :class:`~..model.gestures.Keyframe` objects."""
         from ..model.gestures import Keyframe
-        # Both arms have one joint count (profile_robot refuses others): halves.
-        return tuple(Keyframe(t, np.array(p[:len(p) // 2]), np.array(p[len(p) // 2:]))
-                     for t, p in zip(self.times, self.positions))
+        out = []
+        for t, p in zip(self.times, self.positions):
+            split = self.right_joints or len(p) // 2
+            out.append(Keyframe(t, np.array(p[:split]), np.array(p[split:])))
+        return tuple(out)
 
     def to_dict(self) -> dict:
         """Return a JSON-ready dict."""
@@ -162,7 +177,7 @@ class GestureResult:
             'tip_error_max_mm': self.tip_error_max_mm,
             'max_jump_designed_deg': self.max_jump_designed_deg,
             'max_jump_before_deg': self.max_jump_before_deg,
-            'speed_ratio': self.speed_ratio,
+            'speed_ratio': self.speed_ratio, 'right_joints': self.right_joints,
         }
 
     @classmethod
@@ -202,6 +217,7 @@ class GestureResult:
                 max_jump_designed_deg=number(doc.get('max_jump_designed_deg', 0.0)),
                 max_jump_before_deg=number(doc.get('max_jump_before_deg', 0.0)),
                 speed_ratio=number(doc.get('speed_ratio', 0.0)),
+                right_joints=arm_split(doc.get('right_joints', 0), positions),
             )
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             if isinstance(exc, MalformedResult):
@@ -368,7 +384,7 @@ def reference_result(library, deadline: Optional[float] = 0.0, settings: Optiona
                       positions=tuple(tuple(float(a) for a in kf.positions())
                                       for kf in g.keyframes),
                       status='unchanged', message='reference gesture',
-                      speed_ratio=ratio(g))
+                      speed_ratio=ratio(g), right_joints=len(g.keyframes[0].right))
         for g in library)
     return LibraryResult(gestures=gestures, deadline=deadline, settings=dict(settings or {}),
                          seed=seed, origin='reference')

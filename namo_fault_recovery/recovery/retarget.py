@@ -28,7 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .keyframes import PoseProblem
-from ..model.kinematics import ArmLandmarks, forward_kinematics, shoulder_position
+from ..model.kinematics import (arm_joint_count, ArmLandmarks, forward_kinematics,
+                                shoulder_position, split_arms)
 from ..model.robot import ARMS
 from ..model.self_contact import designed_pairs
 from ..model.weights import ScoreWeights
@@ -100,8 +101,7 @@ class RetargetedGesture:
 def _problem(target, scorer, checker, ids, starts, anchor=None):
     """Return the PoseProblem of both arms' joints for targets ``ids``, rows ``starts``."""
     free = tuple((side, j) for side in ARMS for j in range(len(target.arms[side].joint_names)))
-    n = len(ids)
-    base = (np.zeros((n, len(free) // 2)), np.zeros((n, len(free) // 2)))
+    base = tuple(np.zeros((len(ids), arm_joint_count(target, side))) for side in ARMS)
     return PoseProblem(target, scorer, ids, base, free, collision=checker,
                        anchor=anchor, continuity=STAY_CLOSE if anchor is not None else 0.0,
                        x0=starts[:, 0])
@@ -134,27 +134,26 @@ def rest_palms(source, target, rng) -> dict:
     :data:`REST_PALM_WEIGHT`, only picks the roll of an arm that positions leave free
     (a hanging straight arm), the one nearest the target's own zero pose.
     """
-    zero = np.zeros((1, len(source.arms['right'].joint_names)))
-    x = _search(source, target, zero, zero, False, ScoreWeights(palm=REST_PALM_WEIGHT),
-                'rest', rng, {'right': None, 'left': None})[0]
-    n = len(target.arms['right'].joint_names)
-    return {side: forward_kinematics(target, x[0, k * n:(k + 1) * n], side).palm
-            for k, side in enumerate(ARMS)}
+    zero = {side: np.zeros((1, arm_joint_count(source, side))) for side in ARMS}
+    x = _search(source, target, zero['right'], zero['left'], False,
+                ScoreWeights(palm=REST_PALM_WEIGHT), 'rest', rng,
+                {'right': None, 'left': None})[0]
+    return {side: forward_kinematics(target, q, side).palm
+            for side, q in zip(ARMS, split_arms(target, x[0]))}
 
 
 def _search(source, target, qr, ql, two_handed, weights, name, rng, rest, own=False):
     """
-    Return (x (K, 2n), scorer, checker) of the keyframes (qr, ql) of ``source``.
+    Return (x (K, J), scorer, checker) of the keyframes (qr, ql) of ``source``.
 
     Each keyframe starts from the one before (the first from the zero pose, or with
     ``own`` from the source's angles, clipped: arms of one design often share them).
     """
     ref_r = scaled_landmarks(source, target, 'right', qr, rest['right'])
     ref_l = scaled_landmarks(source, target, 'left', ql, rest['left'])
-    n = len(target.arms['right'].joint_names)
-    zeros = np.zeros((len(qr), n))
-    targets = [Target(zeros[k], zeros[k], ARMS, two_handed, f'{name}[{k}]', weights)
-               for k in range(len(qr))]
+    zeros = {side: np.zeros(arm_joint_count(target, side)) for side in ARMS}
+    targets = [Target(zeros['right'], zeros['left'], ARMS, two_handed, f'{name}[{k}]',
+                      weights) for k in range(len(qr))]
     scorer = SimilarityScore(target, targets, reference_landmarks=(ref_r, ref_l))
     checker = CollisionModel(target, targets, target.capsules)
     _designed_allowance(checker, targets, ref_r, ref_l)
@@ -165,7 +164,7 @@ def _search(source, target, qr, ql, two_handed, weights, name, rng, rest, own=Fa
         if own:
             first = np.concatenate((qr[k], ql[k]))
         else:
-            first = np.zeros(2 * n) if prev is None else prev
+            first = np.zeros(len(target.joint_names)) if prev is None else prev
         start = np.clip(first, low, high)
         prev = _solve_keyframe(target, scorer, checker, k, start, prev,
                                int(rng.integers(2 ** 63)))
@@ -182,15 +181,14 @@ def retarget_gesture(source, target, gesture, rng, rest=None):
     rest = rest if rest is not None else rest_palms(source, target, rng)
     qr = np.array([kf.right for kf in gesture.keyframes])
     ql = np.array([kf.left for kf in gesture.keyframes])
-    n = len(target.arms['right'].joint_names)
     ids = np.arange(len(qr))
     best = None
-    same = qr.shape[1] == n
+    same = (qr.shape[1], ql.shape[1]) == tuple(arm_joint_count(target, s) for s in ARMS)
     for k in range(RESTARTS):       # the colony's luck: keep the best of a few searches
         x, scorer, checker = _search(source, target, qr, ql, gesture.two_handed,
                                      gesture.weights, gesture.name, rng, rest,
                                      own=same and k % 2 == 1)
-        right, left = x[:, :n], x[:, n:]
+        right, left = split_arms(target, x)
         lm_r = forward_kinematics(target, right, 'right')
         lm_l = forward_kinematics(target, left, 'left')
         scores = np.asarray(scorer.evaluate(lm_r, lm_l, ids))

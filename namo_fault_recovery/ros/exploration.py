@@ -283,10 +283,10 @@ class Exploration:
         self.profile = profile
         self.watch = None              # the player's StructureWatch (its model is corrected)
         self.chains = {side: profile.arms[side].chain for side in robot.arms}
-        velocity = np.asarray(robot.velocity_limits, dtype=float)
         self.arms = {side: RosTrialRobot(
             robot.arms[side].joint_names,
-            (self.chains[side].lower, self.chains[side].upper, velocity),
+            (self.chains[side].lower, self.chains[side].upper,
+             np.asarray(robot.arm_velocity_limits(side), dtype=float)),
             lambda q, duration, s=side: send_pose(self, s, q, duration), self._now,
             self.params['timing']) for side in robot.arms}
         self.explored = {}             # gesture -> Explored

@@ -182,7 +182,8 @@ def _joint_limits(robot, joints):
     """Return (velocity limits, lower, upper) of ``joints`` (rad/s, rad), in that order."""
     arms = {j: (side, i) for side in ('right', 'left')
             for i, j in enumerate(robot.arms[side].joint_names)}
-    limits = [robot.velocity_limits[arms[j][1]] for j in joints]
+    speed = dict(zip(robot.joint_names, robot.joint_velocity_limits))
+    limits = [speed[j] for j in joints]
     lower = [robot.arms[arms[j][0]].lower[arms[j][1]] for j in joints]
     upper = [robot.arms[arms[j][0]].upper[arms[j][1]] for j in joints]
     return np.array(limits), np.array(lower), np.array(upper)

@@ -60,7 +60,8 @@ def explored_library(robot, current, name, times, positions, correction):
         tip_error_mm=mean, tip_error_max_mm=worst,
         tip_error_before_mm=before[1] if old else base.tip_error_mm,
         free_joints=base.free_joints, stage=base.stage,
-        speed_ratio=pacing.speed_ratio(robot.velocity_limits, list(times), positions))
+        speed_ratio=pacing.speed_ratio(robot.joint_velocity_limits, list(times), positions),
+        right_joints=len(robot.arms['right'].joint_names))
     gestures = tuple(gesture if g.name == name else g for g in current.gestures)
     corrections = dict(current.corrections, **{correction.side: correction.to_dict()})
     return replace(current, gestures=gestures, origin=ORIGIN, corrections=corrections,

@@ -44,7 +44,7 @@ import mujoco
 import numpy as np
 
 from .profile_model import add_profile_capsules, is_profile_robot, MovingCapsules, profile_spec
-from ..model.kinematics import arm_joint_count, forward_kinematics, shoulder_position
+from ..model.kinematics import arm_columns, forward_kinematics, shoulder_position
 from ..model.robot import ARMS
 from ..model.urdf import capsule_segments, SEGMENTS, urdf_string
 from ..objective.collision import segment_distance
@@ -68,9 +68,8 @@ def contact_pairs():
 def segments_mm(robot, q):
     """Return {capsule name: (start, end)} in mm in the base frame for both arms' angles."""
     out = {}
-    n = arm_joint_count(robot)
-    for i, side in enumerate(ARMS):
-        lm = forward_kinematics(robot, q[i * n:(i + 1) * n], side)
+    for side, cols in arm_columns(robot).items():
+        lm = forward_kinematics(robot, q[cols], side)
         ends = (shoulder_position(robot, side), lm.elbow, lm.wrist, lm.tip)
         for k, seg in enumerate(SEGMENTS):
             out[f'{side}_arm_{seg}'] = (ends[k], ends[k + 1])
