@@ -12,11 +12,15 @@ on the real parser.
 from dataclasses import replace
 import io
 import math
+from pathlib import Path
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from namo_fault_recovery.cli.main import build_parser, main
+from namo_fault_recovery.model.gestures import load_library
+from namo_fault_recovery.model.profile_robot import robot_from_profile
 from namo_fault_recovery.recovery.engine import recover, RecoverySettings
+from namo_fault_recovery.resources import distribution_file
 from namo_fault_recovery.ros.client import (BadNamespace, Inbox, node_diagnostics,
                                             normalise_namespace, rebuild_library,
                                             TriggerAnswer)
@@ -214,3 +218,24 @@ def test_a_bad_namespace_is_a_usage_error(capsys):
 def test_namespace_and_domain_before_or_after_the_command(argv, namespace, domain):
     args = build_parser().parse_args(argv)
     assert (args.namespace, args.domain_id) == (namespace, domain)
+
+
+def test_a_library_of_arms_of_unequal_joint_counts_comes_back_split_where_the_node_says():
+    try:
+        distribution_file('example-robot-data', 'talos_data/robots/talos_reduced.urdf')
+    except FileNotFoundError:
+        pytest.skip('example-robot-data (the Talos URDF) is not installed')
+    data = Path(__file__).resolve().parent / 'data'
+    robot = robot_from_profile(data / 'talos76.yaml')         # 7 right joints, 6 left
+    library = load_library(robot, data / 'talos76_gestures.yaml')
+    result = recover(robot, library, {'arm_left_2_joint': None}, RecoverySettings(),
+                     seed=0)
+    diagnostics = node_diagnostics(DiagnosticArray(status=_statuses(robot, ROOT, result)),
+                                   ROOT, arrival=1.0)
+    back = rebuild_library(STAMP, _msgs(robot, result), diagnostics, received=2.0)
+    for sent, got in zip(result.gestures, back.result.gestures):
+        assert got.right_joints == 7 and len(got.positions[0]) == 13
+        assert [(len(k.right), len(k.left)) for k in got.keyframes] == \
+            [(7, 6)] * len(sent.times)
+    undescribed = rebuild_library(STAMP, _msgs(robot, result), None, received=2.0)
+    assert undescribed.result.gestures[0].right_joints == 0       # not known: halves

@@ -158,6 +158,15 @@ def _number(values, key):
         return math.nan
 
 
+def _count(value, width):
+    """Return a described column count from 0 to ``width``; 0 (not known) otherwise."""
+    try:
+        count = int(value)
+    except (TypeError, ValueError):
+        return 0
+    return count if 0 <= count <= width else 0
+
+
 def _gesture(name, msg, values):
     """Return one GestureResult from its trajectory and the 'reconfiguration' values."""
     def field(key, default=None):
@@ -177,7 +186,8 @@ def _gesture(name, msg, values):
         method=field(keys.METHOD, 'keyframes'),
         typical_points=int(field(keys.TYPICAL_POINTS, 0)),
         tip_error_mm=_number(values, keys.gesture_key(name, keys.TIP_ERROR_MM)),
-        max_jump_deg=_number(values, keys.gesture_key(name, keys.MAX_JUMP_DEG)))
+        max_jump_deg=_number(values, keys.gesture_key(name, keys.MAX_JUMP_DEG)),
+        right_joints=_count(field(keys.RIGHT_JOINTS, 0), len(positions[0]) if positions else 0))
 
 
 def rebuild_library(stamp, msgs, diagnostics, received, delivered_ns=None):

@@ -183,7 +183,8 @@ def reconfiguration_status(snap, up_to_date, hw, prefix):
                   (dk.STAGE, g.stage), (dk.METHOD, g.method),
                   (dk.TYPICAL_POINTS, g.typical_points),
                   (dk.TIP_ERROR_MM, f'{g.tip_error_mm:.3f}'),
-                  (dk.MAX_JUMP_DEG, f'{g.max_jump_deg:.3f}')]
+                  (dk.MAX_JUMP_DEG, f'{g.max_jump_deg:.3f}'),
+                  (dk.RIGHT_JOINTS, g.right_joints)]
         if current.settings.get('collision_check'):
             fields.append((dk.COLLIDES, dk.flag(g.collides)))
             if g.colliding_pairs:

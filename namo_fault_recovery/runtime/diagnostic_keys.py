@@ -87,8 +87,10 @@ TIP_ERROR_MM = 'tip_error_mm'
 MAX_JUMP_DEG = 'max_jump_deg'
 COLLIDES = 'collides'
 COLLIDING_PAIRS = 'colliding_pairs'  # space-separated
+RIGHT_JOINTS = 'right_joints'        # the right arm's columns in the gesture's joint_names
 GESTURE_FIELDS = (SCORE_BEFORE, SCORE_AFTER, TIME_SEC, STATUS, STAGE, METHOD,
-                  TYPICAL_POINTS, TIP_ERROR_MM, MAX_JUMP_DEG, COLLIDES, COLLIDING_PAIRS)
+                  TYPICAL_POINTS, TIP_ERROR_MM, MAX_JUMP_DEG, COLLIDES, COLLIDING_PAIRS,
+                  RIGHT_JOINTS)
 
 # --- keys of 'inputs' and 'state' -------------------------------------------------------
 
