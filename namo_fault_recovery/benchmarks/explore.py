@@ -146,7 +146,7 @@ class _Case:
         quant = typical_points(robot, library, threshold, 2)[motion]
         self.picks = tuple(range(len(self.design))) if quant is None else tuple(quant.typical)
         self.layouts = motion_layouts(robot, gesture, SIDE, self.locks)
-        self.clearance = capsule_clearance(robot, SIDE, np.zeros(2 * len(names)))
+        self.clearance = capsule_clearance(robot, SIDE, np.zeros(len(robot.joint_names)))
 
     def truth(self, q):
         """Return the changed robot's true tip (N, 3) mm at joint readings q."""

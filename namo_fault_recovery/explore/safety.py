@@ -19,7 +19,7 @@ def capsule_clearance(robot, side, held):
     """
     Return ``clearance(q)``: (N, n) poses of ``side`` -> (N,) smallest clearance (mm).
 
-    ``held`` (2n,) rad is the whole robot's pose; the other arm stays at its part of it.
+    ``held`` (J,) rad is the whole robot's pose; the other arm stays at its part of it.
     """
     other = [s for s in ARMS if s != side][0]
     rest = split_arms(robot, held)[ARMS.index(other)]

@@ -41,7 +41,7 @@ class Keyframe:
         return self.right if side == 'right' else self.left
 
     def positions(self) -> np.ndarray:
-        """All 2n angles (14 on Namo), right arm first (the order of RobotModel.joint_names)."""
+        """All J angles (14 on Namo), right arm first (the order of RobotModel.joint_names)."""
         return np.concatenate((self.right, self.left))
 
 
@@ -74,7 +74,7 @@ class Gesture:
         return np.array([kf.time_from_start for kf in self.keyframes])
 
     def joint_matrix(self) -> np.ndarray:
-        """Return every keyframe's 2n joint angles (rad) stacked, right arm first: (T, 2n)."""
+        """Return every keyframe's J joint angles (rad) stacked, right arm first: (T, J)."""
         return np.array([kf.positions() for kf in self.keyframes])
 
     def with_keyframes(self, keyframes: Iterable[Keyframe]) -> 'Gesture':

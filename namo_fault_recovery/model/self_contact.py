@@ -120,7 +120,7 @@ def pair_distances(robot, lm_right, lm_left):
 
 
 def penetrations(robot, q14):
-    """Return how deep (mm, >= 0) every pair interpenetrates at poses ``q14`` (N, 2n) rad."""
+    """Return how deep (mm, >= 0) every pair interpenetrates at poses ``q14`` (N, J) rad."""
     right, left = split_arms(robot, np.atleast_2d(np.asarray(q14, dtype=float)))
     d = pair_distances(robot, forward_kinematics(robot, right, 'right'),
                        forward_kinematics(robot, left, 'left'))[0]
@@ -185,7 +185,7 @@ class ReferenceContact(NamedTuple):
 
 def undesigned_depth(robot, reference, poses) -> float:
     """
-    Return how deep (mm, >= 0) poses (N, 2n) press any pair beyond ``reference``'s design.
+    Return how deep (mm, >= 0) poses (N, J) press any pair beyond ``reference``'s design.
 
     A played motion is checked along its whole path, not only at its keyframes: a
     two-handed gesture's designed pairs may go as deep as its reference keyframes do

@@ -1,5 +1,5 @@
 """
-Dense recorded trajectories: a CSV of ``time, 2n joint angles``, validated on load.
+Dense recorded trajectories: a CSV of ``time, J joint angles``, validated on load.
 
 The file has one row per sample: the time from the start of the gesture (s), then the
 angles of all arm joints (14 on Namo) in the robot's joint order (right arm first).  An optional
@@ -19,7 +19,7 @@ from ..errors import ConfigError
 
 def load_trajectory_csv(path, robot, scale):
     """
-    Read a trajectory CSV; return ``(times (T,), angles (T, 2n) in rad)``.
+    Read a trajectory CSV; return ``(times (T,), angles (T, J) in rad)``.
 
     ``scale`` converts the file's angle unit to radians.  Times must be non-negative and
     strictly increasing, and every angle finite and within the joint's limits.

@@ -670,7 +670,7 @@ def _run(setup, lock_sets, rng, clock, stats):
 
 def pose_values(robot, scorer, checker, q, ids):
     """
-    Return the search's value of poses ``q`` (..., 2n) for targets ``ids`` (...,).
+    Return the search's value of poses ``q`` (..., J) for targets ``ids`` (...,).
 
     The similarity score, plus the capsule penalty with a collision ``checker``: what
     the keyframe search minimises, without its ``stay_close`` pull.
@@ -773,7 +773,7 @@ def _within_reach(setup, rows, owner, ks, motion, clock, rng):
     """
     Search every other keyframe again within its neighbours' reach; return the motions.
 
-    ``motion`` is (q (K, 2n), step limits, lower, upper).  For each parity, the
+    ``motion`` is (q (K, J), step limits, lower, upper).  For each parity, the
     keyframes of that parity are searched again by the run's algorithm, each within the
     box its two kept neighbours allow (:func:`.pacing.reach_boxes`, the problem's
     bounds): a keyframe flipped into another branch finds the best pose its neighbours
@@ -811,9 +811,9 @@ def _within_reach(setup, rows, owner, ks, motion, clock, rng):
 
 def _branch_restarts(setup, rows, owner, ks, starts, clock):
     """
-    Polish a motion's keyframes from each feasible start; return the motions (N, K, 2n).
+    Polish a motion's keyframes from each feasible start; return the motions (N, K, J).
 
-    Every start (N, K, 2n) puts the whole motion in one branch (e.g. the design carried
+    Every start (N, K, J) puts the whole motion in one branch (e.g. the design carried
     through one solved keyframe); polishing each of its keyframes freely keeps them in
     that branch, so the polished motion is usually feasible, and a much better one than
     the start (the caller clips it into reach).  All starts of all keyframes are one

@@ -17,7 +17,7 @@ wave that turns back at every keyframe, Namo's Bye, reaches exactly 1.5 times it
 secant speed).  The approach from the measured pose is the player's, at its
 ``approach_velocity`` (0.5 rad/s, below every Namo limit over 1.5).
 
-The constraint on a motion of keyframes ``q`` (K, 2n) is therefore
+The constraint on a motion of keyframes ``q`` (K, J) is therefore
 ``|q[k + 1, j] - q[k, j]| <= limits[k, j]`` (:func:`step_limits`), a convex set.  A
 design that itself steps further keeps its own steps as their limits, so that the
 locked design (failed joints at their locks, clipped into the joint limits) is always

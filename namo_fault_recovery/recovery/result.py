@@ -76,8 +76,9 @@ class GestureResult:
     Scores are the similarity score (lower is better, 0 = the reference).  Over the
     gesture's keyframes (every point of a motion, Kriging-interpolated ones included):
 
-    - ``times``: time_from_start (s) per keyframe; ``positions``: per keyframe the 2n
-      joint angles (rad), right arm joints 1-n then left arm joints 1-n, as published;
+    - ``times``: time_from_start (s) per keyframe; ``positions``: per keyframe the J
+      joint angles (rad), the right arm's joints then the left arm's (see
+      ``right_joints``), as published;
     - ``score_before`` / ``score_before_mean``: worst / mean keyframe score as designed
       with the locks applied and nothing re-optimised;
     - ``score_after`` / ``score_mean``: worst / mean keyframe score as published;

@@ -538,7 +538,7 @@ def optimise_motion(robot, scorer, target_ids, start_right, start_left, layout, 
     """
     Optimise one whole motion from its warm start; return a :class:`TrajectoryResult`.
 
-    ``design`` (T, 2n) is the designed motion (both arms, rad): its largest step is the
+    ``design`` (T, J) is the designed motion (both arms, rad): its largest step is the
     cap of the step hinge.  The other arguments are those of :class:`TrajectoryProblem`
     (with the default smoothness and step penalty) and :func:`optimise_trajectory`.
     Solved by :func:`banded_newton`, once per rounding of :data:`MOTION_SMOOTHING`, each
