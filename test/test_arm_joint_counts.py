@@ -13,6 +13,7 @@ config/gestures.yaml.  Kinematics are checked against Pinocchio on the full URDF
 physics must take these arms as they take Talos's seven.
 """
 
+from dataclasses import replace
 import json
 import math
 from pathlib import Path
@@ -34,6 +35,7 @@ from namo_fault_recovery.recovery.locks import resolve_locks
 from namo_fault_recovery.recovery.result import LibraryResult
 from namo_fault_recovery.recovery.settings import RecoverySettings
 from namo_fault_recovery.resources import distribution_file
+from namo_fault_recovery.runtime.restore import check_result
 from namo_fault_recovery.sim.physics import designed_allowances, NamoSim
 import numpy as np
 import pinocchio as pin
@@ -325,3 +327,17 @@ def test_a_result_of_unequal_arms_keeps_its_split_through_json():
     doc['gestures'][0]['right_joints'] = 14
     with pytest.raises(ValueError, match='right_joints: expected .* 0 to 13, got 14'):
         LibraryResult.from_dict(doc)
+
+
+def test_a_library_split_elsewhere_than_the_right_arm_is_not_published_or_read():
+    robot, library = talos(76)
+    res = recover(robot, library, {'arm_left_3_joint': None}, RecoverySettings(), seed=1,
+                  clock=Clock(None))
+    assert check_result(robot, library, res) is None
+    for split in (0, 6):            # unknown (halves of 13) or the left arm's count
+        g = replace(res.gestures[0], right_joints=split)
+        bad = replace(res, gestures=(g,) + res.gestures[1:])
+        reason = check_result(robot, library, bad)
+        assert reason and 'not after the 7 of the right arm' in reason, reason
+    with pytest.raises(ValueError, match='13 angles per row and right_joints not known'):
+        replace(res.gestures[0], right_joints=0).keyframes

@@ -150,3 +150,12 @@ def test_a_search_cut_at_once_publishes_a_playable_library(robot, product_librar
                   seed=0, clock=Clock(0.0))
     assert res.speed_ratio <= 1.0 + 1e-9
     assert _played(robot, res) == pytest.approx(1.0)
+
+
+def test_limits_are_one_per_joint_column_never_repeated_to_fit():
+    """One arm's row on both arms' columns was tiled: wrong for arms of two joint counts."""
+    times = [0.0, 1.0]
+    with pytest.raises(ValueError, match=r'one per joint column \(13\), got 7'):
+        pacing.step_limits(LIMITS, times, np.zeros((2, 13)))
+    with pytest.raises(ValueError, match=r'one per joint column \(14\), got 0'):
+        pacing.speed_ratio((), times, np.ones((2, 14)))

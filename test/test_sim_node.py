@@ -358,6 +358,40 @@ def test_talos_from_its_profile_follows_a_key_pose_while_a_stuck_joint_holds():
     assert 'Traceback' not in process.stderr + process.stdout
 
 
+def test_a_robot_of_unequal_arms_starts_where_told_and_its_six_joint_arm_follows():
+    """Talos with a 7-joint right arm and a 6-joint left one: 13 joints, started at 0 rad."""
+    try:
+        distribution_file('example-robot-data', 'talos_data/robots/talos_reduced.urdf')
+    except FileNotFoundError:
+        pytest.skip('example-robot-data (the Talos URDF) is not installed')
+    data = Path(__file__).resolve().parent / 'data'
+    profile, library = data / 'talos76.yaml', data / 'talos76_gestures.yaml'
+    robot, gestures = load_models(robot_source({'robot_profile': str(profile)}), str(library))
+    left = list(robot.arms['left'].joint_names)
+    # initial_positions left at its default, one angle (0 rad) for every joint: it
+    # was 14 zeros, which this robot's 13 joints refused at start-up.
+    process = NodeProcess(OTHER_DOMAIN, command=sim_command(), args=[
+        '-p', f'robot_profile:={profile}', '-p', f'gesture_file:={library}'])
+    client = SimClient(OTHER_DOMAIN)
+    try:
+        client.wait(lambda: client.states, 'the first /joint_states', timeout=40.0)
+        first = client.latest()
+        assert list(first) == list(robot.joint_names) and len(first) == 13
+        assert np.abs(np.array(list(first.values()))).max() < math.radians(1.0), first
+        pose = gestures['wai'].keyframes[0].left
+        client.send('left_arm_controller', trajectory(left, [(1.5, list(pose))]))
+
+        def there():
+            state = client.latest()
+            return all(abs(state[n] - v) < math.radians(0.1) for n, v in zip(left, pose))
+        client.wait(there, "the 6-joint left arm at Wai's key pose", timeout=15.0)
+    finally:
+        client.close()
+        code = process.stop()
+    assert code == 0, process.describe()
+    assert 'Traceback' not in process.stderr + process.stdout
+
+
 def test_a_profile_naming_no_urdf_waits_for_the_robot_description_topic(tmp_path):
     try:
         urdf = distribution_file('example-robot-data', 'talos_data/robots/talos_reduced.urdf')

@@ -1,7 +1,7 @@
 """
 The ``precompute`` command of ``namo-recovery``: build the contingency table offline.
 
-One entry per fault set (each joint failing on top of ``--active`` faults, all 14 joints
+One entry per fault set (each joint failing on top of ``--active`` faults, all joints
 by default or those of ``--joint``), each the best library of ``--seeds`` runs without a
 deadline (:mod:`~namo_fault_recovery.recovery.contingency`).  The settings options are
 ``solve``'s, named like the node's parameters: a table is used only by a node whose
@@ -96,7 +96,7 @@ def register(sub):
                    help="seconds per seed (default: no deadline, the preset's full "
                         'iterations; 0: the same)')
     p.add_argument('--joint', action='append', metavar='JOINT',
-                   help='only this joint failing (repeatable; default: all 14)')
+                   help='only this joint failing (repeatable; default: all of the robot)')
     p.add_argument('--active', action='append', metavar='JOINT[=DEG]',
                    help='a fault already in force, that every entry adds to (repeatable; '
                         'without DEG the lock strategy chooses the angle)')

@@ -3,7 +3,7 @@ The contingency table: adapted libraries precomputed offline, one per likely fau
 
 Free of ROS.  Within the 1 s deadline the engine finds a good library, not always the
 best one it can find given minutes; and the fault sets worth preparing for are few (each
-of the 14 joints failing alone, then each further joint on top of the faults already in
+of the joints (14 on Namo) failing alone, then each further joint on top of the faults already in
 force).  So ``namo-recovery precompute`` solves each of them without a deadline, with
 several seeds, keeps the best library of each, and writes a table the node can look up
 before (or instead of) a live run.
@@ -162,7 +162,7 @@ def fault_sets(robot, library, settings, active=None, joints=None):
     Return the fault sets to precompute: each joint failing on top of ``active``.
 
     ``active`` maps joints already failed to their lock angles (rad, or None for the
-    strategy's); ``joints`` limits the new failures to these (default: all 14 joints,
+    strategy's); ``joints`` limits the new failures to these (default: all the robot's joints,
     right arm first).  Joints of ``active`` are not failed again.  With the ``average``
     and ``measured`` strategies every angle is resolved (:func:`table_locks`; measured
     falls back to the average offline); with ``optimal`` the joints without an angle stay

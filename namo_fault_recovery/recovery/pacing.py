@@ -44,19 +44,23 @@ def step_limits(velocity_limits, times, design):
     Return the largest step (rad) each joint may take between keyframes, (K - 1, J).
 
     ``velocity_limits`` (rad/s: one per column of ``design``, as
-    :attr:`~..model.robot.RobotJoints.joint_velocity_limits`; n per arm are tiled),
+    :attr:`~..model.robot.RobotJoints.joint_velocity_limits`),
     ``times`` (K,) the keyframes' time_from_start and ``design`` (K, J) the designed
     angles: ``dt * limit / PEAK_FACTOR``, or the designed step where that is larger.
     """
     design = np.asarray(design, dtype=float)
-    limits = _tiled(velocity_limits, design.shape[1])
+    limits = _per_column(velocity_limits, design.shape[1])
     reach = _gaps(times)[:, None] * limits / PEAK_FACTOR
     return np.maximum(reach, np.abs(np.diff(design, axis=0)))
 
 
-def _tiled(velocity_limits, width):
+def _per_column(velocity_limits, width):
+    """Return the limits as (width,), or raise ValueError: one per column, none repeated."""
     limits = np.asarray(velocity_limits, dtype=float).ravel()
-    return np.resize(limits, width)
+    if len(limits) != width:
+        raise ValueError(f'velocity_limits: expected one per joint column ({width}), got '
+                         f'{len(limits)}; pass robot.joint_velocity_limits')
+    return limits
 
 
 def speed_ratio(velocity_limits, times, q):
@@ -71,7 +75,7 @@ def speed_ratio(velocity_limits, times, q):
     if len(q) < 2:
         return 0.0
     step = np.abs(np.diff(q, axis=0))
-    room = _gaps(times)[:, None] * _tiled(velocity_limits, q.shape[1])
+    room = _gaps(times)[:, None] * _per_column(velocity_limits, q.shape[1])
     with np.errstate(divide='ignore', invalid='ignore'):
         ratio = np.where(step > _TOLERANCE, PEAK_FACTOR * step / room, 0.0)
     return float(np.max(ratio))

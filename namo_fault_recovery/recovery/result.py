@@ -154,6 +154,9 @@ class GestureResult:
         from ..model.gestures import Keyframe
         out = []
         for t, p in zip(self.times, self.positions):
+            if not self.right_joints and len(p) % 2:
+                raise ValueError(f'{self.name}: {len(p)} angles per row and right_joints not '
+                                 'known; expected right_joints for arms of two joint counts')
             split = self.right_joints or len(p) // 2
             out.append(Keyframe(t, np.array(p[:split]), np.array(p[split:])))
         return tuple(out)

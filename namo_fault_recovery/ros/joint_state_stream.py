@@ -23,7 +23,7 @@ from .spun_node import SpunNode, wait_until
 
 def reference_pose(robot=None, library=None):
     """
-    Return ``(names, positions)``: the 14 arm joints at the library's first keyframe.
+    Return ``(names, positions)``: every arm joint (14 on Namo) at the library's first keyframe.
 
     That is the pose a robot standing ready to gesture reports on ``/joint_states``;
     names come from the robot model (right arm first).

@@ -13,7 +13,7 @@ What it offers, so that a gesture player can be tried without the robot:
   ``right_arm_controller`` (right_arm_joint1..7) and ``left_arm_controller``.  The rules
   (what is rejected, with the reason logged; zero stamp = now; interpolation) are in
   :mod:`..sim.trajectory`.
-- ``/joint_states`` (all 14 joints, position and velocity) at ``joint_state_rate``
+- ``/joint_states`` (all joints, 14 on Namo, position and velocity) at ``joint_state_rate``
   (100 Hz).
 - Stuck joints, as a failed actuator: the ``stuck_joints`` parameter (``'NAME'`` = where
   it is, ``'NAME:DEG'`` = at that angle) and the ``~/stick`` topic
@@ -107,8 +107,8 @@ PARAMETERS = {
                               'encoder reads (0: exact)', _T.PARAMETER_DOUBLE),
     'contact_tolerance_mm': (1.0, 'penetration (mm) below which a contact '
                              'is not counted', _T.PARAMETER_DOUBLE),
-    'initial_positions': ([0.0] * 14, 'start angles (rad) of the 14 joints, '
-                          'right arm first', _T.PARAMETER_DOUBLE_ARRAY),
+    'initial_positions': ([0.0], 'start angles (rad): one per joint, right arm first (14 on '
+                          'Namo), or one angle for every joint', _T.PARAMETER_DOUBLE_ARRAY),
     'stuck_joints': ([''], "joints stuck from the start: 'NAME' (where it "
                      "is) or 'NAME:DEG'", _T.PARAMETER_STRING_ARRAY),
     'allow_partial_joints_goal': (False, 'accept trajectories naming only '
@@ -237,9 +237,12 @@ class SimNode(Node):
     def _initial_state(self):
         """Set the start angles and the stuck joints; return the (q, qd) first desired."""
         q0 = list(self.p['initial_positions'])
-        if len(q0) != len(self.sim.joint_names):
-            raise ValueError(f'initial_positions: expected {len(self.sim.joint_names)} '
-                             f'angles, got {len(q0)}')
+        count = len(self.sim.joint_names)
+        if len(q0) == 1:                       # one angle for every joint (default 0)
+            q0 = q0 * count
+        if len(q0) != count:
+            raise ValueError(f'initial_positions: expected {count} angles (one per joint) or '
+                             f'one for all, got {len(q0)}')
         self.sim.set_positions(q0)
         for spec in self.p['stuck_joints']:
             if spec:

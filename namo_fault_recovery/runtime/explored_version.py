@@ -25,7 +25,7 @@ ORIGIN = 'explored'
 
 def explored_library(robot, current, name, times, positions, correction):
     """
-    Return ``current`` with gesture ``name`` explored: ``positions`` (T, 14 rad) at ``times``.
+    Return ``current`` with gesture ``name`` explored: ``positions`` (T, J) rad at ``times``.
 
     Raises ValueError (one line) if ``name`` is not in ``current`` or the keyframes do
     not match its keyframe count.

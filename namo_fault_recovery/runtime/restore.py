@@ -35,9 +35,14 @@ def check_result(robot, library, result, faults=None):
         if not (math.isfinite(angle) and within_exactly(robot, side, index, angle)):
             return f'lock angle {angle!r} of {joint} is not usable'
         columns[joint_names.index(robot.arms[side].joint_names[index])] = angle
+    right = len(robot.arms['right'].joint_names)
     for gesture in result.gestures:
         if len(gesture.times) != len(library[gesture.name].keyframes):
             return f'{gesture.name}: wrong number of keyframes'
+        split = gesture.right_joints or len(joint_names) / 2      # 0: halves (one count)
+        if split != right:
+            return (f'{gesture.name}: rows split after {split:g} columns, not after the '
+                    f'{right} of the right arm')
         for q in gesture.positions:
             if len(q) != len(joint_names):
                 return f'{gesture.name}: expected {len(joint_names)} angles'
