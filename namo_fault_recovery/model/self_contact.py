@@ -141,11 +141,11 @@ def pressed_joints(robot, joint_names, q, tolerance_mm=TOLERANCE_MM):
     out = np.zeros(q.shape, dtype=bool)
     q14 = np.zeros((len(q), len(robot.joint_names)))
     whole = {}
-    for side in ('right', 'left'):
+    for side, cols in arm_columns(robot).items():
         arm = list(robot.arms[side].joint_names)
         whole[side] = all(j in names for j in arm)
         if whole[side]:
-            q14[:, arm_columns(robot)[side]] = q[:, [names.index(j) for j in arm]]
+            q14[:, cols] = q[:, [names.index(j) for j in arm]]
     if not any(whole.values()):
         return out
     pen = penetrations(robot, q14)

@@ -27,11 +27,6 @@ LABELS = {'kriging': '{k} typical points + Kriging',
 COLLIDES_WARNING = 'WARNING: the pose still collides'
 
 
-def columns(robot, side):
-    """Return the columns of ``side``'s joints in a (T, J) motion (right arm first)."""
-    return arm_columns(robot)[side]
-
-
 def largest_jump(q):
     """Return the largest joint step (deg) between successive rows of ``q`` (rad)."""
     if len(q) < 2:
@@ -43,7 +38,7 @@ def tip_errors(robot, model, gesture, design, q_r, q_l):
     """Return per point the fingertip distance (mm) to the design, the larger hand's."""
     err = np.zeros(len(design))
     for side in gesture.arms:
-        want = batch_forward(robot, design[:, columns(robot, side)], side).tip
+        want = batch_forward(robot, design[:, arm_columns(robot)[side]], side).tip
         q = q_r if side == 'right' else q_l
         err = np.maximum(err, np.linalg.norm(batch_forward(model, q, side).tip - want, axis=1))
     return err

@@ -35,7 +35,7 @@ import numpy as np
 from . import keyframes as keyframe_search
 from . import pacing
 from .budget import FINISH_RESERVE, PUBLISH_RESERVE, TYPICAL_SHARE, VQ_SHARE
-from .figures import columns, describe_motion, no_worse_than_locked
+from .figures import describe_motion, no_worse_than_locked
 from .keyframes import (apply_locks, free_layout, joint_bounds, joint_set, layout_columns,
                         locked_sets, PACED_NOTE, pose_values, PoseProblem,
                         reconfigure_library, SearchOptions)
@@ -46,7 +46,7 @@ from .trajectory_opt import (designed_step_deg, optimise_motion, optimise_trajec
                              TrajectoryProblem)
 from .vq import quantise
 from ..model.gestures import GestureLibrary
-from ..model.kinematics import batch_forward, split_arms
+from ..model.kinematics import arm_columns, batch_forward, split_arms
 from ..model.robot import ARMS
 from ..objective.collision import CollisionModel
 from ..objective.score import gesture_targets, SimilarityScore
@@ -85,7 +85,7 @@ def typical_points(robot, library, vq_distortion_mm=DEFAULT_DISTORTION_MM,
     out = {g.name: None for g in library}
     for n_left, gesture in zip(range(len(todo), 0, -1), todo):
         q = gesture.joint_matrix()
-        tips = np.concatenate([batch_forward(robot, q[:, columns(robot, side)], side).tip
+        tips = np.concatenate([batch_forward(robot, q[:, arm_columns(robot)[side]], side).tip
                                for side in gesture.arms], axis=1)
         # Each motion gets an equal share of what is left; unused time rolls over.
         found = quantise(np.degrees(q), vq_distortion_mm, features=tips, seed=seed,
@@ -528,7 +528,7 @@ def _consistent(ctx, ids, design, solved, layout, continuity_weight, clock):
 def _spread(robot, gesture, picks, solved, locks):
     """Kriging of the typical points' corrections to every point of one motion."""
     design = gesture.joint_matrix()
-    cols = np.concatenate([np.arange(design.shape[1])[columns(robot, s)] for s in ARMS])
+    cols = np.concatenate([np.arange(design.shape[1])[arm_columns(robot)[s]] for s in ARMS])
     x = np.degrees(design[:, cols])
     r = np.degrees(solved - design[list(picks)])
     if len(picks) == len(design):

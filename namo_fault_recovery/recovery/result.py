@@ -148,16 +148,27 @@ class GestureResult:
     speed_ratio: float = 0.0
     right_joints: int = 0
 
+    def right_columns(self, width: int) -> Optional[int]:
+        """
+        Return how many of a row's ``width`` columns are the right arm's, or None.
+
+        ``right_joints``, or, when it is not known (0), half of an even row (arms of one
+        joint count); None for an odd row whose split is not known.
+        """
+        if self.right_joints:
+            return self.right_joints
+        return width // 2 if width % 2 == 0 else None
+
     @property
     def keyframes(self) -> tuple:
         """Return the published keyframes as :class:`~..model.gestures.Keyframe` objects."""
         from ..model.gestures import Keyframe
         out = []
         for t, p in zip(self.times, self.positions):
-            if not self.right_joints and len(p) % 2:
+            split = self.right_columns(len(p))
+            if split is None:
                 raise ValueError(f'{self.name}: {len(p)} angles per row and right_joints not '
                                  'known; expected right_joints for arms of two joint counts')
-            split = self.right_joints or len(p) // 2
             out.append(Keyframe(t, np.array(p[:split]), np.array(p[split:])))
         return tuple(out)
 

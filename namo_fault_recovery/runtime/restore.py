@@ -39,10 +39,10 @@ def check_result(robot, library, result, faults=None):
     for gesture in result.gestures:
         if len(gesture.times) != len(library[gesture.name].keyframes):
             return f'{gesture.name}: wrong number of keyframes'
-        split = gesture.right_joints or len(joint_names) / 2      # 0: halves (one count)
+        split = gesture.right_columns(len(joint_names))
         if split != right:
-            return (f'{gesture.name}: rows split after {split:g} columns, not after the '
-                    f'{right} of the right arm')
+            return (f'{gesture.name}: rows split after {split or "unknown"} columns, not '
+                    f'after the {right} of the right arm')
         for q in gesture.positions:
             if len(q) != len(joint_names):
                 return f'{gesture.name}: expected {len(joint_names)} angles'
