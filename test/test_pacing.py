@@ -130,10 +130,11 @@ def test_the_bye_whose_keyframes_end_in_two_wrist_branches_is_repaired(robot, pr
     # waves in two branches of the wrist (seed 6 did before the colony started from
     # kinematic sources; seed 0 does since): the player would stretch it; the engine
     # searches its waves again within their neighbours' reach and publishes it within
-    # the limits.
+    # the limits.  Without the colony's polish: with it (5 iterations), the least-squares
+    # refinement since 2026-12-04 ends the waves in one branch at every seed 0-39.
     res = recover(robot, product_library, {'right_arm_joint5': None}, RecoverySettings(),
                   seed=0, clock=Clock(None),
-                  optimizer_overrides={'max_cycles': 1, 'polish_maxiter': 5})
+                  optimizer_overrides={'max_cycles': 1, 'polish': 0})
     assert any(n.startswith('bye: ') and PACED_NOTE in n for n in res.notes)
     bye = res['bye']
     assert bye.speed_ratio <= 1.0 + 1e-9

@@ -25,7 +25,7 @@ from ..model.robot import ARMS, load_robot
 from ..objective.score import gesture_targets, SimilarityScore
 from ..optimize.base import Clock
 from ..recovery.engine import recover, RecoverySettings
-from ..recovery.keyframes import PoseProblem
+from ..recovery.keyframes import finish_search, PoseProblem
 from ..recovery.locks import resolve_locks
 from ..resources import config_path, PAPER_GESTURE_FILE
 
@@ -450,7 +450,8 @@ def run_gesture(spec, robot, library, gesture, joint, seed, deadline=None):
     Run one algorithm on one case (one gesture, one failed joint) with one seed.
 
     The run is the one the engine's keyframe stage makes for that gesture alone (same
-    problem, same derived seed), but it keeps the optimiser's own best
+    problem, same derived seed, the same local steps after the algorithm's search:
+    :func:`~..recovery.keyframes.finish_search`), but it keeps the optimiser's own best
     (``score``), as the paper reports it; the engine returns the better of that and the
     locked reference pose (``score_engine``, never above ``score_before``).  The wall
     time is measured around problem construction and search.
@@ -462,9 +463,12 @@ def run_gesture(spec, robot, library, gesture, joint, seed, deadline=None):
     before = problem.evaluate(problem.x0[:, None, :])[:, 0]
     rng = np.random.default_rng(int(seed))
     budget = None if deadline is None else max(deadline - (time.perf_counter() - t0), 0.0)
-    res = minimize(problem, algo, clock=Clock(budget), seed=int(rng.integers(2 ** 63)))
+    clock = Clock(budget)
+    res = minimize(problem, algo, clock=clock, seed=int(rng.integers(2 ** 63)))
+    rows = len(problem.target_ids)
+    _, raw, _ = finish_search(problem, algo, np.atleast_2d(res.x), np.atleast_1d(res.fun),
+                              np.zeros(rows, dtype=int), problem.x0, clock)
     outer = time.perf_counter() - t0
-    raw = np.atleast_1d(res.fun)
     engine = np.minimum(raw, before)
     status = {0: 'converged', 1: 'deadline', 2: 'cancelled'}[res.status]
     return {'seed': int(seed), 'score': float(raw.max()), 'score_engine': float(engine.max()),

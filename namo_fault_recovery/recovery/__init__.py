@@ -16,6 +16,8 @@ From a fault set to an adapted gesture library, free of ROS.
   deadline (the first paper's method, with stage 2 and the collision term);
 - :mod:`.seeding`: the keyframe search's starting sources, random draws taken a few
   damped least-squares steps towards the landmarks (so the colony starts in good basins);
+- :mod:`.least_squares`: reweighted Gauss-Newton on the score's terms: those steps, and
+  the search's last local step, which ends on the score's kinks where the polish crawls;
 - :mod:`.motion`: whole-motion adaptation (the second paper: typical points and Kriging,
   point by point, or Kriging then the whole trajectory at once);
 - :mod:`.figures`: an adapted motion's figures as a ``GestureResult`` (scores, fingertip

@@ -30,6 +30,7 @@ import numpy as np
 from . import pacing
 from .budget import ENGINE_RESERVE, STAGE1_SHARE
 from .figures import COLLIDES_WARNING, largest_jump
+from .least_squares import refine
 from .locks import clamp_lock, resolve_locks
 from .result import GestureResult, LibraryResult
 from .seeding import kinematic_starts
@@ -360,10 +361,9 @@ def _solve_once(robot, scorer, collision, batch, algo, clock, rng, stats=None):
         nfev = res.nfev * len(members)
         x = np.atleast_2d(res.x)
         f = np.atleast_1d(res.fun)
-        if getattr(algo, 'polish', 0):
-            x, f, used = _share_branches(problem, x, f, batch.motions[members], designed,
-                                         group_clock, algo.polish_maxiter, algo.polish_ftol)
-            nfev += used
+        x, f, used = finish_search(problem, algo, x, f, batch.motions[members], designed,
+                                   group_clock)
+        nfev += used
         if stats is not None:
             stats['nfev'] = stats.get('nfev', 0) + nfev
         keep = f <= start
@@ -373,6 +373,25 @@ def _solve_once(robot, scorer, collision, batch, algo, clock, rng, stats=None):
             best_r[k], best_l[k] = qr[i], ql[i]
             status[k] = _STATUS_NAMES[res.status]
     return best_r, best_l, status
+
+
+def finish_search(problem, algo, x, f, motions, designed, clock):
+    """
+    Return ``(x, f, nfev)``: the local steps that follow the algorithm's own search.
+
+    For algorithms that polish (the node's default), the keyframes of a motion share
+    their branches (:func:`_share_branches`), then every keyframe takes the reweighted
+    Gauss-Newton refinement (:func:`~.least_squares.refine`); the paper's preset, which
+    does not polish, is left as the paper ran it.  ``x`` (B, D) and ``f`` (B,) are the
+    algorithm's best per row of ``problem``, ``motions`` (B,) each row's motion (-1:
+    none) and ``designed`` (B, D) the designed angles of the free joints.
+    """
+    if not getattr(algo, 'polish', 0):
+        return x, f, 0
+    x, f, shared = _share_branches(problem, x, f, motions, designed, clock,
+                                   algo.polish_maxiter, algo.polish_ftol)
+    x, f, refined = refine(problem, x, f, clock)
+    return x, f, shared + refined
 
 
 def _share_branches(problem, x, f, motions, designed, clock, maxiter, ftol):
