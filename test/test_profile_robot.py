@@ -23,6 +23,7 @@ from namo_fault_recovery.recovery.retarget import arm_length, retarget_gesture
 from namo_fault_recovery.recovery.settings import RecoverySettings
 import numpy as np
 import pytest
+import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 NAMO = ROOT / 'config' / 'namo_profile.yaml'
@@ -178,6 +179,36 @@ def test_bench_robots_prints_the_deadline_figures(tmp_path):
     assert cli_main(argv, out=out) == 0
     text = out.getvalue()
     assert optima.is_file() and 'solve p95 ms' in text and 'all within 1%' in text
+
+
+def test_bench_robots_takes_any_profile_and_its_library(tmp_path):
+    import io
+    from namo_fault_recovery.cli.main import main as cli_main
+    data = ROOT / 'test' / 'data'
+    out, optima = io.StringIO(), tmp_path / 'talos76_best_known.yaml'
+    argv = ['bench', 'robots', '--profile', str(data / 'talos76.yaml'), '--gesture-file',
+            str(data / 'talos76_gestures.yaml'), '--joints', 'arm_left_6_joint', '--seeds', '1',
+            '--update-optima', '--optima-seeds', '1', '--optima', str(optima)]
+    assert cli_main(argv, out=out) == 0
+    text = out.getvalue()
+    assert '== talos76: every single fault x 1 seeds' in text and 'all within 1%' in text
+    doc = yaml.safe_load(optima.read_text())
+    assert list(doc['fault_sets']) == [k for k in doc['fault_sets'] if 'arm_left_6' in k]
+    assert '--profile' in doc['generated_by'] and 'talos76_gestures.yaml' in doc['generated_by']
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['--robot', 'talos', '--profile', 'p.yaml'], 'got both'),
+    ([], 'got neither'),
+    (['--profile', 'p.yaml'], 'expected --gesture-file FILE too'),
+    (['--robot', 'talos', '--gesture-file', 'g.yaml'], 'expected it with --profile'),
+])
+def test_bench_robots_names_what_is_missing_or_extra(argv, message, capsys):
+    import io
+    from namo_fault_recovery.cli.main import EXIT_USAGE, main as cli_main
+    assert cli_main(['bench', 'robots'] + argv, out=io.StringIO()) == EXIT_USAGE
+    err = capsys.readouterr().err
+    assert message in err and err.count('\n') == 1
 
 
 def test_a_colliding_optimum_is_repaired_from_where_it_collided(others):

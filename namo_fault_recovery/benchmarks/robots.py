@@ -1,14 +1,15 @@
 """
 ``bench robots``: every single fault x the four gestures on a robot from its profile.
 
-For a shipped robot (``config/robots/<name>.yaml`` and its retargeted library
-``<name>_gestures.yaml``), two parts, the way :mod:`.product` measures Namo:
+For a shipped robot (``--robot NAME``: ``config/robots/<name>.yaml`` and its retargeted
+library ``<name>_gestures.yaml``) or any other (``--profile FILE --gesture-file FILE``,
+a :class:`BenchRobot`), two parts, the way :mod:`.product` measures Namo:
 
 - optima (``--update-optima``): the best-known ``score_after`` per single fault and
   gesture, the lowest over ``--optima-seeds`` seeds of :func:`recover` without a
   deadline (the node's settings and preset; only seeds whose keyframes respect the
-  velocity limits), stored in ``config/robots/<name>_best_known.yaml`` with the model
-  fingerprint;
+  velocity limits), stored with the model fingerprint in ``<profile>_best_known.yaml``
+  beside the profile (``config/robots/<name>_best_known.yaml``) or in ``--optima``;
 - quality: every single fault x ``--seeds`` seeds through :func:`recover` at the node's
   1 s deadline with the cached typical points, as the node's engine runs a table miss;
   each run's wall time (the table miss's solve, without the node's transport) and each
@@ -16,7 +17,9 @@ For a shipped robot (``config/robots/<name>.yaml`` and its retargeted library
   runs).  Wall times depend on load: run it under the shared lock.
 """
 
+from dataclasses import dataclass
 from datetime import datetime, timezone
+from pathlib import Path
 import time
 
 import numpy as np
@@ -36,16 +39,51 @@ ROBOTS = ('talos', 'tiago_dual')
 QUALITY_SEED_BASE = 1000
 
 
-def robot_models(name):
-    """Return ``(robot, library)`` of a shipped robot profile and its retargeted library."""
+@dataclass(frozen=True)
+class BenchRobot:
+    """A robot of ``bench robots``: its profile, its gesture library and its optima file."""
+
+    name: str
+    profile: Path
+    gestures: Path
+    optima: Path
+    command: str            # the command line's robot arguments, for ``generated_by``
+
+    def models(self):
+        """Return ``(robot, library)``: the profile's robot and its library."""
+        robot = robot_from_profile(self.profile)
+        return robot, load_library(robot, self.gestures)
+
+
+def shipped_robot(name, optima=None) -> BenchRobot:
+    """Return a shipped robot (``config/robots/<name>.yaml``) of ``bench robots``."""
     if name not in ROBOTS:
         raise ValueError(f'--robot: expected one of {", ".join(ROBOTS)}, got {name!r}')
-    robot = robot_from_profile(config_path(f'robots/{name}.yaml'))
-    return robot, load_library(robot, config_path(f'robots/{name}_gestures.yaml'))
+    return BenchRobot(name, config_path(f'robots/{name}.yaml'),
+                      config_path(f'robots/{name}_gestures.yaml'),
+                      Path(optima) if optima else optima_path(name), f'--robot {name}')
+
+
+def profile_robot(profile, gestures, optima=None) -> BenchRobot:
+    """
+    Return any robot of ``bench robots``: a recovery profile and its gesture library.
+
+    Its best-known optima are ``optima``, or ``<profile stem>_best_known.yaml`` beside
+    the profile (where a shipped robot's are).
+    """
+    profile, gestures = Path(profile), Path(gestures)
+    optima = Path(optima) if optima else profile.with_name(f'{profile.stem}_best_known.yaml')
+    return BenchRobot(profile.stem, profile, gestures, optima,
+                      f'--profile {profile} --gesture-file {gestures}')
+
+
+def robot_models(name):
+    """Return ``(robot, library)`` of a shipped robot profile and its retargeted library."""
+    return shipped_robot(name).models()
 
 
 def optima_path(name):
-    """Return the path of a robot's best-known optima file."""
+    """Return the path of a shipped robot's best-known optima file."""
     return share_dir('config') / 'robots' / f'{name}_best_known.yaml'
 
 
@@ -54,10 +92,11 @@ def _single_faults(robot, library, settings, joints=None):
     return {entry_key(f): dict.fromkeys(f) for f in sets}
 
 
-def generate_optima(out, name, seeds=16, joints=None):
-    """Return the best-known document of robot ``name`` (min over ``seeds`` per gesture)."""
+def generate_optima(out, bench: BenchRobot, seeds=16, joints=None):
+    """Return the best-known document of ``bench``'s robot (min over ``seeds`` per gesture)."""
     settings = RecoverySettings()
-    robot, lib = robot_models(name)
+    name = bench.name
+    robot, lib = bench.models()
     quant = typical_points(robot, lib, settings.vq_distortion_mm)
     began = time.monotonic()
     cases = {}
@@ -80,7 +119,7 @@ def generate_optima(out, name, seeds=16, joints=None):
             'method': 'per single fault, recover() without a deadline, seeds 0..N-1, the '
                       'node settings; per gesture the lowest score_after over the seeds '
                       'whose keyframes respect the velocity limits',
-            'generated_by': f'namo-recovery bench robots --robot {name} --update-optima '
+            'generated_by': f'namo-recovery bench robots {bench.command} --update-optima '
                             f'--optima-seeds {seeds}',
             'made': {'date': datetime.now(timezone.utc).strftime('%Y-%m-%dT%H:%M:%SZ'),
                      'commit': git_commit(), 'wall_sec': round(wall, 1)},
@@ -88,21 +127,20 @@ def generate_optima(out, name, seeds=16, joints=None):
             'fault_sets': cases}
 
 
-def load_optima(name, path=None):
+def load_optima(bench: BenchRobot):
     """Return a robot's stored best-known document, or raise FileNotFoundError."""
-    path = optima_path(name) if path is None else path
-    with open(path, encoding='utf-8') as handle:
+    with open(bench.optima, encoding='utf-8') as handle:
         return yaml.safe_load(handle)
 
 
-def run_quality(out, name, best_doc, seeds=10, joints=None, deadline=None):
+def run_quality(out, bench: BenchRobot, best_doc, seeds=10, joints=None, deadline=None):
     """Run every single fault x ``seeds`` at the deadline; print and return the summary."""
     settings = RecoverySettings()
     if deadline is not None:
         settings = settings.with_changes(deadline_sec=float(deadline))
-    robot, lib = robot_models(name)
+    robot, lib = bench.models()
     if best_doc.get('model_fingerprint') != common.model_fingerprint(robot, lib):
-        out.write(f'warning: {optima_path(name)} was made for another model; rerun with '
+        out.write(f'warning: {bench.optima} was made for another model; rerun with '
                   '--update-optima\n')
     quant = typical_points(robot, lib, settings.vq_distortion_mm)
     faults_of = _single_faults(robot, lib, settings, joints)
@@ -118,7 +156,7 @@ def run_quality(out, name, best_doc, seeds=10, joints=None, deadline=None):
             gaps = {g.name: gap(g.score_after, best[g.name]) for g in res.gestures}
             runs.append({'fault': key, 'wall_s': wall, 'met': res.deadline_met,
                          'gaps': gaps, 'collides': any(g.collides for g in res.gestures)})
-    summary = _summary(name, runs, lib.names, settings.deadline_sec, seeds)
+    summary = _summary(bench.name, runs, lib.names, settings.deadline_sec, seeds)
     _print(out, summary)
     return summary
 

@@ -129,28 +129,51 @@ def cmd_bench_robots(args, out):
     if args.seeds < 1 or args.optima_seeds < 1:
         raise UsageError(f'--seeds/--optima-seeds: expected integers >= 1, got '
                          f'{args.seeds}/{args.optima_seeds}')
+    bench = _bench_robot(args)
     joints = args.joints.split(',') if args.joints else None
     if args.update_optima:
-        doc = robots.generate_optima(out, args.robot, seeds=args.optima_seeds, joints=joints)
-        path = Path(args.optima) if args.optima else robots.optima_path(args.robot)
-        path.write_text(yaml.safe_dump(doc, sort_keys=False), encoding='utf-8')
-        out.write(f'wrote {path}\n')
+        doc = robots.generate_optima(out, bench, seeds=args.optima_seeds, joints=joints)
+        bench.optima.write_text(yaml.safe_dump(doc, sort_keys=False), encoding='utf-8')
+        out.write(f'wrote {bench.optima}\n')
     if not args.skip_quality:
         try:
-            best = robots.load_optima(args.robot, args.optima)
+            best = robots.load_optima(bench)
         except FileNotFoundError as exc:
-            raise UsageError(f'no best-known optima for {args.robot} ({exc}); run with '
+            raise UsageError(f'no best-known optima for {bench.name} ({exc}); run with '
                              '--update-optima first') from None
-        robots.run_quality(out, args.robot, best, seeds=args.seeds, joints=joints,
+        robots.run_quality(out, bench, best, seeds=args.seeds, joints=joints,
                            deadline=args.deadline)
     return 0
 
 
+def _bench_robot(args):
+    """Return the BenchRobot of ``--robot``, or of ``--profile`` and ``--gesture-file``."""
+    from ..benchmarks import robots
+    if (args.robot is None) == (args.profile is None):
+        raise UsageError('bench robots: expected --robot NAME or --profile FILE (with '
+                         f'--gesture-file), got {"both" if args.robot else "neither"}')
+    if args.robot is not None:
+        if args.gesture_file is not None:
+            raise UsageError(f'--gesture-file: {args.gesture_file} is given with --robot '
+                             f'{args.robot}, which has its own; expected it with --profile')
+        return robots.shipped_robot(args.robot, args.optima)
+    if args.gesture_file is None:
+        raise UsageError(f'--profile {args.profile}: expected --gesture-file FILE too (the '
+                         "robot's library, e.g. from namo-recovery retarget)")
+    return robots.profile_robot(args.profile, args.gesture_file, args.optima)
+
+
 def register_bench(bench_sub):
     """Add ``bench robots`` to the ``bench`` command's subcommands."""
-    p = bench_sub.add_parser('robots', help='every single fault x the four gestures on '
-                                            'Talos or TIAGo++ at the deadline')
-    p.add_argument('--robot', required=True, choices=['talos', 'tiago_dual'])
+    p = bench_sub.add_parser('robots', help='every single fault x the gestures of a robot '
+                                            'from its profile (Talos, TIAGo++ or yours) at '
+                                            'the deadline')
+    p.add_argument('--robot', default=None, choices=['talos', 'tiago_dual'],
+                   help='a shipped robot (config/robots/<robot>.yaml and its library)')
+    p.add_argument('--profile', default=None, metavar='FILE',
+                   help='any robot: its recovery profile (with --gesture-file)')
+    p.add_argument('--gesture-file', default=None, metavar='FILE',
+                   help="the --profile robot's gesture library")
     p.add_argument('--seeds', type=int, default=10, help='seeds per fault (default 10)')
     p.add_argument('--update-optima', action='store_true',
                    help='recompute the best-known optima first (no deadline)')
@@ -158,7 +181,8 @@ def register_bench(bench_sub):
                    help='seeds per fault of the optima (default 16)')
     p.add_argument('--skip-quality', action='store_true', help='only the optima')
     p.add_argument('--optima', default=None, metavar='FILE',
-                   help='the best-known file (default config/robots/<robot>_best_known.yaml)')
+                   help='the best-known file (default <profile>_best_known.yaml beside '
+                        'the profile: config/robots/<robot>_best_known.yaml)')
     p.add_argument('--joints', default=None, help='comma-separated joints to fail (all)')
     p.add_argument('--deadline', type=float, default=None,
                    help="seconds (default: the node's 1 s)")
