@@ -474,6 +474,12 @@ class Exploration:
         except (TrialTimeout, ValueError, KeyError) as exc:
             text = f'{gesture}: exploration failed: {exc}'
             self._status('failed', gesture, side, text)
+        except Exception:  # noqa: B902 - only a shutdown under the thread is expected
+            if self.node.context.ok():
+                raise
+            # A signal shut ROS down under this thread (rclpy's handler, before the node's
+            # stop() could end it): its last publish failed; nothing is left to tell.
+            text = f'{gesture}: exploration ended: ROS shut down under it'
         finally:
             with self._lock:
                 self.active = None
