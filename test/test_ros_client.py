@@ -146,10 +146,11 @@ def test_a_reported_lock_angle_is_a_fault_angle(robot, result):
 
 def test_the_inbox_waits_for_complete_versions_and_their_diagnostics(robot, result):
     inbox = Inbox(ROOT)
-    assert inbox.wait(inbox.settled(quiet=0.0), timeout=0.0) is None      # nothing yet
+    settled = inbox.settled(quiet=0.0, declaration=0.0)
+    assert inbox.wait(settled, timeout=0.0) is None      # nothing yet
     for msg in _msgs(robot, result).values():
         inbox.add_library(msg)
-    assert inbox.wait(inbox.settled(quiet=0.0), timeout=0.0) == (STAMP,)
+    assert inbox.wait(settled, timeout=0.0) == (STAMP,)
     first = inbox.library(STAMP, diagnostics_timeout=0.0)
     assert not first.described and first.names == result.names
     later = list(_msgs(robot, result, STAMP + 5).values())
@@ -163,6 +164,33 @@ def test_the_inbox_waits_for_complete_versions_and_their_diagnostics(robot, resu
     inbox.add_diagnostics(DiagnosticArray(status=_statuses(robot, ROOT, result, STAMP + 5)))
     described = inbox.library(STAMP + 5, diagnostics_timeout=0.0)
     assert described.described and described.result.locks == result.locks
+
+
+def test_a_version_is_whole_when_every_gesture_its_diagnostics_list_arrived(robot, result):
+    """A late gesture (a repaired DDS fragment) after any quiet time is still waited for."""
+    inbox = Inbox(ROOT)
+    msgs = list(_msgs(robot, result).values())
+    for msg in msgs[:-1]:
+        inbox.add_library(msg)
+    undeclared = inbox.settled(quiet=0.0, declaration=0.0)
+    assert inbox.wait(undeclared, timeout=0.0) == (STAMP,)     # what a quiet time would take
+    inbox.add_diagnostics(DiagnosticArray(status=_statuses(robot, ROOT, result)))
+    assert inbox.declared(STAMP) == result.names
+    assert inbox.wait(inbox.settled(quiet=0.0, declaration=0.0), timeout=0.0) is None
+    assert not inbox.complete(STAMP)
+    inbox.add_library(msgs[-1])
+    assert inbox.wait(inbox.settled(quiet=0.0, declaration=0.0), timeout=0.0) == (STAMP,)
+    assert inbox.library(STAMP, diagnostics_timeout=0.0).names == result.names
+
+
+def test_an_undeclared_version_waits_its_declaration_time(robot, result):
+    inbox = Inbox(ROOT)
+    for msg in _msgs(robot, result).values():
+        inbox.add_library(msg)
+    assert inbox.declared(STAMP) is None
+    assert inbox.wait(inbox.settled(quiet=0.0, declaration=60.0), timeout=0.0) is None
+    assert inbox.wait(inbox.settled(quiet=60.0, declaration=0.0), timeout=0.0) is None
+    assert inbox.wait(inbox.settled(quiet=0.0, declaration=0.0), timeout=0.0) == (STAMP,)
 
 
 def test_the_inbox_sees_a_rejected_input(robot, result):

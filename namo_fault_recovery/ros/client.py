@@ -39,7 +39,8 @@ FAULT_TOPIC = 'actuator_fault'
 RECONFIGURE_SERVICE = 'reconfigure_gestures'
 CLEAR_SERVICE = 'clear_faults'
 DIAGNOSTICS_TOPIC = '/diagnostics'
-SETTLE_SEC = 0.3          # quiet time after which a late-joiner's library is complete
+SETTLE_SEC = 0.3          # quiet time after which a late-joiner's library may be complete
+DECLARATION_SEC = 1.5     # how long a version waits for the diagnostics that list it
 DIAGNOSTICS_SEC = 3.0     # how long to wait for the /diagnostics of a library version
 _MAX_DIAGNOSTICS = 200
 _COUNTER = itertools.count()
@@ -248,6 +249,7 @@ class Inbox:
         self._cond = threading.Condition()
         self._versions = {}       # stamp ns -> {gesture: JointTrajectory}
         self._arrivals = {}       # stamp ns -> monotonic time of its latest message
+        self._firsts = {}         # stamp ns -> monotonic time of its first message
         self._delivered = {}      # stamp ns -> the middleware's latest reception time, ns
         self._last_arrival = None
         self._gesture_count = None
@@ -260,9 +262,10 @@ class Inbox:
             version = self._versions.setdefault(key, {})
             version[msg.header.frame_id] = msg
             self._last_arrival = self._arrivals[key] = time.monotonic()
+            self._firsts.setdefault(key, self._last_arrival)
             # Waiters want complete versions (a settled one is polled): wake them once,
             # not once per gesture, while the executor thread still takes the others.
-            if len(version) >= (self._gesture_count or 1):
+            if self.complete(key):
                 self._cond.notify_all()
         if self._on_library is not None:
             self._on_library(key, msg)
@@ -293,18 +296,58 @@ class Inbox:
         """Return ``predicate()`` (called under the lock) once truthy, or None at timeout."""
         return wait_on(self._cond, predicate, timeout)
 
-    def settled(self, quiet=SETTLE_SEC):
+    def declared(self, stamp):
         """
-        Return a predicate: ``(stamp,)`` of the newest version once ``quiet`` s passed.
+        Return the gesture names the node's diagnostics list for version ``stamp``, or None.
 
-        Transient local hands a late subscriber the whole current version at once; the
-        version is complete when nothing more arrives.  Its size becomes the size every
-        later version must reach (see :meth:`newer`).
+        The node's ``reconfiguration`` status names every gesture of the version it
+        published (key ``gestures``): that, not a quiet time, says when a version is
+        whole.  Reliable DDS may repair a lost fragment of a large message seconds after
+        the rest arrived.  Called under the lock.
+        """
+        text = keys.format_stamp(stamp)
+        for entry in reversed(self._diagnostics):
+            if entry.get(keys.RECONFIGURATION, keys.LIBRARY_STAMP) == text:
+                names = entry.get(keys.RECONFIGURATION, keys.GESTURES)
+                if names is not None:
+                    return tuple(names.split())
+        return None
+
+    def complete(self, stamp):
+        """
+        Return True if version ``stamp`` holds all its gestures (called under the lock).
+
+        All that its diagnostics list (:meth:`declared`); without them, as many as the
+        first settled version held.
+        """
+        names = self.declared(stamp)
+        if names is not None:
+            return set(names) <= set(self._versions[stamp])
+        return len(self._versions[stamp]) >= (self._gesture_count or 1)
+
+    def settled(self, quiet=SETTLE_SEC, declaration=DECLARATION_SEC):
+        """
+        Return a predicate: ``(stamp,)`` of the newest version once it is whole.
+
+        Transient local hands a late subscriber the whole current version.  It is whole
+        once every gesture its diagnostics list arrived (:meth:`declared`).  From a node
+        that lists none (an older node, a test double), it is taken as whole after
+        ``quiet`` s with nothing arriving and ``declaration`` s after its first gesture.
+        Its size becomes the size every later version must reach (see :meth:`newer`).
         """
         def find():
-            if self._last_arrival is None or time.monotonic() - self._last_arrival < quiet:
+            if not self._versions:
                 return None
             stamp = max(self._versions)
+            names = self.declared(stamp)
+            if names is not None:
+                if not set(names) <= set(self._versions[stamp]):
+                    return None
+            else:
+                now = time.monotonic()
+                if (now - self._last_arrival < quiet
+                        or now - self._firsts[stamp] < declaration):
+                    return None
             self._gesture_count = max(self._gesture_count or 0, len(self._versions[stamp]))
             return stamp,
         return find
@@ -313,7 +356,7 @@ class Inbox:
         """Return a predicate: ``(stamp,)`` of the first complete version after ``after``."""
         def find():
             for stamp in sorted(self._versions):
-                if stamp > after and len(self._versions[stamp]) >= (self._gesture_count or 1):
+                if stamp > after and self.complete(stamp):
                     return stamp,
             return None
         return find
@@ -454,8 +497,8 @@ class RecoveryClient(SpunClient):
         """
         Return the first complete version newer than stamp ``after``, or None.
 
-        Complete means as many gestures as the library current_library() saw, so call
-        that first.
+        Complete means every gesture its diagnostics list, or else as many gestures as
+        the library current_library() saw, so call that first.
         """
         found = self.inbox.wait(self.inbox.newer(after), timeout)
         return None if found is None else self.inbox.library(found[0], diagnostics_timeout)

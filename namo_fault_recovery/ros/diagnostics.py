@@ -162,6 +162,7 @@ def reconfiguration_status(snap, up_to_date, hw, prefix):
         return status(prefix, dk.RECONFIGURATION, 'STALE', 'no library published yet', hw,
                       pairs)
     pairs += [(dk.LIBRARY_ORIGIN, current.origin),
+              (dk.GESTURES, ' '.join(g.name for g in current.gestures)),
               (dk.WALL_TIME_SEC, f'{current.wall_time:.4f}'),
               (dk.REQUEST_TO_PUBLISH_SEC, _seconds(snap.request_to_publish)),
               (dk.PUBLISH_PATH_SEC, _seconds(snap.publish_path, 6)),

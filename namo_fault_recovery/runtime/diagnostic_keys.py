@@ -48,6 +48,7 @@ FROZEN = 'frozen'
 LIBRARY_VERSION = 'library_version'
 LIBRARY_STAMP = 'library_stamp'     # format_stamp() of the published header stamp
 LIBRARY_ORIGIN = 'library_origin'   # LibraryResult.origin: reference, deadline, table, ...
+GESTURES = 'gestures'               # the version's gesture names, space-separated, in order
 CORRECTIONS = 'corrections'         # arms searched on their measured model (corrections)
 UP_TO_DATE = 'up_to_date'
 RUNNING = 'running'
