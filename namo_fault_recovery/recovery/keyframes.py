@@ -793,37 +793,42 @@ def _within_reach(setup, rows, owner, ks, motion, clock, rng):
     Search every other keyframe again within its neighbours' reach; return the motions.
 
     ``motion`` is (q (K, J), step limits, lower, upper).  For each parity, the
-    keyframes of that parity are searched again by the run's algorithm, each within the
-    box its two kept neighbours allow (:func:`.pacing.reach_boxes`, the problem's
-    bounds): a keyframe flipped into another branch finds the best pose its neighbours
-    can reach in time, and every point searched is feasible.
+    keyframes of that parity may each move within the box its two kept neighbours
+    allow (:func:`.pacing.reach_boxes`, the problem's bounds): a keyframe flipped into
+    another branch finds the best pose its neighbours can reach in time, and every
+    point searched is feasible.  The boxes of both parities depend on ``q`` alone, so
+    all of them are one batched search by the run's algorithm; each parity's results,
+    with the other keyframes kept, make one motion.
     """
     q, limits, lower, upper = motion
     free = _motion_layout(setup, rows, owner, ks)
+    parts = [pacing.reach_boxes(q, limits, lower, upper, parity) for parity in (0, 1)]
+    parts = [p for p in parts if p is not None]
+    if not free or not parts or clock.expired():
+        return []
     col = layout_columns(setup.robot, free)
-    out = []
-    for parity in (0, 1):
-        boxes = pacing.reach_boxes(q, limits, lower, upper, parity)
-        if not free or boxes is None or clock.expired():
-            continue
-        picked, low, high = boxes
-        problem = _motion_problem(setup, rows, ks[picked], free)
-        problem.restrict(low[:, col], high[:, col])
-        res = minimize(problem, _reach_algorithm(setup.algo), clock=clock,
-                       seed=int(rng.integers(2 ** 63)))
-        x, f = np.atleast_2d(res.x), np.atleast_1d(res.fun)
-        # The kept neighbours' own poses are starts in the branches they reach.
-        design = np.concatenate((setup.ref_r[rows.ids[ks]], setup.ref_l[rows.ids[ks]]), axis=1)
-        near = [np.clip(picked + d, 0, len(q) - 1) for d in (-1, 1)]
-        starts = np.stack([(q[n] + design[picked] - design[n])[:, col] for n in near], axis=1)
-        px, pf = polish(problem, problem.clip(starts), clock,
-                        maxiter=getattr(setup.algo, 'polish_maxiter', 100),
-                        ftol=getattr(setup.algo, 'polish_ftol', 1e-7))
-        pick = np.argmin(pf, axis=1)
-        better = pf[np.arange(len(pf)), pick] < f
-        x[better] = px[np.arange(len(px)), pick][better]
+    picked = np.concatenate([p[0] for p in parts])
+    problem = _motion_problem(setup, rows, ks[picked], free)
+    problem.restrict(np.concatenate([p[1] for p in parts])[:, col],
+                     np.concatenate([p[2] for p in parts])[:, col])
+    res = minimize(problem, _reach_algorithm(setup.algo), clock=clock,
+                   seed=int(rng.integers(2 ** 63)))
+    x, f = np.atleast_2d(res.x), np.atleast_1d(res.fun)
+    # The kept neighbours' own poses are starts in the branches they reach.
+    design = np.concatenate((setup.ref_r[rows.ids[ks]], setup.ref_l[rows.ids[ks]]), axis=1)
+    near = [np.clip(picked + d, 0, len(q) - 1) for d in (-1, 1)]
+    starts = np.stack([(q[n] + design[picked] - design[n])[:, col] for n in near], axis=1)
+    px, pf = polish(problem, problem.clip(starts), clock,
+                    maxiter=getattr(setup.algo, 'polish_maxiter', 100),
+                    ftol=getattr(setup.algo, 'polish_ftol', 1e-7))
+    pick = np.argmin(pf, axis=1)
+    better = pf[np.arange(len(pf)), pick] < f
+    x[better] = px[np.arange(len(px)), pick][better]
+    out, first = [], 0
+    for part_rows, _, _ in parts:
         found = q.copy()
-        found[np.ix_(picked, col)] = x
+        found[np.ix_(part_rows, col)] = x[first:first + len(part_rows)]
+        first += len(part_rows)
         out.append(found)
     return out
 
