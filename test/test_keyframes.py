@@ -9,7 +9,8 @@ from namo_fault_recovery.model.gestures import load_library
 from namo_fault_recovery.objective.score import gesture_targets, SimilarityScore
 from namo_fault_recovery.optimize.base import Clock
 from namo_fault_recovery.recovery.engine import RecoverySettings
-from namo_fault_recovery.recovery.keyframes import reconfigure_library
+from namo_fault_recovery.recovery.keyframes import PoseProblem, reconfigure_library
+from namo_fault_recovery.recovery.keyframes import SearchOptions
 from namo_fault_recovery.resources import config_path, PAPER_GESTURE_FILE
 import numpy as np
 import pytest
@@ -160,6 +161,48 @@ def test_gradient_matches_finite_differences(robot, library):
         fd_l = (scorer.evaluate(qr, ql + dq, target) - scorer.evaluate(qr, ql - dq, target))
         np.testing.assert_allclose(g_right[:, i], fd_r / (2 * h), atol=1e-5)
         np.testing.assert_allclose(g_left[:, i], fd_l / (2 * h), atol=1e-5)
+
+
+def test_the_pull_is_per_row_and_a_row_without_one_scores_its_similarity(robot, library):
+    targets = [t for g in library for t in gesture_targets(g)]
+    scorer = SimilarityScore(robot, targets)
+    free = tuple(('right', j) for j in range(7))
+    base = (np.array([t.q_right for t in targets[:2]]), np.array([t.q_left for t in targets[:2]]))
+    anchor = np.radians([[10.0] * 7, [-20.0] * 7])
+    problem = PoseProblem(robot, scorer, [0, 1], base, free, anchor=anchor,
+                          continuity=[0.0, 0.01])
+    x = np.random.default_rng(2).uniform(-1.0, 1.0, (2, 3, 7))
+    qr, ql = problem.assemble(x)
+    plain = scorer.evaluate(qr.reshape(-1, 7), ql.reshape(-1, 7),
+                            np.repeat([0, 1], 3)).reshape(2, 3)
+    pull = 0.01 * np.sum(np.degrees(x[1] - anchor[1]) ** 2, axis=-1)
+    f = problem.evaluate(x)
+    np.testing.assert_allclose(f[0], plain[0])
+    np.testing.assert_allclose(f[1], plain[1] + pull)
+    value, grad = problem.value_and_grad(x)   # of the score rounded by 0.01 mm or deg
+    np.testing.assert_allclose(value, f, atol=0.1)
+    h = 1e-6
+    for i in range(7):
+        dx = np.zeros(7)
+        dx[i] = h
+        fd = (problem.evaluate(x + dx) - problem.evaluate(x - dx)) / (2 * h)
+        np.testing.assert_allclose(grad[..., i], fd, rtol=1e-4, atol=1e-3)
+    assert problem.subset([1]).continuity == pytest.approx(problem.continuity[1:])
+
+
+def test_a_gesture_left_out_of_pulled_is_solved_as_without_the_pull(robot, library):
+    faults = {'right_arm_joint3': None}
+    kw = {'seed': 4, 'clock': Clock(None)}
+    plain = reconfigure_library(robot, library, faults, PAPER, **kw)
+    unpulled = reconfigure_library(robot, library, faults, PAPER, **kw,
+                                   options=SearchOptions(stay_close=0.05, pulled=()))
+    pulled = reconfigure_library(robot, library, faults, PAPER, **kw,
+                                 options=SearchOptions(stay_close=0.05))
+    for a, b in zip(plain.gestures, unpulled.gestures):
+        assert a.score_after == b.score_after, a.name
+        np.testing.assert_array_equal(a.positions, b.positions)
+    # A strong pull holds the poses near their design, at a cost in similarity.
+    assert pulled.total_score > plain.total_score + 1.0
 
 
 def test_cli_solve_json_schema(robot):

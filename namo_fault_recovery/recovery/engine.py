@@ -62,9 +62,10 @@ def recover(robot: 'RobotModel', library: 'GestureLibrary', faults: Optional[dic
     benchmarks, not node parameters.  ``settings`` goes down to the optimiser unchanged.
 
     A library of single poses is the paper's problem and is solved as such; when the
-    library holds a motion (a gesture of several keyframes) the explored keyframes are
-    also drawn gently towards their designed poses (``DEFAULT_STAY_CLOSE`` per deg^2),
-    so that neighbouring keyframes stay on one redundant branch.
+    library holds a motion (a gesture of several keyframes) the explored keyframes of
+    its motions are also drawn gently towards their designed poses
+    (``DEFAULT_STAY_CLOSE`` per deg^2), so that neighbouring keyframes stay on one
+    redundant branch; its single poses are not (they have no neighbour).
     """
     settings = settings or RecoverySettings()
     faults = dict(faults or {})

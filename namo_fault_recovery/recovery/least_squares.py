@@ -37,21 +37,23 @@ REFINE_DAMPING = 1e-6   # refine's damping: the line search, not the damping, ke
 REFINE_ITERATIONS = 15  # refine's iterations at most
 
 
-def gauss_newton(problem, x, iterations):
+def gauss_newton(problem, x, iterations, pull=0.0):
     """
     Return points ``x`` (batch, N, D) after ``iterations`` reweighted damped GN steps.
 
     Each step solves, per point, ``(H + lambda I) dx = -g`` with ``H = sum c J^T J``,
     ``g = sum c J^T r`` over the score's residual blocks (``c = w / max(|r|,
-    IRLS_FLOOR)``) plus the problem's ``stay_close`` pull; steps are capped at
-    ``MAX_STEP`` and projected onto the bounds.  No step is checked against the
-    objective: the caller ranks the points.
+    IRLS_FLOOR)``) plus the problem's ``stay_close`` pull, at least ``pull`` per deg^2
+    towards the problem's anchor (if it has one); steps are capped at ``MAX_STEP`` and
+    projected onto the bounds.  No step is checked against the objective: the caller
+    ranks the points.
     """
     batch, n, dim = x.shape
     eye = np.eye(dim)
     x = problem.clip(np.array(x, dtype=float))
+    continuity = np.maximum(problem.continuity, pull * np.degrees(1.0) ** 2)
     for _ in range(iterations):
-        h, g = normal_equations(problem, x)
+        h, g = normal_equations(problem, x, continuity=continuity)
         lam = DAMPING * np.trace(h, axis1=1, axis2=2) / dim + 1e-9
         step = -np.linalg.solve(h + lam[:, None, None] * eye, g[..., None])[..., 0]
         norm = np.linalg.norm(step, axis=-1, keepdims=True)
@@ -60,11 +62,12 @@ def gauss_newton(problem, x, iterations):
     return x
 
 
-def normal_equations(problem, x, floor=IRLS_FLOOR):
+def normal_equations(problem, x, floor=IRLS_FLOOR, continuity=None):
     """
     Return the reweighted normal matrices (B N, D, D) and gradients (B N, D) at ``x``.
 
-    ``x`` is (B, N, D); ``floor`` (mm or deg) is one number, or one per point (B N,).
+    ``x`` is (B, N, D); ``floor`` (mm or deg) is one number, or one per point (B N,);
+    ``continuity`` (B,), per rad^2, replaces the problem's own pull weights.
     """
     batch, n, dim = x.shape
     q = dict(zip(ARMS, problem.assemble(x)))
@@ -89,9 +92,11 @@ def normal_equations(problem, x, floor=IRLS_FLOOR):
     res, jac, weight = (np.concatenate(a, axis=1) for a in (res, jac, weight))
     h = np.einsum('nmi,nmj->nij', jac * weight[..., None], jac)
     g = np.einsum('nmi,nm->ni', jac, weight * res)
-    if problem.continuity:
-        h += 2.0 * problem.continuity * np.eye(dim)
-        g += 2.0 * problem.continuity * (x - problem.anchor[:, None]).reshape(batch * n, dim)
+    continuity = problem.continuity if continuity is None else continuity
+    if problem.anchor is not None and np.any(continuity):
+        c = np.repeat(continuity, n)[:, None]   # per row (B,) of the problem, per rad^2
+        h += 2.0 * c[..., None] * np.eye(dim)
+        g += 2.0 * c * (x - problem.anchor[:, None]).reshape(batch * n, dim)
     return h, g
 
 

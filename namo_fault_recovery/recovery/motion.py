@@ -124,9 +124,12 @@ class _Job:
         # published as searched: a dense motion is paced as a whole (_pace_motion), and
         # pacing its typical points took up to half of the 1 s deadline.
         shared = tuple(g.name for g in self.library if self.quantisations.get(g.name) is None)
+        # A single pose has no neighbouring keyframe to stay on a branch with.
+        pulled = tuple(g.name for g in self.library if len(g.keyframes) > 1)
         return {'optimizer_overrides': self.optimizer_overrides,
-                'options': SearchOptions(stay_close=self.stay_close, share_branches=shared,
-                                         lock_start=lock_start, pace=shared)}
+                'options': SearchOptions(stay_close=self.stay_close, pulled=pulled,
+                                         share_branches=shared, lock_start=lock_start,
+                                         pace=shared)}
 
 
 def adapt_library(robot, library, faults, settings, *,
