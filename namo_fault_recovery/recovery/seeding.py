@@ -1,7 +1,7 @@
 """
 Kinematic starts of the keyframe search: a few damped least-squares steps on the landmarks.
 
-The product's colony is small (8 sources, 8 cycles, the best 2 polished) and its random
+The product's colony is small (8 sources, 8 cycles, 5 of them polished) and its random
 sources land in whichever basin of the arm's redundancy they happen to sample: with a
 shoulder joint locked the best basin of a pose may be far from the reference (TIAGo++'s
 side_invite with right joint 2 locked: 49.7 with joint 1 near 10 deg and joint 3 near
