@@ -23,8 +23,12 @@ def test_solve_json_equals_the_library_the_node_publishes(tmp_path):
     assert main(['solve', '--fault', FAULT, '--seed', '0', '--no-deadline', '--json'],
                 out=out) == 0
     solved = json.loads(out.getvalue())
+    # The live path only: a table hit serves the best of the table's seeds, which since
+    # 2026-12-04 all reach this fault's optimum up to the last bits (64.880176414926xx,
+    # seed 3 lowest by 1e-13), so it is seed 0's library only up to rounding.
     node = NodeProcess(DOMAIN, state_dir=tmp_path,
-                       args=['-p', 'seed:=0', '-p', 'deadline_sec:=60.0'])
+                       args=['-p', 'seed:=0', '-p', 'deadline_sec:=60.0',
+                             '-p', 'contingency_table:=false'])
     client = RosClient(DOMAIN, name='solve_vs_node')
     try:
         reference = client.wait_library(what='the reference library')
