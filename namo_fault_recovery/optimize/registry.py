@@ -18,8 +18,8 @@ PRESETS = ('default', 'paper')
 # so five starts for 40 iterations cost about what two for 100 did, and find the best
 # basin more often (2026-12-04, `bench robots` against the same optima: Talos 87.9 ->
 # 93.6 %, TIAGo++ 86.4 -> 95.0 % of runs within 1 %; solve p95 +10-20 %).  Chosen with
-# `namo-recovery bench speed` and
-# `bench robots`; see README "Product default" and "Other robots".
+# `namo-recovery bench speed` and `bench robots`; see README "Product default" and
+# "Other robots".
 DEFAULT_ABC = {'n_sources': 8, 'max_cycles': 8, 'limit': 20, 'polish': 5,
                'polish_maxiter': 40, 'polish_ftol': 1e-7, 'use_x0': True,
                'polish_restart': True, 'informed_starts': True}

@@ -526,7 +526,6 @@ def reconfigure_library(robot, library, faults, settings, *,
     search = clock.child(reserve=ENGINE_RESERVE)
     setup = _Setup(robot, reference, selected, locks, settings, algo, options)
     setup.faults, setup.seed = dict(faults), seed
-    setup.paced = None if options.pace is True else set(options.pace or ())
     setup.budget = None if clock.end is None else clock.end - clock.start
     notes += setup.notes
     stats = {'nfev': 0}
@@ -578,6 +577,7 @@ class _Setup:
         self.stay_close = np.array([options.stay_close
                                     if _named(options.pulled, selected[g].name) else 0.0
                                     for g in self.owners])
+        self.paced = options.pace   # the motions kept within the velocity limits
         targets = self.targets
         self.scorer = SimilarityScore(robot, targets, settings.weights,
                                       reference_robot=reference)
@@ -787,8 +787,7 @@ def _pace(setup, rows, clock, rng):
 
 def _paced(setup, gesture):
     """Return True if the search keeps ``gesture`` within the velocity limits."""
-    paced = getattr(setup, 'paced', None)
-    return paced is None or gesture.name in paced
+    return _named(setup.paced, gesture.name)
 
 
 def _motion_layout(setup, rows, owner, ks):
