@@ -410,11 +410,14 @@ class KinematicChain:
         states = self._states(q)
         n, m = q.shape
         lm = self._landmarks_of(states, n)
-        axes = np.stack([np.broadcast_to(states[i + 1][3], (n, 3)) for i in range(m)], axis=1)
+        # Filled joint by joint: a state may be one (3,) row for every pose (a joint
+        # before the first moving one), and stacking broadcast views cost more here
+        # than the Jacobian's arithmetic (TIAGo++'s keyframe search).
+        axes, origins = np.empty((n, m, 3)), np.empty((n, m, 3))
+        for i in range(m):
+            origins[:, i], axes[:, i] = states[i + 1][0], states[i + 1][3]
         if self._signs is not None:
             axes = axes * self._signs[:, None]
-        origins = np.stack([np.broadcast_to(states[i + 1][0], (n, 3)) for i in range(m)],
-                           axis=1)
         pts = np.stack((lm.elbow, lm.wrist, lm.tip), axis=1)
         arm = pts[:, :, None, :] - origins[:, None]                    # (N, 3, n, 3)
         ax = axes[:, None]
