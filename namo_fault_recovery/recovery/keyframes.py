@@ -54,6 +54,7 @@ SHARE_SWEEPS = 3           # restart sweeps at most (each spreads a branch a lit
 IDLE_STAY_CLOSE = 0.01      # per deg^2: an idle faulted arm moved clear stays near its pose
 SHARE_POLISHED = 1         # of those restarts, the best-scoring ones are polished
 RESTART_MAXITER = 20       # polish iterations of a repair's branch restarts
+REACH_MAXITER = 20         # polish iterations of a repair's searches within reach
 PACED_NOTE = ('its keyframes were searched into branches too far apart for the joints '
               'to travel in time; repaired within the velocity limits')
 
@@ -324,16 +325,23 @@ def _repair_algorithm(algo):
 
 def _reach_algorithm(algo):
     """
-    Return the algorithm of a paced motion's searches within reach: without polish restarts.
+    Return the algorithm of a paced motion's searches within reach: a short plain polish.
 
     Every point of those searches lies in a box its neighbours allow, and a polish
     restarted from steepest descent crawls along the box's faces to its iteration cap:
     on TIAGo++ with right joint 1 or 2 locked it made the paced runs 50-75 % slower and
-    no run better (12 faults x 6 seeds).
+    no run better (12 faults x 6 seeds).  The polish stops at ``REACH_MAXITER``: the
+    search only offers candidates to :func:`.pacing.repair`, whose pick is polished
+    again within its tubes (:func:`_polish_in_tubes`).  The paced faults were the
+    slowest of both test robots (TIAGo++ right joints 1 and 2, Talos right joint 7:
+    about 230 ms, 58 % of it in the repair); at 20 iterations instead of 40 the
+    results stayed within 1 % as often and no gap to the best-known grew (2026-12-06,
+    ``bench robots`` on both, ``bench product --parts quality`` on Namo).
     """
-    if getattr(algo, 'polish_restart', False):
+    if getattr(algo, 'polish', 0):
         algo = copy.copy(algo)
         algo.polish_restart = False
+        algo.polish_maxiter = REACH_MAXITER
     return algo
 
 
@@ -838,8 +846,7 @@ def _within_reach(setup, rows, owner, ks, motion, clock, rng):
     design = np.concatenate((setup.ref_r[rows.ids[ks]], setup.ref_l[rows.ids[ks]]), axis=1)
     near = [np.clip(picked + d, 0, len(q) - 1) for d in (-1, 1)]
     starts = np.stack([(q[n] + design[picked] - design[n])[:, col] for n in near], axis=1)
-    px, pf = polish(problem, problem.clip(starts), clock,
-                    maxiter=getattr(setup.algo, 'polish_maxiter', 100),
+    px, pf = polish(problem, problem.clip(starts), clock, maxiter=REACH_MAXITER,
                     ftol=getattr(setup.algo, 'polish_ftol', 1e-7))
     pick = np.argmin(pf, axis=1)
     better = pf[np.arange(len(pf)), pick] < f
