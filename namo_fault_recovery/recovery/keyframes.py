@@ -958,7 +958,10 @@ def _clear_idle_arms(setup, rows, clock, rng):
     lay = [free_layout(robot, idle[k], setup.locked, setup.faulted) for k in todo]
     batch = _Batch(rows.right[todo], rows.left[todo], rows.ids[todo], lay,
                    stay_close=IDLE_STAY_CLOSE, motions=[rows.motions[k] for k in todo])
-    r2, l2, _ = _solve(robot, setup.scorer, checker, batch, setup.algo, clock, rng)
+    # With the collision term from the start: the arm is not scored, so the plain
+    # search would only find the colliding reference pose again (the stay_close pull).
+    r2, l2, _ = _solve_once(robot, setup.scorer, checker, batch,
+                            _repair_algorithm(setup.algo), clock, rng)
     clear = ~checker.collides(batch_forward(robot, r2, 'right'),
                               batch_forward(robot, l2, 'left'), rows.ids[todo])
     for i, k in enumerate(todo):
