@@ -1,14 +1,16 @@
 """Exploration on the robot: both explorers on a kinematic trial robot, the safety checks."""
 
+from dataclasses import replace
 import json
 import math
 
 from namo_fault_recovery.benchmarks import explore as bench
-from namo_fault_recovery.cli.bench import EXPLORE_RUNS
-from namo_fault_recovery.explore.annealing import AnnealingSchedule
+from namo_fault_recovery.cli.bench import EXPLORE_RUNS, EXPLORE_SA_STARTS
+from namo_fault_recovery.explore.annealing import _start_pose, AnnealingSchedule, START_POSES
 from namo_fault_recovery.explore.motion import (explore_motion, locked, motion_layouts,
                                                 MotionSpec)
 from namo_fault_recovery.explore.safety import capsule_clearance
+from namo_fault_recovery.explore.task import ExploreTask
 from namo_fault_recovery.explore.trial import (KinematicTrialRobot, SafetyCheck,
                                                TrialSession, UnsafeTrial)
 from namo_fault_recovery.model.gestures import load_library
@@ -121,6 +123,74 @@ def test_annealing_improves_on_the_unadapted_motion():
     assert ses.trials == res.trials >= 4 * 40      # every trial is counted
 
 
+def first_trials(ses):
+    """Return each typical point's first commanded pose in ``ses``'s log."""
+    out = {}
+    for point, q, _ in ses.log:
+        out.setdefault(point, q)
+    return out
+
+
+def test_annealing_carried_on_starts_from_the_corrections_found_before():
+    truth = true_chain('tool:right_arm_fingertip_joint:50')
+    short = AnnealingSchedule(trials_per_stage=10, temperature_mm=10.0, step_deg=3.0)
+    design = DESIGN[list(PICKS)]
+    res, ses, _ = explore(truth, 'annealing', short)
+    for k, q in enumerate(first_trials(ses).values()):
+        assert np.allclose(q, design[k])                   # the paper's reading
+    res, ses, _ = explore(truth, 'annealing', replace(short, start='previous'))
+    starts = list(first_trials(ses).values())
+    assert np.allclose(starts[0], design[0])
+    for k in range(1, len(PICKS)):                         # theta_X(k) + r(k - 1)
+        assert np.allclose(starts[k], design[k] + res.q[PICKS[k - 1]] - design[k - 1])
+    res, ses, _ = explore(truth, 'annealing', replace(short, start='kriging'))
+    starts = list(first_trials(ses).values())
+    r = res.q[list(PICKS)] - design
+    assert np.allclose(starts[1], design[1] + r[0])
+    assert not np.allclose(starts[2], design[2] + r[1])    # Kriging of r(0) and r(1)
+    assert np.abs(starts[2] - design[2]).max() <= np.abs(r[:2]).max() + 1e-9
+
+
+def test_annealing_carried_on_stays_on_one_branch_after_expansion():
+    # The elbow locked at 0 with expansion: six free joints for a 3-D target.  From the
+    # design, each point's SA ends on its own branch and the Kriging of r between them
+    # is garbage (154 mm at the interpolated points on this seed); carried on from the
+    # corrections found before, the points stay on one branch (12 mm).
+    between = np.ones(len(DESIGN), dtype=bool)
+    between[list(PICKS)] = False
+    sa = bench.TUNED_SA
+    _, _, apart = explore(NOMINAL, 'annealing', replace(sa, start='design'),
+                          locks={ELBOW: 0.0}, seed=1)
+    res, ses, err = explore(NOMINAL, 'annealing', replace(sa, start='kriging'),
+                            locks={ELBOW: 0.0}, seed=1)
+    assert res.stage == 2 and res.status == 'converged'
+    assert apart[between].mean() > 100.0 and err[between].mean() < 20.0
+    assert err[list(PICKS)].mean() < 5.0
+    for _, q, _ in ses.log:                  # every commanded pose passed the checks
+        assert CLEARANCE(q[None])[0] >= 5.0
+
+
+def test_a_refused_carried_start_is_pulled_back_to_the_point_before():
+    class Checks:
+        def __init__(self, reach):
+            self.reach = reach
+
+        def problem(self, q):
+            return 'refused' if np.abs(q - explored[0]).max() > self.reach else ''
+
+    task = ExploreTask(NOMINAL, DESIGN[[0, 25]], NOMINAL.batch_forward(DESIGN[[0, 25]]).tip,
+                       NOMINAL.lower, NOMINAL.upper, ((0, np.arange(7)),))
+    explored = DESIGN[[0, 25]] + 0.2
+    carried = DESIGN[25] + 0.2
+    gap = np.abs(carried - explored[0]).max()
+    assert np.allclose(_start_pose(Checks(2 * gap), task, explored, 1, 'previous'), carried)
+    half = _start_pose(Checks(0.6 * gap), task, explored, 1, 'previous')
+    assert np.allclose(half, explored[0] + 0.5 * (carried - explored[0]))
+    assert np.allclose(_start_pose(Checks(0.0), task, explored, 1, 'previous'), explored[0])
+    with pytest.raises(ValueError, match='SA start'):
+        _start_pose(Checks(1.0), task, explored, 1, 'nearest')
+
+
 def test_unsafe_trial_poses_are_refused_before_moving():
     ses = session(NOMINAL)
     here = ses.robot.current()
@@ -172,6 +242,7 @@ def test_bench_explore_smoke(tmp_path):
                            schedule=AnnealingSchedule(trials_per_stage=20))
     summary = bench.bench_explore(Sink(), str(tmp_path), run, progress=False)
     assert {r['run'] for r in summary} == set(bench.RUNS) == set(EXPLORE_RUNS)
+    assert START_POSES == EXPLORE_SA_STARTS
     ours = next(r for r in summary if r['run'] == 'ours')
     sa = next(r for r in summary if r['run'] == 'sa')
     assert ours['mean_mm'] < ours['unadapted_mean_mm'] and sa['trials'] > ours['trials']

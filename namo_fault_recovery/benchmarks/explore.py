@@ -9,7 +9,9 @@ apply_changes`); the recovery side gets only the nominal chain, the lock (a faul
 was told) and the tracker's measurements.  Per case, four runs:
 
 - ``sa``: the paper's explorer (:mod:`namo_fault_recovery.explore.annealing`) at the
-  typical points, Kriging to the rest, with the tuned schedule (``--tune-sa``);
+  typical points, Kriging to the rest, with the tuned schedule (``--tune-sa``): each
+  point carried on from the Kriging of the corrections found before it (``--sa-start
+  design``: from its design, the paper's literal reading);
 - ``ours``: :mod:`namo_fault_recovery.explore.secant`, Kriging to the rest;
 - ``every``: ours at every point (the paper's upper bound: nothing interpolated);
 - ``ik_true``: inverse kinematics on the true (changed) chain, noise-free: the floor.
@@ -26,6 +28,7 @@ against the noise-free truth at the final commanded poses.
 """
 
 from dataclasses import dataclass, replace
+import itertools
 import json
 import os
 
@@ -33,7 +36,7 @@ import numpy as np
 
 from . import common
 from .motion import ELBOW, WAVE_DISTORTION_MM
-from ..explore.annealing import AnnealingSchedule
+from ..explore.annealing import AnnealingSchedule, START_POSES
 from ..explore.corrections import solve_poses
 from ..explore.motion import explore_motion, locked, motion_layouts, MotionSpec
 from ..explore.safety import capsule_clearance
@@ -228,8 +231,11 @@ def run_one(robot, case, run, sigma, seed, robot_kind, schedule):
 
 # The schedule chosen by ``--tune-sa`` (see the README): the fewest trials within 10 %
 # (+0.5 mm) of the grid's best mean error on the tuning cases (the lower error on a tie).
-TUNED_SA = AnnealingSchedule(trials_per_stage=300, temperature_mm=5.0, step_deg=20.0)
-TUNE_GRID = {'step_deg': (3.0, 8.0, 20.0), 'temperature_mm': (5.0,),
+# The grid includes where each typical point's SA starts (``start``: the design, the
+# paper's reading, or carried on from the points explored before it).
+TUNED_SA = AnnealingSchedule(trials_per_stage=300, temperature_mm=5.0, step_deg=20.0,
+                             start='kriging')
+TUNE_GRID = {'start': START_POSES, 'step_deg': (3.0, 8.0, 20.0), 'temperature_mm': (5.0,),
              'trials_per_stage': (100, 300)}
 TUNE_CASES = ('tool 50 mm', 'elbow locked at 0, with expansion')
 _AVERAGED = ('unadapted_mean_mm', 'mean_mm', 'p95_mm', 'typical_mean_mm', 'interp_mean_mm',
@@ -445,26 +451,26 @@ def tune_sa(out, out_dir, seeds=2, grid=None, robot_kind='kinematic', progress=T
     library = load_library(robot, config_path(DEMO_MOTION_FILE))
     cases = _cases(robot, library, ('circle',), TUNE_CASES)
     results = []
-    for step in grid['step_deg']:
-        for temp in grid['temperature_mm']:
-            for n in grid['trials_per_stage']:
-                sched = AnnealingSchedule(trials_per_stage=n, temperature_mm=temp,
-                                          step_deg=step)
-                rows = [run_one(robot, c, 'sa', 1.0, s, robot_kind, sched)
-                        for c in cases for s in range(seeds)]
-                results.append((sched, float(np.mean([r['mean_mm'] for r in rows])),
-                                float(np.mean([r['trials'] for r in rows]))))
-                _progress(progress, f'{sched.describe()}: {results[-1][1]:.2f} mm')
+    for start, step, temp, n in itertools.product(
+            grid.get('start', ('design',)), grid['step_deg'], grid['temperature_mm'],
+            grid['trials_per_stage']):
+        sched = AnnealingSchedule(trials_per_stage=n, temperature_mm=temp, step_deg=step,
+                                  start=start)
+        rows = [run_one(robot, c, 'sa', 1.0, s, robot_kind, sched)
+                for c in cases for s in range(seeds)]
+        results.append((sched, float(np.mean([r['mean_mm'] for r in rows])),
+                        float(np.mean([r['trials'] for r in rows]))))
+        _progress(progress, f'{sched.describe()}: {results[-1][1]:.2f} mm')
     best = min(e for _, e, _ in results)
     fit = [r for r in results if r[1] <= 1.1 * best + 0.5]
     pick = min(fit, key=lambda r: (r[2], r[1]))
     out.write(f'# bench explore --tune-sa: cases {", ".join(TUNE_CASES)} on the circle, '
               f'{seeds} seeds, trial robot {robot_kind}\n')
-    out.write(f'{"step deg":>8s} {"T0 mm":>6s} {"trials/stage":>12s} {"mean mm":>8s} '
-              f'{"trials":>8s}\n')
+    out.write(f'{"start":>8s} {"step deg":>8s} {"T0 mm":>6s} {"trials/stage":>12s} '
+              f'{"mean mm":>8s} {"trials":>8s}\n')
     for sched, err, trials in results:
         mark = ' <- pick' if sched == pick[0] else ''
-        out.write(f'{sched.step_deg:8g} {sched.temperature_mm:6g} '
+        out.write(f'{sched.start:>8s} {sched.step_deg:8g} {sched.temperature_mm:6g} '
                   f'{sched.trials_per_stage:12d} {err:8.2f} {trials:8.0f}{mark}\n')
     out.write(f'best mean error {best:.2f} mm; pick: {pick[0].describe()}\n')
     os.makedirs(out_dir, exist_ok=True)

@@ -6,6 +6,7 @@ their figures on stdout (progress goes to stderr) and write their files under
 ``bench_out/`` unless told otherwise.
 """
 
+from dataclasses import replace
 import math
 from pathlib import Path
 import sys
@@ -16,6 +17,8 @@ EXIT_USAGE = 2
 # ``bench explore``'s runs (benchmarks.explore.RUNS, named here so that the parser does not
 # import the simulator; a test checks that they agree).
 EXPLORE_RUNS = ('sa', 'ours', 'every', 'ik_true')
+# Where the SA starts at each typical point (explore.annealing.START_POSES, likewise).
+EXPLORE_SA_STARTS = ('design', 'previous', 'kriging')
 
 
 def _usage(message):
@@ -404,10 +407,13 @@ def cmd_bench_explore(args, out):
         explore.tune_sa(out, out_dir_of(args, 'explore'), seeds=args.seeds,
                         progress=not args.quiet)
         return 0
+    schedule = explore.TUNED_SA
+    if args.sa_start:
+        schedule = replace(schedule, start=args.sa_start)
     run = explore.ExploreRun(seeds=args.seeds, every_seeds=args.every_seeds, sigmas=sigmas,
                              motions=tuple(args.motions), labels=labels,
                              robot_kind=args.robot, sa_robot=args.sa_robot,
-                             runs=tuple(args.runs))
+                             schedule=schedule, runs=tuple(args.runs))
     explore.bench_explore(out, out_dir_of(args, 'explore'), run, progress=not args.quiet)
     return 0
 
@@ -433,6 +439,11 @@ def _add_explore(bench_sub):
     p.add_argument('--sa-robot', default='kinematic', choices=['physics', 'kinematic'],
                    help="trial robot of the paper's SA (default kinematic: its thousands of "
                         'trials would take minutes of physics per run)')
+    p.add_argument('--sa-start', default=None, choices=EXPLORE_SA_STARTS,
+                   help="where the SA starts at each typical point: 'design' (the paper's "
+                        "reading), or carried on in the motion's order from the previous "
+                        "point's correction ('previous') or the Kriging of those explored "
+                        "('kriging'); default: the tuned schedule's (kriging)")
     p.add_argument('--merge', nargs='+', default=None, metavar='JSON',
                    help='report the rows of several explore.json files (partial runs) as one')
     p.add_argument('--tune-sa', action='store_true',
