@@ -323,25 +323,12 @@ def _repair_algorithm(algo):
     return algo
 
 
-def _reach_algorithm(algo):
-    """
-    Return the algorithm of a paced motion's searches within reach: a short plain polish.
-
-    Every point of those searches lies in a box its neighbours allow, and a polish
-    restarted from steepest descent crawls along the box's faces to its iteration cap:
-    on TIAGo++ with right joint 1 or 2 locked it made the paced runs 50-75 % slower and
-    no run better (12 faults x 6 seeds).  The polish stops at ``REACH_MAXITER``: the
-    search only offers candidates to :func:`.pacing.repair`, whose pick is polished
-    again within its tubes (:func:`_polish_in_tubes`).  The paced faults were the
-    slowest of both test robots (TIAGo++ right joints 1 and 2, Talos right joint 7:
-    about 230 ms, 58 % of it in the repair); at 20 iterations instead of 40 the
-    results stayed within 1 % as often and no gap to the best-known grew (2026-12-06,
-    ``bench robots`` on both, ``bench product --parts quality`` on Namo).
-    """
-    if getattr(algo, 'polish', 0):
-        algo = copy.copy(algo)
-        algo.polish_restart = False
-        algo.polish_maxiter = REACH_MAXITER
+def _unpolished(algo):
+    """Return ``algo`` without its own polish: its caller polishes the result with more."""
+    if not getattr(algo, 'polish', 0):
+        return algo
+    algo = copy.copy(algo)
+    algo.polish = 0
     return algo
 
 
@@ -827,6 +814,16 @@ def _within_reach(setup, rows, owner, ks, motion, clock, rng):
     point searched is feasible.  The boxes of both parities depend on ``q`` alone, so
     all of them are one batched search by the run's algorithm; each parity's results,
     with the other keyframes kept, make one motion.
+
+    The search's polish is one batched call for all its starts, plain (a polish
+    restarted from steepest descent crawls along the box faces to its iteration cap:
+    on TIAGo++ with right joint 1 or 2 locked it made the paced runs 50-75 % slower and
+    no run better, 12 faults x 6 seeds) and short (``REACH_MAXITER``): the search only
+    offers candidates to :func:`.pacing.repair`, whose pick is polished again within
+    its tubes (:func:`_polish_in_tubes`).  The paced faults were the slowest of both
+    test robots (TIAGo++ right joints 1 and 2, Talos right joint 7: about 230 ms, 58 %
+    of it in the repair, whose search had polished twice for 40 iterations: the
+    colony's five starts, then the neighbours' two); see README "Other robots".
     """
     q, limits, lower, upper = motion
     free = _motion_layout(setup, rows, owner, ks)
@@ -839,13 +836,15 @@ def _within_reach(setup, rows, owner, ks, motion, clock, rng):
     problem = _motion_problem(setup, rows, ks[picked], free)
     problem.restrict(np.concatenate([p[1] for p in parts])[:, col],
                      np.concatenate([p[2] for p in parts])[:, col])
-    res = minimize(problem, _reach_algorithm(setup.algo), clock=clock,
+    res = minimize(problem, _unpolished(setup.algo), clock=clock,
                    seed=int(rng.integers(2 ** 63)))
     x, f = np.atleast_2d(res.x), np.atleast_1d(res.fun)
-    # The kept neighbours' own poses are starts in the branches they reach.
+    # One plain polish of the colony's best, the known-good start and the kept
+    # neighbours' own poses (starts in the branches they reach); see REACH_MAXITER.
     design = np.concatenate((setup.ref_r[rows.ids[ks]], setup.ref_l[rows.ids[ks]]), axis=1)
     near = [np.clip(picked + d, 0, len(q) - 1) for d in (-1, 1)]
-    starts = np.stack([(q[n] + design[picked] - design[n])[:, col] for n in near], axis=1)
+    starts = np.stack([x, problem.x0] + [(q[n] + design[picked] - design[n])[:, col]
+                                         for n in near], axis=1)
     px, pf = polish(problem, problem.clip(starts), clock, maxiter=REACH_MAXITER,
                     ftol=getattr(setup.algo, 'polish_ftol', 1e-7))
     pick = np.argmin(pf, axis=1)
