@@ -179,6 +179,7 @@ def test_bench_robots_prints_the_deadline_figures(tmp_path):
     assert cli_main(argv, out=out) == 0
     text = out.getvalue()
     assert optima.is_file() and 'solve p95 ms' in text and 'all within 1%' in text
+    assert 'slowest faults (median solve ms): arm_right_4_joint ' in text
 
 
 def test_bench_robots_takes_any_profile_and_its_library(tmp_path):

@@ -37,6 +37,7 @@ from ..resources import config_path, share_dir
 
 ROBOTS = ('talos', 'tiago_dual')
 QUALITY_SEED_BASE = 1000
+SLOWEST_SHOWN = 3          # faults named by their median solve time
 
 
 @dataclass(frozen=True)
@@ -163,10 +164,16 @@ def run_quality(out, bench: BenchRobot, best_doc, seeds=10, joints=None, deadlin
 
 def _summary(name, runs, names, deadline, seeds):
     within = [max(r['gaps'].values()) <= QUALITY_WITHIN for r in runs]
-    misses = {}
+    misses, walls = {}, {}
     for r, ok in zip(runs, within):
+        joint = r['fault'].split('=')[0]
+        walls.setdefault(joint, []).append(r['wall_s'])
         if not ok:
-            misses[r['fault'].split('=')[0]] = misses.get(r['fault'].split('=')[0], 0) + 1
+            misses[joint] = misses.get(joint, 0) + 1
+    # A fault's solve time barely moves from seed to seed, so the p95 of the runs is
+    # about the second-slowest fault's: these say where to look.
+    slowest = sorted(((1000 * common.percentile(w, 50), j) for j, w in walls.items()),
+                     reverse=True)[:SLOWEST_SHOWN]
     return {'robot': name, 'runs': len(runs), 'seeds': seeds, 'deadline_sec': deadline,
             'share_within': float(np.mean(within)),
             'met': float(np.mean(within)) >= QUALITY_TARGET,
@@ -176,7 +183,8 @@ def _summary(name, runs, names, deadline, seeds):
             'deadline_met_share': float(np.mean([r['met'] for r in runs])),
             'colliding_runs': sum(r['collides'] for r in runs),
             'max_gap_pct': {g: 100 * max(r['gaps'][g] for r in runs) for g in names},
-            'misses_by_fault': misses}
+            'misses_by_fault': misses,
+            'slowest_faults_median_ms': {j: ms for ms, j in slowest}}
 
 
 def _print(out, s):
@@ -194,3 +202,5 @@ def _print(out, s):
     if s['misses_by_fault']:
         out.write('  runs beyond 1% by fault: ' + ', '.join(
             f'{k}: {n}' for k, n in sorted(s['misses_by_fault'].items())) + '\n')
+    out.write('  slowest faults (median solve ms): ' + ', '.join(
+        f'{k} {ms:.1f}' for k, ms in s['slowest_faults_median_ms'].items()) + '\n')
