@@ -34,12 +34,12 @@ from namo_fault_recovery.recovery.engine import recover
 from namo_fault_recovery.recovery.locks import resolve_locks
 from namo_fault_recovery.recovery.result import LibraryResult
 from namo_fault_recovery.recovery.settings import RecoverySettings
-from namo_fault_recovery.resources import distribution_file
 from namo_fault_recovery.runtime.restore import check_result
 from namo_fault_recovery.sim.physics import designed_allowances, NamoSim
 import numpy as np
 import pinocchio as pin
 import pytest
+from robot_urdfs import installed_urdf
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = Path(__file__).resolve().parent / 'data'
@@ -47,13 +47,12 @@ COUNTS = (5, 6, 8)
 # Test robot -> joints of its (right, left) arm; 76 is the one of unequal arms.
 ARM_COUNTS = {5: (5, 5), 6: (6, 6), 8: (8, 8), 76: (7, 6)}
 ROBOTS = tuple(ARM_COUNTS)
-TALOS_URDF = 'talos_data/robots/talos_reduced.urdf'
 _LOADED = {}
 
 
 def talos8_urdf():
     """Return Talos's URDF text with a joint ``arm_<side>_4b_joint`` added in each forearm."""
-    text = Path(distribution_file('example-robot-data', TALOS_URDF)).read_text()
+    text = Path(installed_urdf('talos')).read_text()
     for side in ('right', 'left'):
         joint5 = f'<joint name="arm_{side}_5_joint" type="revolute">\n    <parent link='
         old = f'{joint5}"arm_{side}_4_link"/>'
@@ -80,15 +79,12 @@ def urdf_text(n):
     """Return the URDF text of the Talos test robot with ``n`` joints per arm."""
     if n == 8:
         return talos8_urdf()
-    return Path(distribution_file('example-robot-data', TALOS_URDF)).read_text()
+    return Path(installed_urdf('talos')).read_text()
 
 
 def talos(n):
     """Return (robot, library) of the Talos test robot ``n`` (:data:`ARM_COUNTS`), once."""
-    try:
-        distribution_file('example-robot-data', TALOS_URDF)
-    except FileNotFoundError:
-        pytest.skip('example-robot-data (the Talos URDF) is not installed')
+    installed_urdf('talos')
     if n not in _LOADED:
         urdf = urdf_text(n) if n == 8 else None
         robot = robot_from_profile(load_profile(DATA / f'talos{n}.yaml', urdf=urdf))

@@ -17,6 +17,7 @@ from namo_fault_recovery.recovery.engine import RecoverySettings
 from namo_fault_recovery.recovery.result import GestureResult, LibraryResult
 import numpy as np
 import pytest
+from robot_urdfs import installed_urdf
 
 ROBOT = load_robot()
 LIBRARY = load_library(ROBOT)
@@ -266,12 +267,8 @@ def test_precompute_usage_errors(argv, words, capsys, tmp_path):
 
 def talos_models():
     """Return Talos and its library as the node loads them (skip without the URDF)."""
-    from namo_fault_recovery.resources import distribution_file
     from namo_fault_recovery.runtime.robot_source import load_models, RobotSource
-    try:
-        distribution_file('example-robot-data', 'talos_data/robots/talos_reduced.urdf')
-    except FileNotFoundError:
-        pytest.skip('example-robot-data (the Talos URDF) is not installed')
+    installed_urdf('talos')
     return load_models(RobotSource(profile=str(TALOS)), str(TALOS_LIBRARY))
 
 

@@ -20,7 +20,6 @@ from namo_fault_recovery.cli.main import build_parser, main
 from namo_fault_recovery.model.gestures import load_library
 from namo_fault_recovery.model.profile_robot import robot_from_profile
 from namo_fault_recovery.recovery.engine import recover, RecoverySettings
-from namo_fault_recovery.resources import distribution_file
 from namo_fault_recovery.ros.client import (BadNamespace, Inbox, node_diagnostics,
                                             normalise_namespace, rebuild_library,
                                             TriggerAnswer)
@@ -29,6 +28,7 @@ from namo_fault_recovery.ros.messages import library_to_msgs, PreparedMessages
 from namo_fault_recovery.runtime import diagnostic_keys as keys
 from namo_fault_recovery.runtime.state_store import Fault
 import pytest
+from robot_urdfs import installed_urdf
 from std_srvs.srv import Trigger
 
 JOINT = 'right_arm_joint2'
@@ -249,10 +249,7 @@ def test_namespace_and_domain_before_or_after_the_command(argv, namespace, domai
 
 
 def test_a_library_of_arms_of_unequal_joint_counts_comes_back_split_where_the_node_says():
-    try:
-        distribution_file('example-robot-data', 'talos_data/robots/talos_reduced.urdf')
-    except FileNotFoundError:
-        pytest.skip('example-robot-data (the Talos URDF) is not installed')
+    installed_urdf('talos')
     data = Path(__file__).resolve().parent / 'data'
     robot = robot_from_profile(data / 'talos76.yaml')         # 7 right joints, 6 left
     library = load_library(robot, data / 'talos76_gestures.yaml')

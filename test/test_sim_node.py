@@ -17,7 +17,6 @@ import time
 from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticArray
 from namo_fault_recovery import load_library, load_robot
-from namo_fault_recovery.resources import distribution_file
 from namo_fault_recovery.ros.description_wait import QOS as DESCRIPTION_QOS
 from namo_fault_recovery.ros.sim_node import sim_command
 from namo_fault_recovery.ros.spun_node import SpunNode, wait_until
@@ -26,6 +25,7 @@ from namo_fault_recovery.sim.trajectory import ActiveTrajectory, Command, Point
 from node_harness import NodeProcess, session_domain
 import numpy as np
 import pytest
+from robot_urdfs import installed_urdf
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
@@ -324,10 +324,7 @@ def test_reference_wai_makes_no_self_contact_and_the_torso_does(sim):
 
 
 def test_talos_from_its_profile_follows_a_key_pose_while_a_stuck_joint_holds():
-    try:
-        distribution_file('example-robot-data', 'talos_data/robots/talos_reduced.urdf')
-    except FileNotFoundError:
-        pytest.skip('example-robot-data (the Talos URDF) is not installed')
+    installed_urdf('talos')
     profile, library = ROBOTS / 'talos.yaml', ROBOTS / 'talos_gestures.yaml'
     robot, gestures = load_models(robot_source({'robot_profile': str(profile)}), str(library))
     right = list(robot.arms['right'].joint_names)
@@ -360,10 +357,7 @@ def test_talos_from_its_profile_follows_a_key_pose_while_a_stuck_joint_holds():
 
 def test_a_robot_of_unequal_arms_starts_where_told_and_its_six_joint_arm_follows():
     """Talos with a 7-joint right arm and a 6-joint left one: 13 joints, started at 0 rad."""
-    try:
-        distribution_file('example-robot-data', 'talos_data/robots/talos_reduced.urdf')
-    except FileNotFoundError:
-        pytest.skip('example-robot-data (the Talos URDF) is not installed')
+    installed_urdf('talos')
     data = Path(__file__).resolve().parent / 'data'
     profile, library = data / 'talos76.yaml', data / 'talos76_gestures.yaml'
     robot, gestures = load_models(robot_source({'robot_profile': str(profile)}), str(library))
@@ -393,10 +387,7 @@ def test_a_robot_of_unequal_arms_starts_where_told_and_its_six_joint_arm_follows
 
 
 def test_a_profile_naming_no_urdf_waits_for_the_robot_description_topic(tmp_path):
-    try:
-        urdf = distribution_file('example-robot-data', 'talos_data/robots/talos_reduced.urdf')
-    except FileNotFoundError:
-        pytest.skip('example-robot-data (the Talos URDF) is not installed')
+    urdf = installed_urdf('talos')
     doc = yaml.safe_load((ROBOTS / 'talos.yaml').read_text())
     del doc['urdf']
     profile = tmp_path / 'talos_without_urdf.yaml'

@@ -13,25 +13,20 @@ from pathlib import Path
 from namo_fault_recovery.model.gestures import load_library
 from namo_fault_recovery.model.profile_robot import robot_from_profile
 from namo_fault_recovery.model.robot_profile import load_profile
-from namo_fault_recovery.resources import distribution_file
 from namo_fault_recovery.sim.physics import (contact_pairs, designed_allowances, NamoSim,
                                              segments_mm)
 from namo_fault_recovery.sim.profile_model import sim_urdf
 import numpy as np
 import pytest
+from robot_urdfs import installed_urdf
 
 ROBOTS = Path(__file__).resolve().parent.parent / 'config' / 'robots'
-URDFS = {'talos': 'talos_data/robots/talos_reduced.urdf',
-         'tiago_dual': 'tiago_description/robots/tiago_dual.urdf'}
 _LOADED = {}
 
 
 def shipped(name):
     """Return (robot, library, designed allowances) of a shipped profile robot (once)."""
-    try:
-        distribution_file('example-robot-data', URDFS[name])
-    except FileNotFoundError:
-        pytest.skip(f'example-robot-data (the {name} URDF) is not installed')
+    installed_urdf(name)
     if name not in _LOADED:
         robot = robot_from_profile(ROBOTS / f'{name}.yaml')
         library = load_library(robot, ROBOTS / f'{name}_gestures.yaml')
