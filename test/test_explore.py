@@ -6,7 +6,7 @@ import math
 
 from namo_fault_recovery.benchmarks import explore as bench
 from namo_fault_recovery.cli.bench import EXPLORE_RUNS, EXPLORE_SA_STARTS
-from namo_fault_recovery.explore.annealing import _start_pose, AnnealingSchedule, START_POSES
+from namo_fault_recovery.explore.annealing import AnnealingSchedule, start_pose, START_POSES
 from namo_fault_recovery.explore.motion import (explore_motion, locked, motion_layouts,
                                                 MotionSpec)
 from namo_fault_recovery.explore.safety import capsule_clearance
@@ -183,12 +183,15 @@ def test_a_refused_carried_start_is_pulled_back_to_the_point_before():
     explored = DESIGN[[0, 25]] + 0.2
     carried = DESIGN[25] + 0.2
     gap = np.abs(carried - explored[0]).max()
-    assert np.allclose(_start_pose(Checks(2 * gap), task, explored, 1, 'previous'), carried)
-    half = _start_pose(Checks(0.6 * gap), task, explored, 1, 'previous')
+    assert np.allclose(start_pose(Checks(2 * gap), task, explored, 1, 'previous'), carried)
+    half = start_pose(Checks(0.6 * gap), task, explored, 1, 'previous')
     assert np.allclose(half, explored[0] + 0.5 * (carried - explored[0]))
-    assert np.allclose(_start_pose(Checks(0.0), task, explored, 1, 'previous'), explored[0])
+    assert np.allclose(start_pose(Checks(0.0), task, explored, 1, 'previous'), explored[0])
     with pytest.raises(ValueError, match='SA start'):
-        _start_pose(Checks(1.0), task, explored, 1, 'nearest')
+        start_pose(Checks(1.0), task, explored, 1, 'nearest')
+    with pytest.raises(ValueError, match='SA schedule start: expected one of design, '
+                                         "previous, kriging, got 'nearest'"):
+        AnnealingSchedule(start='nearest')
 
 
 def test_unsafe_trial_poses_are_refused_before_moving():

@@ -47,6 +47,11 @@ class AnnealingSchedule:
     stop_mm: float = 0.0             # a measured error below this ends the point early
     start: str = 'design'            # where each point's SA starts: see START_POSES
 
+    def __post_init__(self):
+        if self.start not in START_POSES:
+            raise ValueError(f'SA schedule start: expected one of {", ".join(START_POSES)}, '
+                             f'got {self.start!r}')
+
     def describe(self) -> str:
         """Return the schedule as the README states it."""
         return (f'{self.trials_per_stage} trials per point and stage, T0 '
@@ -89,7 +94,8 @@ def _anneal_point(session, task, p, q0, free, schedule, rng):
 _PULL_BACK = (1.0, 0.5, 0.25, 0.125, 0.0)
 
 
-def _start_pose(session, task, explored, p, how):
+def start_pose(session: TrialSession, task: ExploreTask, explored: np.ndarray, p: int,
+               how: str) -> np.ndarray:
     """
     Return where point ``p``'s SA starts: its designed pose, or carried on from before.
 
@@ -129,7 +135,7 @@ def explore_annealing(session: TrialSession, task: ExploreTask,
     Explore ``task``'s typical points by the paper's SA; return what was measured.
 
     The points are explored in the task's order (the motion's), each from the pose
-    ``schedule.start`` gives (:func:`_start_pose`).
+    ``schedule.start`` gives (:func:`start_pose`).
     """
     rng = np.random.default_rng(seed)
     k = len(task.start)
@@ -137,7 +143,7 @@ def explore_annealing(session: TrialSession, task: ExploreTask,
                        np.zeros(k, dtype=int))
     with recording_end(out):
         for p in range(k):
-            q = _start_pose(session, task, out.q, p, schedule.start)
+            q = start_pose(session, task, out.q, p, schedule.start)
             for stage, free in task.layouts:
                 before = session.trials
                 (q, tip, err), _ = _anneal_point(session, task, p, q,
