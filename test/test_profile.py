@@ -14,14 +14,13 @@ from namo_fault_recovery.model.robot_profile import load_profile
 from namo_fault_recovery.model.urdf_tree import load_urdf_tree
 from namo_fault_recovery.resources import distribution_file
 import pytest
+from robot_urdfs import TALOS_URDF, TIAGO_URDF
 import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 NAMO = ROOT / 'config' / 'namo_profile.yaml'
 TALOS = ROOT / 'config' / 'robots' / 'talos.yaml'
 TIAGO = ROOT / 'config' / 'robots' / 'tiago_dual.yaml'
-TALOS_URDF = 'talos_data/robots/talos_reduced.urdf'
-TIAGO_URDF = 'tiago_description/robots/tiago_dual.urdf'
 
 
 def test_packaged_profiles_load_with_their_roles():

@@ -19,6 +19,7 @@ from namo_fault_recovery.ros.description_wait import QOS as DESCRIPTION_QOS
 from namo_fault_recovery.runtime.robot_source import load_models, robot_source
 from node_harness import NodeProcess, ros_env, RosClient, session_domain, statuses_values
 import pytest
+from robot_urdfs import TALOS_URDF
 from std_msgs.msg import String
 
 pytestmark = pytest.mark.slow
@@ -27,7 +28,6 @@ DOMAIN = session_domain(1)      # modules run one after the other: the ids are r
 ROBOTS = Path(__file__).resolve().parent.parent / 'config' / 'robots'
 PROFILE = ROBOTS / 'talos.yaml'
 LIBRARY = ROBOTS / 'talos_gestures.yaml'
-TALOS_URDF = 'talos_data/robots/talos_reduced.urdf'
 FAULTED = 'arm_left_4_joint'          # Talos's left elbow
 LOCK = -1.2                           # rad, inside its limits [-2.356, 0]
 START = 60.0                          # s: interpreter, URDF and capsule fit, engine warm-up
