@@ -614,9 +614,20 @@ def test_a_start_up_signal_swallowed_where_it_landed_prints_nothing():
 
     from namo_fault_recovery.ros.recovery_node import swallowed_stop_hook
     passed = []
-    stop = SimpleNamespace(exc_type=SystemExit, exc_value=SystemExit(0))
-    other = SimpleNamespace(exc_type=ValueError, exc_value=ValueError('a real one'))
+    stop = SimpleNamespace(exc_type=SystemExit, exc_value=SystemExit(0), object=None)
+    other = SimpleNamespace(exc_type=ValueError, exc_value=ValueError('a real one'),
+                            object=None)
+
+    class HalfBuilt:
+        def __del__(self):
+            return self.never_set
+
+    # A finaliser of an object whose constructor the signal cut short (rclpy's executor).
+    half = SimpleNamespace(exc_type=AttributeError, exc_value=AttributeError('_sigint_gc'),
+                           object=HalfBuilt.__del__)
     swallowed_stop_hook([2], passed.append)(stop)
     swallowed_stop_hook([2], passed.append)(other)
+    swallowed_stop_hook([2], passed.append)(half)
     swallowed_stop_hook([], passed.append)(stop)        # no signal came: not ours
-    assert passed == [other, stop]
+    swallowed_stop_hook([], passed.append)(half)
+    assert passed == [other, stop, half]
