@@ -2,6 +2,11 @@
 
 MAX_REASON = 200           # characters of a rejected value kept in a reason
 
+# The exit codes of every command and node (one place, so that they cannot drift apart).
+EXIT_FAILURE = 1           # something failed: a node unreachable, a benchmark that missed
+EXIT_CONFIG = 1            # a node's configuration was refused (it says why on one line)
+EXIT_USAGE = 2             # bad command-line arguments
+
 
 class ConfigError(ValueError):
     """
@@ -35,6 +40,6 @@ class ReportedError(Exception):
     bad arguments.  The command line prints the message and exits with the code.
     """
 
-    def __init__(self, message, code=1):
+    def __init__(self, message, code=EXIT_FAILURE):
         super().__init__(message)
         self.code = code

@@ -34,7 +34,6 @@ WITHIN = 0.005   # "within 0.5% of the best-known optimum"
 # The paper's problem: the faulted arm alone, no collision term (the gesture file is the
 # paper's Table 2, see :func:`models`).  Everything else is the node's default.
 PAPER_SETTINGS = RecoverySettings(collision_check=False, bimanual='off')
-EXIT_USAGE = 2
 
 
 class BenchError(ReportedError):

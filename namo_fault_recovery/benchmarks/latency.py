@@ -23,7 +23,8 @@ import time
 
 import numpy as np
 
-from .common import BenchError, EXIT_USAGE
+from .common import BenchError
+from ..errors import EXIT_USAGE
 from ..runtime import diagnostic_keys as keys
 from ..runtime.private_node import NodeTarget
 

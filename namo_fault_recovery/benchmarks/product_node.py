@@ -34,9 +34,10 @@ import time
 import numpy as np
 
 from . import common, product
-from .common import BenchError, EXIT_USAGE
+from .common import BenchError
 from .deadline import CpuBurner
 from .latency import clear_faults, fault_library
+from ..errors import EXIT_USAGE
 from ..recovery.contingency import entry_key, fault_sets, table_locks
 from ..runtime.private_node import NodeTarget
 

@@ -12,8 +12,8 @@ from pathlib import Path
 import sys
 
 from .common import gesture_and_keyframe, parse_faults, Parser, UsageError
+from ..errors import EXIT_USAGE
 
-EXIT_USAGE = 2
 # ``bench explore``'s runs (benchmarks.explore.RUNS, named here so that the parser does not
 # import the simulator; a test checks that they agree).
 EXPLORE_RUNS = ('sa', 'ours', 'every', 'ik_true')

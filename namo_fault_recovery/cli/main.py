@@ -11,13 +11,11 @@ import numpy as np
 
 from .common import add_setting_options, engine_settings, gesture_and_keyframe
 from .common import parse_faults, Parser, UsageError
-from ..errors import ConfigError
+from ..errors import ConfigError, EXIT_USAGE
 from ..model.gestures import load_library
 from ..model.kinematics import forward_kinematics
 from ..model.robot import load_robot
 from ..objective.score import COMPONENTS, ScoreWeights, SimilarityScore
-
-EXIT_USAGE = 2
 
 
 def _fmt_vec(v, width=8, prec=2):

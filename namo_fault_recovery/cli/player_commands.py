@@ -20,10 +20,9 @@ import numpy as np
 
 from .bench import add_detector_options, monitor_of
 from .common import UsageError
+from ..errors import EXIT_FAILURE
 from ..runtime.private_node import node_command, player_command, read_log, start_logged
 from ..runtime.private_node import stop_process
-
-EXIT_FAILURE = 1
 
 
 def cmd_play(args, out):

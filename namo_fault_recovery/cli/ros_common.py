@@ -18,10 +18,7 @@ import argparse
 import math
 import sys
 
-from ..errors import ReportedError
-
-EXIT_FAILURE = 1
-EXIT_USAGE = 2
+from ..errors import EXIT_FAILURE, EXIT_USAGE, ReportedError
 
 
 class CommandError(ReportedError):

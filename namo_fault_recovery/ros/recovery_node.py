@@ -14,8 +14,9 @@ from pathlib import Path
 import signal
 import sys
 
+from ..errors import EXIT_CONFIG
+
 NODE_NAME = 'recovery_node'
-EXIT_CONFIG = 1
 _SIGNALS = []
 _BEFORE_ROS = [True]
 

@@ -31,8 +31,9 @@ import threading
 import rclpy
 from rclpy.executors import ExternalShutdownException, ShutdownException, SingleThreadedExecutor
 
+from ..errors import EXIT_CONFIG
+
 WATCH_PERIOD = 0.25       # s: the longest a lost shutdown wake-up can delay the exit
-EXIT_CONFIG = 1           # the exit code of a bad configuration
 
 
 def _watch(executor, context, done, period):
