@@ -245,3 +245,23 @@ def test_only_an_informed_colony_asks_the_problem_for_its_starts():
     ABC(n_sources=4, max_cycles=2, limit=5, informed_starts=True).run(
         problem, np.random.default_rng(0), Clock(None))
     assert Offering.asked == 1
+
+
+def test_the_colony_keeps_its_best_informed_start_beside_the_known_good_one():
+    # Informed starts come best first; the known-good start (use_x0) takes the last
+    # slot.  It used to overwrite the first, losing the best start whenever that one
+    # was the answer (TIAGo++'s salute through its wrist flip).
+    centre = np.linspace(0.5, -0.3, 4)
+
+    class Informed(Problem):
+        def starts(self, rng, n):
+            x = self.random(rng, n)
+            x[:, 0] = centre
+            return x
+
+    problem = Informed(-np.pi * np.ones(4), np.pi * np.ones(4), sphere,
+                       x0=np.full(4, 2.0))
+    algo = ABC(n_sources=4, max_cycles=1, limit=10, use_x0=True, informed_starts=True)
+    res = minimize(problem, algo, seed=0)
+    assert res.fun == 0.0
+    np.testing.assert_array_equal(res.x, centre)

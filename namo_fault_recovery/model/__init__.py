@@ -3,7 +3,8 @@ The robot and its gestures, free of ROS: what Namo is and what it should do.
 
 - :mod:`.robot`: the arm model (DH table, joint names, limits, capsules, a tool) loaded
   from ``config/namo_robot.yaml``;
-- :mod:`.kinematics`: forward kinematics and its Jacobian, batched over N configurations;
+- :mod:`.kinematics`: forward kinematics and its Jacobian, batched over N configurations,
+  and the arm's roll-pitch-roll flips (two joint readings of one pose);
 - :mod:`.urdf_tree`: any robot's kinematic tree read from its URDF (yourdfpy), checked;
 - :mod:`.rotations`: rotation matrices (elementary, about an axis, batched rotation vectors);
 - :mod:`.chain`: a base-to-tip chain compiled from that tree: batched FK and Jacobians;

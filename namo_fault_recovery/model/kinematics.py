@@ -242,3 +242,45 @@ def batch_forward_jacobian(robot, q, arm):
         jac = jac * flip
         axes = -axes * flip
     return lm, ArmJacobian(jac, axes)
+
+
+# Roll-pitch-roll flips: see equivalent_flips.
+_FLIPS = {}              # (id(robot), side) -> (robot, triples); robots are immutable
+FLIP_TOLERANCE = 1e-6    # mm and rotation-matrix entries: "the same landmarks"
+FLIP_PROBES = 8          # random configurations on which a flip must hold
+
+
+def equivalent_flips(robot, side: str) -> tuple:
+    """
+    Return the joint triples ``(i, i+1, i+2)`` of one arm that flip without moving a landmark.
+
+    In a roll-pitch-roll group (a spherical wrist, Namo's upper arm, elbow and forearm)
+    turning the outer joints by half a turn and negating the middle one gives the same
+    hand: ``Rz(a) Ry(b) Rz(c) = Rz(a + pi) Ry(-b) Rz(c + pi)``.  The two readings differ
+    in their joint limits, and a locked middle joint reads as ``-b`` through the flipped
+    outer joints (TIAGo++'s salute with right joint 6 locked at +20 deg where the design
+    has -22 deg: 4.4 through the flip, 27.4 without it): the keyframe search starts from
+    both (:func:`~..recovery.seeding.flip_starts`).  The triples are found numerically,
+    on this robot's own forward kinematics (every landmark, the palm's orientation
+    included, within ``FLIP_TOLERANCE`` at random configurations), so any chain is
+    covered, whatever its convention: Namo (2, 3, 4), TIAGo++ (4, 5, 6), Talos none.
+    Cached per robot.
+    """
+    key = (id(robot), side)
+    hit = _FLIPS.get(key)
+    if hit is not None and hit[0] is robot:
+        return hit[1]
+    n = arm_joint_count(robot, side)
+    q = np.random.default_rng(0).uniform(-np.pi, np.pi, size=(FLIP_PROBES, n))
+    base = batch_forward(robot, q, side)
+    found = []
+    for i in range(n - 2):
+        flipped = q.copy()
+        flipped[:, i] += np.pi
+        flipped[:, i + 1] *= -1.0
+        flipped[:, i + 2] += np.pi
+        moved = batch_forward(robot, flipped, side)
+        if all(np.max(np.abs(a - b)) <= FLIP_TOLERANCE for a, b in zip(base, moved)):
+            found.append((i, i + 1, i + 2))
+    _FLIPS[key] = (robot, tuple(found))
+    return tuple(found)

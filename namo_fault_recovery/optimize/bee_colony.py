@@ -82,7 +82,10 @@ class ABC(Algorithm):
         batch, sn = problem.batch, self.n_sources
         x = problem.starts(rng, sn) if self.informed_starts else problem.random(rng, sn)
         if self.use_x0 and problem.x0 is not None:
-            x[:, 0] = problem.x0
+            # In place of the last start: informed starts come best first, and the first
+            # is the one to keep (overwriting it lost TIAGo++'s salute through its wrist
+            # flip, 6x above the best, whenever the flipped design was the best start).
+            x[:, -1] = problem.x0
         f = problem.evaluate(x)
         trials = np.zeros((batch, sn), dtype=int)
         best_x, best_f = best_of(x, f)

@@ -15,7 +15,8 @@ From a fault set to an adapted gesture library, free of ROS.
 - :mod:`.keyframes`: the batched pose problems of every keyframe, solved within one
   deadline (the first paper's method, with stage 2 and the collision term);
 - :mod:`.seeding`: the keyframe search's starting sources, random draws taken a few
-  damped least-squares steps towards the landmarks (so the colony starts in good basins);
+  damped least-squares steps towards the landmarks, and the design through each of the
+  arm's flips (so the colony starts in good basins);
 - :mod:`.least_squares`: reweighted Gauss-Newton on the score's terms: those steps, and
   the search's last local step, which ends on the score's kinks where the polish crawls;
 - :mod:`.motion`: whole-motion adaptation (the second paper: typical points and Kriging,

@@ -21,7 +21,7 @@ top of the paper's method:
 """
 
 import copy
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import time
 from typing import Optional, Union
 
@@ -55,6 +55,7 @@ IDLE_STAY_CLOSE = 0.01      # per deg^2: an idle faulted arm moved clear stays n
 SHARE_POLISHED = 1         # of those restarts, the best-scoring ones are polished
 RESTART_MAXITER = 20       # polish iterations of a repair's branch restarts
 REACH_MAXITER = 20         # polish iterations of a repair's searches within reach
+STIFF_PENALTY = 10.0       # a stuck repair's penalty, times the capsules' own weight
 PACED_NOTE = ('its keyframes were searched into branches too far apart for the joints '
               'to travel in time; repaired within the velocity limits')
 
@@ -264,16 +265,22 @@ def _solve(robot, scorer, checker, batch, algo, clock, rng, stats=None):
     # Candidates per row: the plain result, the penalised ones (from the starting pose
     # and from the plain result), and the starting pose (collision-free unless the locks
     # themselves force a contact).  The best score among those that do not collide
-    # wins; if all collide, the least penetration.
+    # wins; where all collide, the penalised ones are pushed out with a stiffer penalty
+    # (_push_clear) and join them, and if all still collide, the least penetration.
     candidates = [(best_r[rows], best_l[rows]), (r2, l2), (r3, l3),
                   (batch.right[rows], batch.left[rows])]
-    scores, pens, hits = [], [], []
-    for qr, ql in candidates:
-        lm_r, lm_l = batch_forward(robot, qr, 'right'), batch_forward(robot, ql, 'left')
-        scores.append(scorer.evaluate(lm_r, lm_l, ids[rows]))
-        pens.append(checker.penetration(lm_r, lm_l, ids[rows]).sum(axis=1))
-        hits.append(checker.collides(lm_r, lm_l, ids[rows]))
-    scores, pens, hits = np.array(scores), np.array(pens), np.array(hits)
+    scores, pens, hits = _judge(robot, scorer, checker, ids[rows], candidates)
+    stuck = np.nonzero(hits.all(axis=0))[0]
+    if stuck.size:
+        def solve(stiff, sub):
+            return _solve_once(robot, scorer, stiff, sub, _repair_algorithm(algo), clock,
+                               rng, stats)[:2]
+        for qr, ql in _push_clear(checker, batch, rows[stuck],
+                                  [(r[stuck], l[stuck]) for r, l in candidates[1:3]], solve):
+            full_r, full_l = r3.copy(), l3.copy()
+            full_r[stuck], full_l[stuck] = qr, ql
+            candidates.append((full_r, full_l))
+        scores, pens, hits = _judge(robot, scorer, checker, ids[rows], candidates)
     for i, k in enumerate(rows):
         free = ~hits[:, i]
         pick = (int(np.argmin(np.where(free, scores[:, i], np.inf))) if free.any()
@@ -308,6 +315,43 @@ def _repair(robot, scorer, checker, batch, rows, plain, algo, clock, rng, stats)
                  stay_close=batch.stay_close[both], motions=batch.motions[both])
     r2, l2, st2 = _solve_once(robot, scorer, checker, sub, algo, clock, rng, stats)
     return r2[:m], l2[:m], r2[m:], l2[m:], st2[:m]
+
+
+def _judge(robot, scorer, checker, ids, candidates):
+    """Return (scores, penetration sums, collides) of (right, left) candidates, (C, rows)."""
+    scores, pens, hits = [], [], []
+    for qr, ql in candidates:
+        lm_r, lm_l = batch_forward(robot, qr, 'right'), batch_forward(robot, ql, 'left')
+        scores.append(scorer.evaluate(lm_r, lm_l, ids))
+        pens.append(checker.penetration(lm_r, lm_l, ids).sum(axis=1))
+        hits.append(checker.collides(lm_r, lm_l, ids))
+    return np.array(scores), np.array(pens), np.array(hits)
+
+
+def _push_clear(checker, batch, rows, penalised, solve):
+    """
+    Return the penalised candidates of ``rows`` searched again with a stiffer penalty.
+
+    The capsule penalty is soft: where the score pulls into a contact, its optimum rests
+    at a small penetration (weight 1 per mm^2: about a millimetre against a steep score),
+    and when every candidate of a row ended beyond the tolerance the least-penetrating
+    one was published, colliding (the paper's Wai with right joint 2 locked at 20 deg:
+    1.05 mm into the torso).  From each penalised candidate ``(right, left)`` of the
+    rows, ``solve(checker, batch)`` (the caller's search) runs with the penalty
+    ``STIFF_PENALTY`` times stronger and settles at a clear pose next to it.
+    """
+    stiff = copy.copy(checker)
+    stiff.capsules = replace(checker.capsules, weight=checker.capsules.weight * STIFF_PENALTY)
+    layouts = [batch.layouts[k] for k in rows]
+    m = len(rows)
+    starts = {c * m + i: [(qr if s == 'right' else ql)[i, j] for s, j in lay]
+              for c, (qr, ql) in enumerate(penalised) for i, lay in enumerate(layouts)}
+    many = np.tile(rows, len(penalised))
+    sub = _Batch(batch.right[many], batch.left[many], batch.target_ids[many],
+                 layouts * len(penalised), starts, stay_close=batch.stay_close[many],
+                 motions=batch.motions[many])
+    right, left = solve(stiff, sub)
+    return [(right[c * m:(c + 1) * m], left[c * m:(c + 1) * m]) for c in range(len(penalised))]
 
 
 def _repair_algorithm(algo):
