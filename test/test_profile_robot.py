@@ -400,3 +400,17 @@ def test_a_flip_start_only_where_it_can_change_the_answer(namo):
     flipped, design = batch_forward(robot, q, 'right'), batch_forward(robot, negated, 'right')
     for a, b in zip(flipped, design):
         np.testing.assert_allclose(a, b, atol=1e-6)
+
+
+def test_remade_optima_keep_what_an_earlier_run_found_lower():
+    from namo_fault_recovery.benchmarks.robots import keep_lower
+    previous = {'model_fingerprint': 'm', 'fault_sets': {
+        'a=1': {'wai': 37.96, 'bye': 5.0}, 'b=2': {'wai': 1.0}}}
+    new = {'model_fingerprint': 'm', 'method': 'min over seeds',
+           'fault_sets': {'a=1': {'wai': 38.85, 'bye': 4.0}}}
+    doc = keep_lower(new, previous)
+    assert doc['fault_sets'] == {'a=1': {'wai': 37.96, 'bye': 4.0}, 'b=2': {'wai': 1.0}}
+    assert doc['kept'] == 1 and '(1 here)' in doc['method']
+    other = {'model_fingerprint': 'another model', 'method': 'x',
+             'fault_sets': {'a=1': {'wai': 38.85}}}
+    assert keep_lower(other, previous)['fault_sets'] == {'a=1': {'wai': 38.85}}

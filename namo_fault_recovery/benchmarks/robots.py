@@ -128,6 +128,34 @@ def generate_optima(out, bench: BenchRobot, seeds=16, joints=None):
             'fault_sets': cases}
 
 
+def keep_lower(doc, previous):
+    """
+    Return ``doc`` with every value that ``previous`` knew lower kept from it.
+
+    A best-known optimum is the lowest score ever found for that model: a search change
+    that stops finding a basin (Talos's Wai with right joint 3: 37.96 over 24 seeds on
+    2026-12-04, 38.85 over the same seeds since 2026-12-06) must not raise the bar it is
+    measured against.  Kept only while ``previous`` is of the same model (its
+    ``model_fingerprint``), as are the fault sets this run did not solve (``--joints``);
+    ``doc['kept']`` counts the values kept.
+    """
+    if not previous or previous.get('model_fingerprint') != doc['model_fingerprint']:
+        return doc
+    kept = 0
+    for key, scores in previous.get('fault_sets', {}).items():   # not run this time
+        doc['fault_sets'].setdefault(key, {name: float(v) for name, v in scores.items()})
+    for key, scores in doc['fault_sets'].items():
+        before = previous.get('fault_sets', {}).get(key, {})
+        for name, value in scores.items():
+            if name in before and float(before[name]) < value:
+                scores[name] = float(before[name])
+                kept += 1
+    doc['kept'] = kept
+    doc['method'] += ('; a value found lower by an earlier run for the same model is kept '
+                      f'({kept} here)')
+    return doc
+
+
 def load_optima(bench: BenchRobot):
     """Return a robot's stored best-known document, or raise FileNotFoundError."""
     with open(bench.optima, encoding='utf-8') as handle:

@@ -133,8 +133,13 @@ def cmd_bench_robots(args, out):
     joints = args.joints.split(',') if args.joints else None
     if args.update_optima:
         doc = robots.generate_optima(out, bench, seeds=args.optima_seeds, joints=joints)
+        try:
+            doc = robots.keep_lower(doc, robots.load_optima(bench))
+        except FileNotFoundError:
+            pass
         bench.optima.write_text(yaml.safe_dump(doc, sort_keys=False), encoding='utf-8')
-        out.write(f'wrote {bench.optima}\n')
+        out.write(f'wrote {bench.optima} ({doc.get("kept", 0)} lower values kept from '
+                  'the earlier file)\n')
     if not args.skip_quality:
         try:
             best = robots.load_optima(bench)
@@ -176,7 +181,8 @@ def register_bench(bench_sub):
                    help="the --profile robot's gesture library")
     p.add_argument('--seeds', type=int, default=10, help='seeds per fault (default 10)')
     p.add_argument('--update-optima', action='store_true',
-                   help='recompute the best-known optima first (no deadline)')
+                   help='recompute the best-known optima first (no deadline); a value '
+                        'the file already holds lower for the same model is kept')
     p.add_argument('--optima-seeds', type=int, default=16,
                    help='seeds per fault of the optima (default 16)')
     p.add_argument('--skip-quality', action='store_true', help='only the optima')
