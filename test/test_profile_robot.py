@@ -350,14 +350,15 @@ def test_each_robots_roll_pitch_roll_flips_are_found_and_move_no_landmark(namo, 
 @pytest.mark.parametrize('joint, gesture, gap_before', [
     ('arm_right_6_joint', 'salute', 5.19),        # a locked middle joint: 27.43 against 4.43
     ('arm_right_4_joint', 'side_invite', 0.0155),  # joint 7 at its limit in the design
+    ('arm_right_7_joint', 'side_invite', 0.0113),  # joint 7's turn handed to joint 5
 ])
 def test_the_search_starts_from_the_flipped_design_too(others, joint, gesture, gap_before):
     """
-    TIAGo++ reaches its best-known pose through its wrist flip, at the seeds where it did not.
+    TIAGo++ reaches its best-known pose through its wrist's flip group, at seeds where it did not.
 
-    Before the flipped design was a start (and before the colony kept its best start in
-    place of the known-good one), these seeds ended ``gap_before`` above the best-known
-    of ``bench robots``; every seed of 20 now ends within 1 % of it.
+    Before the flipped design and the handed-over turn were starts (and before the colony
+    kept its best start in place of the known-good one), some of these seeds ended
+    ``gap_before`` above the best-known of ``bench robots``.
     """
     from namo_fault_recovery.benchmarks.robots import load_optima, shipped_robot
     from namo_fault_recovery.recovery.contingency import entry_key, table_locks
@@ -414,3 +415,28 @@ def test_remade_optima_keep_what_an_earlier_run_found_lower():
     other = {'model_fingerprint': 'another model', 'method': 'x',
              'fault_sets': {'a=1': {'wai': 38.85}}}
     assert keep_lower(other, previous)['fault_sets'] == {'a=1': {'wai': 38.85}}
+
+
+def test_a_held_outer_joint_hands_its_turn_to_the_other_one(others):
+    """With the middle joint at 0 the wrist's rolls share one axis: joint 5 turns for 7."""
+    from namo_fault_recovery.model.kinematics import batch_forward
+    from namo_fault_recovery.objective.score import gesture_targets, SimilarityScore
+    from namo_fault_recovery.recovery.keyframes import PoseProblem
+    from namo_fault_recovery.recovery.seeding import flip_starts
+    robot = others['tiago_dual']
+    targets = gesture_targets(load_library(robot, ROBOTS / 'tiago_dual_gestures.yaml')
+                              ['side_invite'])
+    scorer = SimilarityScore(robot, targets, RecoverySettings().weights)
+    free = tuple(('right', j) for j in range(6))
+    right = np.array([targets[0].q_right])
+    right[:, 6] = 0.444006                                  # joint 7's average lock
+    problem = PoseProblem(robot, scorer, [0], (right, np.array([targets[0].q_left])), free,
+                          anchor=right[:, :6])
+    start = flip_starts(problem)
+    assert start.shape == (1, 1, 6) and start[0, 0, 5] == 0.0
+    handed = right.copy()
+    handed[0, :6] = start[0, 0]
+    wanted = np.array([targets[0].q_right])
+    wanted[0, 5] = 0.0
+    for a, b in zip(batch_forward(robot, handed, 'right'), batch_forward(robot, wanted, 'right')):
+        np.testing.assert_allclose(a, b, atol=1e-6)

@@ -12,7 +12,8 @@ steps of iteratively reweighted Gauss-Newton on the score's own terms (each land
 offset weighted by ``w / max(|r|, IRLS_FLOOR)``, so that the least-squares model
 follows the score's sum of distances, kinks included), all of them in one batched
 forward-kinematics call per step; with them, :func:`flip_starts` (the design through
-each of the arm's roll-pitch-roll flips, not stepped: the pull would drag them back);
+each of the arm's roll-pitch-roll flips, or with a held outer joint's turn handed to
+the other, :func:`transfer_start`; not stepped: the pull would drag them back);
 their exact values (the problem's objective, the collision and ``stay_close`` terms
 included) then pick the colony's sources, best first.  Measured
 on the stage-1 problem of TIAGo++ with right joint 2 locked, 16 starts: the best of
@@ -83,6 +84,7 @@ def flip_starts(problem):
     joint space: the colony would as soon settle there, and the arm swing half a turn to
     reach it (Namo's Wai with the left elbow stuck straight: the whole arm turned over,
     blocked by the body on its way in the simulator); those rows start from the design.
+    Where the group's outer joint is the one held, :func:`transfer_start` instead.
     """
     designed = problem.anchor if problem.anchor is not None else problem.x0
     lower, upper = np.asarray(problem.lower), np.asarray(problem.upper)
@@ -93,6 +95,9 @@ def flip_starts(problem):
             continue
         for outer, middle, other in equivalent_flips(problem.robot, side):
             if outer not in column or other not in column:
+                start = transfer_start(problem, side, column, (outer, middle, other))
+                if start is not None:
+                    starts.append(start)
                 continue
             ends = [column[outer], column[other]]
             x = np.array(designed, dtype=float)
@@ -113,3 +118,35 @@ def flip_starts(problem):
     if not starts:
         return None
     return problem.clip(np.stack(starts, axis=1))
+
+
+def transfer_start(problem, side, column, triple):
+    """
+    Return the design with a held outer joint's turn handed to the other one, or None.
+
+    With the middle joint of a flip group at 0 its outer joints turn about one axis, so
+    the free one can take the turn the held one misses: middle 0, free outer at its
+    design plus (the held joint's design - its lock), within its limits where a full
+    turn allows (else clipped).  TIAGo++'s side_invite with right joint 7 locked 95 deg
+    from its design ends in this basin, or 1.13 % above it with the palm turned away.
+    Only rows whose held joint is more than ``FLIP_MARGIN`` from its design.
+    """
+    outer, middle, other = triple
+    held, moved = (outer, other) if other in column else (other, outer)
+    if middle not in column or moved not in column or held in column:
+        return None
+    arm = 0 if side == ARMS[0] else 1
+    design = np.array([problem.scorer.reference(t)[arm][held] for t in problem.target_ids])
+    missed = design - problem.base[side][:, held]
+    worth = np.abs(missed) > FLIP_MARGIN
+    if not worth.any():
+        return None
+    designed = problem.anchor if problem.anchor is not None else problem.x0
+    x = np.array(designed, dtype=float)
+    k = column[moved]
+    x[:, column[middle]] = 0.0
+    turned = x[:, k, None] + missed[:, None] + np.array([0.0, 2 * np.pi, -2 * np.pi])
+    clipped = np.clip(turned, problem.lower[k], problem.upper[k])
+    pick = np.argmin(np.abs(turned - clipped), axis=1)
+    x[:, k] = clipped[np.arange(len(x)), pick]
+    return np.where(worth[:, None], x, designed)
