@@ -1,7 +1,7 @@
 """Forward kinematics against the spec's golden values, mirror symmetry and batching."""
 
 from namo_fault_recovery import forward_kinematics
-from namo_fault_recovery.model.kinematics import shoulder_position
+from namo_fault_recovery.model.kinematics import batch_forward, shoulder_position
 import numpy as np
 import pytest
 
@@ -92,3 +92,20 @@ def test_bad_input(robot, bad, message):
         forward_kinematics(robot, bad)
     with pytest.raises(ValueError, match='arm'):
         forward_kinematics(robot, np.zeros(7), 'middle')
+
+
+def test_a_robot_made_anew_for_each_run_does_not_grow_the_kinematics_caches(robot):
+    # The engine child makes a new robot object per run (with_learned, a tool); caches
+    # keyed by the object held every one of them: a slow leak in a long-running node.
+    from dataclasses import replace
+    from namo_fault_recovery.model import kinematics
+    q = np.zeros((1, 7))
+    batch_forward(robot, q, 'right')
+    flips = kinematics.equivalent_flips(robot, 'right')
+    plans, answers = len(kinematics._PLANS), len(kinematics._FLIPS)
+    for length in (0.0, 0.0, 50.0, 50.0):
+        again = replace(robot.with_tool(length), learned=())
+        batch_forward(again, q, 'right')
+        assert kinematics.equivalent_flips(again, 'right') == flips
+    assert len(kinematics._PLANS) == plans
+    assert len(kinematics._FLIPS) <= answers + 1          # the 50 mm tool's own answer

@@ -15,7 +15,10 @@ from numpy.typing import ArrayLike
 from .robot import ARMS, N_JOINTS, RobotModel
 
 
-_PLANS = {}   # id(robot) -> (robot, link constants); robots are immutable
+# DH table bytes -> link constants.  Keyed by the table, not the robot object: the engine
+# makes a new robot per run (a tool, learned corrections), and an entry per object grew
+# without end in a long-running node.
+_PLANS = {}
 
 
 class ArmLandmarks(NamedTuple):
@@ -76,16 +79,18 @@ def as_joint_array(q, name='q', n_joints=N_JOINTS):
 
 def _link_plan(robot):
     """Per-link constants, with exact 0/+-1 for the common right-angle twists."""
-    cached = _PLANS.get(id(robot))
-    if cached is not None and cached[0] is robot:
-        return cached[1]
+    key = b''.join(np.asarray(a, dtype=float).tobytes()
+                   for a in (robot.a_prev, robot.d, robot.alpha_prev))
+    cached = _PLANS.get(key)
+    if cached is not None:
+        return cached
     plan = []
     for i in range(N_JOINTS):
         ca, sa = np.cos(robot.alpha_prev[i]), np.sin(robot.alpha_prev[i])
         ca = 0.0 if abs(ca) < 1e-12 else ca
         sa = 0.0 if abs(sa) < 1e-12 else sa
         plan.append((float(robot.a_prev[i]), float(robot.d[i]), ca, sa))
-    _PLANS[id(robot)] = (robot, plan)
+    _PLANS[key] = plan
     return plan
 
 
@@ -244,8 +249,11 @@ def batch_forward_jacobian(robot, q, arm):
     return lm, ArmJacobian(jac, axes)
 
 
-# Roll-pitch-roll flips: see equivalent_flips.
-_FLIPS = {}              # (id(robot), side) -> (robot, triples); robots are immutable
+# Roll-pitch-roll flips: see equivalent_flips.  Keyed by the arm's landmarks at the probe
+# configurations (what the answer depends on), so that the robot made anew for each run
+# finds it again; at most FLIP_CACHE entries.
+_FLIPS = {}
+FLIP_CACHE = 64
 FLIP_TOLERANCE = 1e-6    # mm and rotation-matrix entries: "the same landmarks"
 FLIP_PROBES = 8          # random configurations on which a flip must hold
 
@@ -264,15 +272,15 @@ def equivalent_flips(robot, side: str) -> tuple:
     on this robot's own forward kinematics (every landmark, the palm's orientation
     included, within ``FLIP_TOLERANCE`` at random configurations), so any chain is
     covered, whatever its convention: Namo (2, 3, 4), TIAGo++ (4, 5, 6), Talos none.
-    Cached per robot.
+    Cached by the arm's landmarks at the probes (one forward kinematics call per lookup).
     """
-    key = (id(robot), side)
-    hit = _FLIPS.get(key)
-    if hit is not None and hit[0] is robot:
-        return hit[1]
     n = arm_joint_count(robot, side)
     q = np.random.default_rng(0).uniform(-np.pi, np.pi, size=(FLIP_PROBES, n))
     base = batch_forward(robot, q, side)
+    key = b''.join(np.round(a, 9).tobytes() for a in base)
+    hit = _FLIPS.get(key)
+    if hit is not None:
+        return hit
     found = []
     for i in range(n - 2):
         flipped = q.copy()
@@ -282,5 +290,7 @@ def equivalent_flips(robot, side: str) -> tuple:
         moved = batch_forward(robot, flipped, side)
         if all(np.max(np.abs(a - b)) <= FLIP_TOLERANCE for a, b in zip(base, moved)):
             found.append((i, i + 1, i + 2))
-    _FLIPS[key] = (robot, tuple(found))
+    if len(_FLIPS) >= FLIP_CACHE:
+        _FLIPS.pop(next(iter(_FLIPS)))
+    _FLIPS[key] = tuple(found)
     return tuple(found)
