@@ -110,10 +110,8 @@ def flip_starts(problem):
             if not worth.any():
                 continue
             for k in ends:
-                turned = x[:, k, None] + np.array([np.pi, -np.pi])
-                clipped = np.clip(turned, lower[k], upper[k])
-                pick = np.argmin(np.abs(turned - clipped), axis=1)
-                x[:, k] = clipped[np.arange(len(x)), pick]
+                half = x[:, k, None] + np.array([np.pi, -np.pi])
+                x[:, k] = nearest_within(half, lower[k], upper[k])
             starts.append(np.where(worth[:, None], x, designed))
     if not starts:
         return None
@@ -145,8 +143,14 @@ def transfer_start(problem, side, column, triple):
     x = np.array(designed, dtype=float)
     k = column[moved]
     x[:, column[middle]] = 0.0
-    turned = x[:, k, None] + missed[:, None] + np.array([0.0, 2 * np.pi, -2 * np.pi])
-    clipped = np.clip(turned, problem.lower[k], problem.upper[k])
-    pick = np.argmin(np.abs(turned - clipped), axis=1)
-    x[:, k] = clipped[np.arange(len(x)), pick]
+    x[:, k] = nearest_within(x[:, k, None] + missed[:, None]
+                             + np.array([0.0, 2 * np.pi, -2 * np.pi]),
+                             problem.lower[k], problem.upper[k])
     return np.where(worth[:, None], x, designed)
+
+
+def nearest_within(candidates, low, high):
+    """Return, per row of ``candidates`` (rows, m), the one nearest to [low, high], clipped."""
+    clipped = np.clip(candidates, low, high)
+    pick = np.argmin(np.abs(candidates - clipped), axis=1)
+    return clipped[np.arange(len(candidates)), pick]
