@@ -279,6 +279,27 @@ def test_optima_of_one_library_keep_the_others():
         product.generate_optima(io.StringIO(), libraries=('circle',))
 
 
+def test_remade_product_optima_keep_what_an_earlier_run_found_lower():
+    def entry(fingerprint, sets):
+        return {'fingerprint': fingerprint, 'fault_sets': {
+            key: {'best': dict(best), 'best_seed': {g: seed for g in best}}
+            for key, (best, seed) in sets.items()}}
+
+    old = {'made': {}, 'libraries': {'product': entry('m', {
+        'j1=0.1': ({'wai': 15.0, 'bye': 9.0}, 7), 'j2=0.2': ({'wai': 1.0}, 3)})}}
+    new = {'made': {}, 'libraries': {'product': entry('m', {
+        'j1=0.1': ({'wai': 15.5, 'bye': 8.0}, 2)})}}
+    sets = product.merge_optima(new, old)['libraries']['product']['fault_sets']
+    assert sets['j1=0.1']['best'] == {'wai': 15.0, 'bye': 8.0}
+    assert sets['j1=0.1']['best_seed'] == {'wai': 7, 'bye': 2}
+    assert sets['j1=0.1']['kept_from_earlier'] == ['wai']
+    assert sets['j2=0.2']['best'] == {'wai': 1.0}            # not solved this time
+    other = {'made': {}, 'libraries': {'product': entry('another model', {
+        'j1=0.1': ({'wai': 15.5}, 2)})}}
+    sets = product.merge_optima(other, old)['libraries']['product']['fault_sets']
+    assert sets == {'j1=0.1': {'best': {'wai': 15.5}, 'best_seed': {'wai': 2}}}
+
+
 def test_product_bench_node_parts(tmp_path):
     pytest.importorskip('rclpy')
     # The packaged best-known optima (regenerating them is the offline test's business):

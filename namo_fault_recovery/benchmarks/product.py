@@ -281,7 +281,9 @@ def merge_optima(new, old):
     Return ``new`` with the libraries it did not compute taken from ``old`` (or None).
 
     Each library entry keeps its own ``made`` (date, commit, seeds), so a document
-    regenerated for one library still says when and how the others were made.
+    regenerated for one library still says when and how the others were made.  A
+    library computed again for the same model and settings (its ``fingerprint``) keeps
+    every best the old entry knew lower (:func:`keep_lower_bests`).
     """
     for which, entry in new['libraries'].items():
         entry.setdefault('made', new['made'])
@@ -291,8 +293,36 @@ def merge_optima(new, old):
         if which not in new['libraries']:
             entry.setdefault('made', old.get('made', {}))
             new['libraries'][which] = entry
+        else:
+            keep_lower_bests(new['libraries'][which], entry)
     new['libraries'] = {w: new['libraries'][w] for w in LIBRARIES if w in new['libraries']}
     return new
+
+
+def keep_lower_bests(entry, before):
+    """
+    Keep in a library ``entry`` each gesture best that ``before`` (same fingerprint) had lower.
+
+    A best-known optimum is the lowest score ever found for that model: a search change
+    that stops finding a basin must not raise the bar it is measured against (the robots'
+    optima do the same, :func:`~.robots.keep_lower`).  A kept best keeps its seed, listed
+    under ``kept_from_earlier`` (that seed was an earlier code's); ``seeds_within_1pct``
+    stays this run's own share.  Fault sets this run did not solve are carried over.
+    """
+    if before.get('fingerprint') != entry.get('fingerprint'):
+        return
+    for key, old_set in before.get('fault_sets', {}).items():
+        new_set = entry['fault_sets'].setdefault(key, old_set)
+        if new_set is old_set:
+            continue
+        kept = []
+        for name, value in old_set.get('best', {}).items():
+            if name in new_set['best'] and float(value) < new_set['best'][name]:
+                new_set['best'][name] = float(value)
+                new_set['best_seed'][name] = old_set.get('best_seed', {}).get(name)
+                kept.append(name)
+        if kept:
+            new_set['kept_from_earlier'] = kept
 
 
 def git_commit():
