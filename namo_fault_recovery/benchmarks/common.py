@@ -258,6 +258,21 @@ def relative_gap(score, best):
     return (score - best) / abs(best)
 
 
+def keep_lower_scores(scores, before):
+    """
+    Lower each score of ``scores`` ({gesture: value}) to ``before``'s where that is lower.
+
+    Return the names lowered, in ``before``'s order.  Best-known optima are the lowest
+    scores ever found for a model, so a remade file keeps what an earlier one knew lower
+    (``bench robots`` and ``bench product`` alike).
+    """
+    kept = [name for name, value in before.items()
+            if name in scores and float(value) < scores[name]]
+    for name in kept:
+        scores[name] = float(before[name])
+    return kept
+
+
 def within(score, best, tol=WITHIN):
     """Return True if ``score`` is within ``tol`` (relative) of the optimum ``best``."""
     return score <= best + tol * abs(best) + 1e-12

@@ -315,12 +315,9 @@ def keep_lower_bests(entry, before):
         new_set = entry['fault_sets'].setdefault(key, old_set)
         if new_set is old_set:
             continue
-        kept = []
-        for name, value in old_set.get('best', {}).items():
-            if name in new_set['best'] and float(value) < new_set['best'][name]:
-                new_set['best'][name] = float(value)
-                new_set['best_seed'][name] = old_set.get('best_seed', {}).get(name)
-                kept.append(name)
+        kept = common.keep_lower_scores(new_set['best'], old_set.get('best', {}))
+        for name in kept:
+            new_set['best_seed'][name] = old_set.get('best_seed', {}).get(name)
         if kept:
             new_set['kept_from_earlier'] = kept
 

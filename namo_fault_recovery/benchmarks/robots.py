@@ -141,15 +141,11 @@ def keep_lower(doc, previous):
     """
     if not previous or previous.get('model_fingerprint') != doc['model_fingerprint']:
         return doc
-    kept = 0
-    for key, scores in previous.get('fault_sets', {}).items():   # not run this time
+    earlier = previous.get('fault_sets', {})
+    kept = sum(len(common.keep_lower_scores(scores, earlier.get(key, {})))
+               for key, scores in doc['fault_sets'].items())
+    for key, scores in earlier.items():                          # not run this time
         doc['fault_sets'].setdefault(key, {name: float(v) for name, v in scores.items()})
-    for key, scores in doc['fault_sets'].items():
-        before = previous.get('fault_sets', {}).get(key, {})
-        for name, value in scores.items():
-            if name in before and float(before[name]) < value:
-                scores[name] = float(before[name])
-                kept += 1
     doc['kept'] = kept
     doc['method'] += ('; a value found lower by an earlier run for the same model is kept '
                       f'({kept} here)')
