@@ -95,7 +95,8 @@ def flip_starts(problem):
             continue
         for outer, middle, other in equivalent_flips(problem.robot, side):
             if outer not in column or other not in column:
-                start = transfer_start(problem, side, column, (outer, middle, other))
+                start = transfer_start(problem, designed, side, column,
+                                       (outer, middle, other))
                 if start is not None:
                     starts.append(start)
                 continue
@@ -118,7 +119,7 @@ def flip_starts(problem):
     return problem.clip(np.stack(starts, axis=1))
 
 
-def transfer_start(problem, side, column, triple):
+def transfer_start(problem, designed, side, column, triple):
     """
     Return the design with a held outer joint's turn handed to the other one, or None.
 
@@ -127,7 +128,8 @@ def transfer_start(problem, side, column, triple):
     design plus (the held joint's design - its lock), within its limits where a full
     turn allows (else clipped).  TIAGo++'s side_invite with right joint 7 locked 95 deg
     from its design ends in this basin, or 1.13 % above it with the palm turned away.
-    Only rows whose held joint is more than ``FLIP_MARGIN`` from its design.
+    Only rows whose held joint is more than ``FLIP_MARGIN`` from its design; the others
+    keep ``designed`` (the free joints' designed angles, as :func:`flip_starts` has them).
     """
     outer, middle, other = triple
     held, moved = (outer, other) if other in column else (other, outer)
@@ -139,7 +141,6 @@ def transfer_start(problem, side, column, triple):
     worth = np.abs(missed) > FLIP_MARGIN
     if not worth.any():
         return None
-    designed = problem.anchor if problem.anchor is not None else problem.x0
     x = np.array(designed, dtype=float)
     k = column[moved]
     x[:, column[middle]] = 0.0
