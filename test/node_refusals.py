@@ -11,9 +11,12 @@ module state.  Nothing is shared between the children but the imported code.
 
 Input on stdin: a JSON list of ``[argv, stdout_path, stderr_path]``.  Output on stdout:
 a JSON list of exit codes (None for a child that did not exit within the timeout,
-which is then killed).
+which is then killed).  Before it is killed, such a child writes the Python stack of
+each of its threads to its stderr file (``faulthandler`` on SIGUSR1), so that a test
+failing on it says where the start-up or the refusal stopped.
 """
 
+import faulthandler
 import json
 import os
 import signal
@@ -31,6 +34,7 @@ def _child(argv, out_path, err_path):
             target = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
             os.dup2(target, fd)
             os.close(target)
+        faulthandler.register(signal.SIGUSR1, all_threads=True)    # see _wait
         from namo_fault_recovery.ros.recovery_node import main
         sys.argv = list(argv)
         try:
@@ -53,6 +57,8 @@ def _wait(pid, end):
         if done:
             return os.waitstatus_to_exitcode(status)
         time.sleep(0.01)
+    os.kill(pid, signal.SIGUSR1)        # its threads' stacks to its stderr file
+    time.sleep(0.5)
     os.kill(pid, signal.SIGKILL)
     os.waitpid(pid, 0)
     return None
