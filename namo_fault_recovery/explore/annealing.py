@@ -36,6 +36,12 @@ from ..recovery.kriging import OrdinaryKriging
 START_POSES = ('design', 'previous', 'kriging')
 
 
+def check_start(how: str, what: str) -> None:
+    """Raise ValueError (one line naming ``what``) unless ``how`` is one of START_POSES."""
+    if how not in START_POSES:
+        raise ValueError(f'{what}: expected one of {", ".join(START_POSES)}, got {how!r}')
+
+
 @dataclass(frozen=True)
 class AnnealingSchedule:
     """The SA schedule: trials per point and stage, start temperature and step, cooling."""
@@ -48,9 +54,7 @@ class AnnealingSchedule:
     start: str = 'design'            # where each point's SA starts: see START_POSES
 
     def __post_init__(self):
-        if self.start not in START_POSES:
-            raise ValueError(f'SA schedule start: expected one of {", ".join(START_POSES)}, '
-                             f'got {self.start!r}')
+        check_start(self.start, 'SA schedule start')
 
     def describe(self) -> str:
         """Return the schedule as the README states it."""
@@ -108,8 +112,7 @@ def start_pose(session: TrialSession, task: ExploreTask, explored: np.ndarray, p
     explored pose rather than sent back to the design, which would restart the search
     on any branch; the design remains if even that is refused.
     """
-    if how not in START_POSES:
-        raise ValueError(f'SA start {how!r}; expected one of {", ".join(START_POSES)}')
+    check_start(how, 'SA start')
     design = np.asarray(task.start, dtype=float)
     if how == 'design' or p == 0:
         return design[p].copy()
