@@ -36,6 +36,8 @@ returns a plain dict (written as JSON) and prints its figures:
   clean SIGTERM stops of ``recovery_node`` and ``namo_sim`` (``bench idle``);
 - :mod:`.robots`: every single fault x the four gestures on Talos or TIAGo++ from their
   profiles, against per-robot best-known optima (``bench robots``);
+- :mod:`.meshes`: what the capsules pass as clear, measured on a profile robot's URDF
+  collision meshes, every published keyframe of every single fault (``bench meshes``);
 - :mod:`.notice`: ``bench notice``: time to notice a hidden structure change and false
   alarms, on the simulator's clock;
 - :mod:`.fk`: the URDF-compiled chains' FK against the DH FK on Namo (``bench fk``);

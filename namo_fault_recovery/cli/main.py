@@ -272,7 +272,7 @@ def build_parser():
     profile_command.register(sub)            # profile (a template from a URDF)
     from . import retarget_command
     retarget_command.register(sub)           # retarget (a library for another robot)
-    retarget_command.register_bench(bench_sub)   # bench robots
+    retarget_command.register_bench(bench_sub)   # bench robots, bench meshes
     profile_command.register_bench(bench_sub)    # bench fk
     return parser
 

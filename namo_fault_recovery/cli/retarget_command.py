@@ -155,7 +155,7 @@ def _bench_robot(args):
     """Return the BenchRobot of ``--robot``, or of ``--profile`` and ``--gesture-file``."""
     from ..benchmarks import robots
     if (args.robot is None) == (args.profile is None):
-        raise UsageError('bench robots: expected --robot NAME or --profile FILE (with '
+        raise UsageError('expected --robot NAME or --profile FILE (with '
                          f'--gesture-file), got {"both" if args.robot else "neither"}')
     if args.robot is not None:
         if args.gesture_file is not None:
@@ -168,17 +168,39 @@ def _bench_robot(args):
     return robots.profile_robot(args.profile, args.gesture_file, args.optima)
 
 
-def register_bench(bench_sub):
-    """Add ``bench robots`` to the ``bench`` command's subcommands."""
-    p = bench_sub.add_parser('robots', help='every single fault x the gestures of a robot '
-                                            'from its profile (Talos, TIAGo++ or yours) at '
-                                            'the deadline')
+def cmd_bench_meshes(args, out):
+    """Run ``bench meshes``: the capsules' verdicts against the URDF meshes; return 0."""
+    from ..benchmarks import meshes
+    if args.seeds < 1:
+        raise UsageError(f'--seeds: expected an integer >= 1, got {args.seeds}')
+    joints = args.joints.split(',') if args.joints else None
+    meshes.run_meshes(out, _bench_robot(args), seeds=args.seeds, joints=joints)
+    return 0
+
+
+def _robot_arguments(p):
+    """Add the robot's arguments of ``bench robots`` and ``bench meshes``."""
     p.add_argument('--robot', default=None, choices=['talos', 'tiago_dual'],
                    help='a shipped robot (config/robots/<robot>.yaml and its library)')
     p.add_argument('--profile', default=None, metavar='FILE',
                    help='any robot: its recovery profile (with --gesture-file)')
     p.add_argument('--gesture-file', default=None, metavar='FILE',
                    help="the --profile robot's gesture library")
+    p.add_argument('--joints', default=None, help='comma-separated joints to fail (all)')
+
+
+def register_bench(bench_sub):
+    """Add ``bench robots`` and ``bench meshes`` to the ``bench`` command's subcommands."""
+    m = bench_sub.add_parser('meshes', help='what the capsules pass as clear, measured on '
+                                            'the URDF collision meshes of a profile robot '
+                                            '(every single fault at the deadline)')
+    _robot_arguments(m)
+    m.add_argument('--seeds', type=int, default=1, help='seeds per fault (default 1)')
+    m.set_defaults(func=cmd_bench_meshes, optima=None)
+    p = bench_sub.add_parser('robots', help='every single fault x the gestures of a robot '
+                                            'from its profile (Talos, TIAGo++ or yours) at '
+                                            'the deadline')
+    _robot_arguments(p)
     p.add_argument('--seeds', type=int, default=10, help='seeds per fault (default 10)')
     p.add_argument('--update-optima', action='store_true',
                    help='recompute the best-known optima first (no deadline); a value '
@@ -189,7 +211,6 @@ def register_bench(bench_sub):
     p.add_argument('--optima', default=None, metavar='FILE',
                    help='the best-known file (default <profile>_best_known.yaml beside '
                         'the profile: config/robots/<robot>_best_known.yaml)')
-    p.add_argument('--joints', default=None, help='comma-separated joints to fail (all)')
     p.add_argument('--deadline', type=float, default=None,
                    help="seconds (default: the node's 1 s)")
     p.set_defaults(func=cmd_bench_robots)

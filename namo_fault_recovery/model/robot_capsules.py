@@ -143,16 +143,24 @@ def _load_urdf(source):
                               build_collision_scene_graph=False, load_collision_meshes=False)
 
 
-def _arm_groups(robot, side):
-    """Return {segment or 'torso': [link, ...]} for one arm's chain links."""
+def segment_links(robot, side) -> dict:
+    """
+    Return ``{segment or 'torso': [link, ...]}``: which of an arm's chain links each covers.
+
+    A link goes to the segment of the landmarks it moves with (upper arm up to the elbow,
+    forearm up to the wrist, hand beyond); the links above the first arm joint are the
+    torso.  The first joint's own link (a mount beside the torso on Talos and TIAGo++,
+    which the torso touches by design) is in no segment: see the module.
+    """
     chain = robot.chains[side].chain
     marks = chain.landmarks
     bounds = (marks['elbow'].state, marks['wrist'].state)
+    mount = robot.profile.tree.joints[chain.joint_names[0]].child
     groups = {name: [] for name in SEGMENTS + ('torso',)}
     for link, (state, _) in chain.frame_states().items():
         if state == 0:
             groups['torso'].append(link)
-        else:
+        elif link != mount:
             groups[SEGMENTS[int(state >= bounds[0]) + int(state >= bounds[1])]].append(link)
     return groups
 
@@ -185,10 +193,9 @@ def _fit_arm(robot, side, urdf, urdf_dir, notes):
     from .kinematics import forward_kinematics, shoulder_position
     lm = forward_kinematics(robot, np.zeros(robot.chains[side].n_joints), side)
     ends = [shoulder_position(robot, side), lm.elbow, lm.wrist, lm.tip]
-    groups = _arm_groups(robot, side)
+    groups = segment_links(robot, side)
     torso, _ = _points_at_zero(robot, side, groups['torso'], urdf, urdf_dir)
-    mount = robot.profile.tree.joints[robot.chains[side].chain.joint_names[0]].child
-    links = [link for seg in SEGMENTS for link in groups[seg] if link != mount]
+    links = [link for seg in SEGMENTS for link in groups[seg]]
     points, kinds = _points_at_zero(robot, side, links, urdf, urdf_dir)
     nearest, dist = (_assign(points, ends) if len(points)
                      else (np.zeros(0, dtype=int), np.zeros(0)))
