@@ -47,6 +47,13 @@ COUNTS = (5, 6, 8)
 # Test robot -> joints of its (right, left) arm; 76 is the one of unequal arms.
 ARM_COUNTS = {5: (5, 5), 6: (6, 6), 8: (8, 8), 76: (7, 6)}
 ROBOTS = tuple(ARM_COUNTS)
+# The five-joint arm with its left joint 2 held at 0 (4 deg inside its reference): the
+# resting forearm's capsule (82 mm) reaches 16 mm into the torso's own shape
+# (model.torso_field), and the idle arm's four other joints cannot take it out, so Bye
+# and Side Invite are published with that contact flagged.  On the URDF's meshes that
+# forearm is 12.9 mm clear (2026-12-06): the capsule's radius makes the contact, not
+# the robot; a false alarm, not a hidden collision.
+FLAGGED = {(5, 'arm_left_2_joint'): ('left_forearm-torso',)}
 _LOADED = {}
 
 
@@ -209,6 +216,10 @@ def test_every_single_fault_is_recovered_with_the_joint_held(n):
             # best clear motion is published, and the message says why).
             assert (gesture.score_after <= gesture.score_before + 1e-9
                     or 'collides' in gesture.message), (joint, gesture.name)
+            if (n, joint) in FLAGGED and gesture.collides:       # see FLAGGED
+                assert gesture.colliding_pairs == FLAGGED[n, joint], (joint, gesture.name)
+                assert 'collides' in gesture.message
+                continue
             assert not gesture.collides, (joint, gesture.name, gesture.colliding_pairs)
 
 

@@ -1,5 +1,6 @@
 """The URDF mesh check of self-collision (objective.mesh_clearance) and bench meshes."""
 
+from dataclasses import replace
 import io
 
 from namo_fault_recovery.benchmarks.meshes import gesture_checks, run_meshes
@@ -12,8 +13,9 @@ import pytest
 from robot_urdfs import installed_urdf
 
 # Published by the engine for Talos's salute with the left elbow stuck at its library
-# average (arm_left_4_joint, seed 1000, 2026-12-06): the idle left arm, folded by the
-# lock, is moved clear of the torso capsule, but its hand is inside the chest's mesh.
+# average (arm_left_4_joint, seed 1000, 2026-12-06, before the torso's shape was
+# checked): the idle left arm, folded by the lock, moved clear of the torso capsule, but
+# its hand inside the chest's mesh.
 SALUTE_LEFT_ELBOW = np.radians([30.29, -94.52, -57.75, -115.89, -67.29, 25.59, -3.73,
                                 5.59, 8.41, -73.13, -118.99, 89.9, 4.08, 1.14])
 PAIR = PAIR_NAMES.index('left_hand-torso')
@@ -108,10 +110,14 @@ def test_exact_distance_agrees_with_points_sampled_on_the_meshes(talos):
     assert exact[pair] <= sampled + 0.5 and sampled - exact[pair] < 10.0
 
 
-def test_gesture_checks_flag_what_the_capsules_pass_and_nothing_at_rest(talos):
+def test_gesture_checks_compare_both_models_and_the_torso_shape_catches_the_chest(talos):
     robot, library, meshes = talos
     salute = next(g for g in library if g.name == 'salute')
     folded = gesture_checks(robot, meshes, salute, SALUTE_LEFT_ELBOW[None], 7)
+    assert folded[0]['missed'] == [] and folded[0]['invented'] == []
+    # Without the torso's shape the capsules pass that pose: the check says so.
+    thin = replace(robot, capsules=replace(robot.capsules, torso_field=None))
+    folded = gesture_checks(thin, meshes, salute, SALUTE_LEFT_ELBOW[None], 7)
     assert 'left_hand-torso' in folded[0]['missed'] and folded[0]['invented'] == []
     reference = [np.concatenate((k.right, k.left)) for k in salute.keyframes]
     assert all(r['missed'] == [] and r['invented'] == []

@@ -63,6 +63,9 @@ def test_namo_through_its_profile_has_the_dh_landmarks_jacobians_and_tool(namo):
 def test_namo_capsules_fitted_to_its_urdf_are_the_robot_files(namo):
     dh, urdf = namo
     for key, value in vars(dh.capsules).items():
+        if value is None:       # no torso shape: Namo's torso capsule covers its torso
+            assert getattr(urdf.capsules, key) is None, key
+            continue
         assert np.allclose(getattr(urdf.capsules, key), value, atol=1e-5), key
 
 
@@ -238,6 +241,11 @@ def test_an_idle_faulted_arm_is_moved_clear_of_the_body(others):
 
     Talos's left elbow held at its average lock (-119 deg) puts the resting left forearm
     into the torso during every right-arm gesture; the library must not publish that.
+    Clear of the torso's own shape (model.torso_field), not only of its capsule: the
+    arm moves more than when only the thinner capsule was checked (up to 20 deg, with
+    the hand then inside the chest's mesh): Bye and Salute up to 33 deg at one joint,
+    Side Invite, whose left hand sits between the chest and the right upper arm, up to
+    64 deg of the wrist (measured 2026-12-06, no deadline, seed 1000).
     """
     robot = others['talos']
     lib = load_library(robot, ROBOTS / 'talos_gestures.yaml')
@@ -251,7 +259,7 @@ def test_an_idle_faulted_arm_is_moved_clear_of_the_body(others):
         for new, ref in zip(gesture.keyframes, lib[name].keyframes):
             step = np.degrees(np.abs(np.asarray(new.left) - np.asarray(ref.left)))
             step[3] = 0.0                                   # the locked elbow
-            assert step.max() <= 20.0, (name, step)
+            assert step.max() <= 70.0, (name, step)
             assert np.array_equal(new.right, ref.right)     # the gesture itself untouched
         # One correction over the whole gesture: the idle arm does not twitch.
         offset = np.array([kf.left for kf in gesture.keyframes]) - np.array(

@@ -12,6 +12,8 @@ The robot and its gestures, free of ROS: what Namo is and what it should do.
 - :mod:`.profile_robot`: the engine's robot built from a profile (reduced chains);
 - :mod:`.structure`: a correction measured on the robot, compiled into the arm's chain;
 - :mod:`.robot_capsules`: self-collision capsules fitted to a URDF's collision geometry;
+- :mod:`.torso_field`: the torso's own shape as a signed distance field, where its
+  capsule, capped by the resting arms, leaves it uncovered;
 - :mod:`.profile_template`: a template profile guessed from a URDF's tree and names;
 - :mod:`.capsules`: the capsule geometry of the arms and torso;
 - :mod:`.self_contact`: capsule distances, the checked pairs, designed contact, and the

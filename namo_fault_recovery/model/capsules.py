@@ -1,6 +1,6 @@
 """The capsule dimensions of the arms and torso (config data, no geometry code)."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 
 import numpy as np
@@ -23,6 +23,9 @@ class CapsuleModel:
     torso_top: tuple = (0.0, 0.0, -40.0)
     torso_bottom: tuple = (0.0, 0.0, -500.0)
     weight: float = 1.0
+    # The torso's own shape, which the forearms and hands must clear too (a
+    # model.torso_field.TorsoField fitted to a URDF's torso; None on Namo).
+    torso_field: object = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         for name in ('upper_arm', 'forearm', 'hand', 'torso_radius', 'weight'):

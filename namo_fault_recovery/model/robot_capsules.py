@@ -237,7 +237,10 @@ def fit_report(robot) -> FittedCapsules:
             values[key] = value
     given = (robot.profile.capsules or {}).get('torso_radius')
     known = {**vars(default), **values, **({} if given is None else {'torso_given': given})}
-    values.update(_fit_torso(np.vstack(torso_pts), rest, known, notes))
+    torso, capped = _fit_torso(np.vstack(torso_pts), rest, known, notes)
+    values.update(torso)
+    if capped:      # the capsule leaves the torso uncovered: its own shape is checked too
+        values['torso_field'] = _torso_shape(robot, urdf, folder, rest, known | values, notes)
     return FittedCapsules(CapsuleModel(**values), tuple(notes))
 
 
@@ -250,10 +253,15 @@ def _torso_axis(points, centre, radius):
 
 
 def _fit_torso(points, rest, radii, notes):
-    """Return the torso keys of CapsuleModel fitted to ``points`` (mm), capped by the arms."""
+    """
+    Return the torso keys of CapsuleModel fitted to ``points`` (mm), capped by the arms.
+
+    And whether the cap took more than a millimetre off the fitted radius (then the
+    capsule leaves part of the torso uncovered; a radius the profile gives is not).
+    """
     if not len(points):
         notes.append('torso: no loadable collision geometry; no torso capsule (radius 0)')
-        return {'torso_radius': 0.0}
+        return {'torso_radius': 0.0}, False
     centre = points[:, :2].mean(axis=0)
     radial = np.linalg.norm(points[:, :2] - centre, axis=1)
     fitted = radius = float(radii.get('torso_given', np.quantile(radial, COVER)))
@@ -269,8 +277,66 @@ def _fit_torso(points, rest, radii, notes):
                  f'{len(points)} points, capped so the arms at rest clear it), axis z '
                  f'{axis[1][2]:.0f}..{axis[0][2]:.0f} mm at x, y {centre[0]:.0f}, '
                  f'{centre[1]:.0f} mm')
-    return {'torso_radius': radius, 'torso_top': tuple(float(v) for v in axis[0]),
-            'torso_bottom': tuple(float(v) for v in axis[1])}
+    return ({'torso_radius': radius, 'torso_top': tuple(float(v) for v in axis[0]),
+             'torso_bottom': tuple(float(v) for v in axis[1])},
+            'torso_given' not in radii and radius < fitted - 1.0)
+
+
+def _torso_shape(robot, urdf, urdf_dir, rest, radii, notes):
+    """Return the torso's TorsoField (:mod:`.torso_field`), or None without geometry."""
+    from .torso_field import fit_field
+    surface = []
+    for side in ('right', 'left'):
+        chain = robot.chains[side].chain
+        links = segment_links(robot, side)['torso']
+        frames = chain.link_frames(np.zeros(chain.n_joints), links)
+        for link in links:
+            local = _link_surface(urdf, link, urdf_dir)
+            if len(local):
+                origin, rot = frames[link]
+                surface.append(local * 1000.0 @ rot[0].T + origin[0])
+    if not surface:
+        return None
+    segments = [(ends[i], ends[i + 1], radii[seg]) for ends in rest.values()
+                for i, seg in enumerate(SEGMENTS) if i > 0]
+    shape = fit_field(np.vstack(surface), segments, REST_CLEARANCE_MM,
+                      (radii['torso_top'], radii['torso_bottom']))
+    notes.append(f'torso shape: a {shape.spacing:g} mm distance field of '
+                 f'{sum(len(p) for p in surface)} surface points, '
+                 f'{shape.values.shape[0]} x {shape.values.shape[1]} x '
+                 f'{shape.values.shape[2]} cells, eroded {shape.eroded:.1f} mm so that the '
+                 'forearms and hands at rest clear it')
+    return shape
+
+
+def _link_surface(urdf, link_name, urdf_dir):
+    """Return points (K, 3) m spread over a link's collision surfaces, in its frame."""
+    import trimesh
+    from .torso_field import surface_points
+    link = urdf.link_map.get(link_name)
+    out = []
+    for col in (link.collisions if link is not None else ()):
+        g = col.geometry
+        try:
+            if g.box is not None:
+                shape = trimesh.creation.box(extents=g.box.size)
+            elif g.cylinder is not None:
+                shape = trimesh.creation.cylinder(g.cylinder.radius, g.cylinder.length)
+            elif g.sphere is not None:
+                shape = trimesh.creation.icosphere(radius=g.sphere.radius)
+            else:
+                path = _resolve(g.mesh.filename, urdf_dir)
+                if path is None:
+                    continue
+                shape = trimesh.load(str(path), force='mesh')
+                if g.mesh.scale is not None:
+                    shape.apply_scale(g.mesh.scale)
+        except (OSError, ValueError, AttributeError, IndexError, KeyError):
+            continue
+        origin = col.origin if col.origin is not None else np.eye(4)
+        points = surface_points(shape)
+        out.append(points @ origin[:3, :3].T + origin[:3, 3])
+    return np.vstack(out) if out else np.zeros((0, 3))
 
 
 def fit_capsules(robot) -> CapsuleModel:

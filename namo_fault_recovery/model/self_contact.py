@@ -42,6 +42,8 @@ PAIRS = ([('right', i, 'torso', 0) for i in range(3)]
          + [('right', i, 'left', k) for i in range(3) for k in range(3)])
 TOLERANCE_MM = 1.0     # penetration tolerated as numerical slack (objective, simulator)
 REFUSE_MM = 5.0        # a reference deeper than this is refused at load time
+FIELD_SAMPLES = 5      # points along a forearm or hand axis checked against a torso field
+LIPSCHITZ = 1.75       # bound on how fast the interpolated field changes per mm (sqrt 3 > it)
 
 
 def pair_name(pair):
@@ -104,19 +106,74 @@ def arm_segments(robot, lm, side):
                      np.stack((lm.wrist, lm.tip), axis=1)), axis=1)
 
 
+def closest_pairs(capsules, seg, field=True):
+    """
+    Return ``(d, s, t, normal)`` of every pair of PAIRS: (N, pairs) each, normal (N, pairs, 3).
+
+    ``seg`` maps 'right' and 'left' to arm segments (N, 3, 2, 3) mm.  ``d`` is the
+    axis distance, ``s`` and ``t`` the closest points' parameters on the first and
+    second segment.  With a ``capsules.torso_field``, a forearm or hand must clear the
+    torso's own shape as well as its capsule: where the field is nearer, ``d`` is the
+    field's distance at the nearest of ``FIELD_SAMPLES`` points along the segment's
+    axis, read against the torso capsule's radius (``dist + r_torso``, so that
+    :func:`radius_sums` holds), ``s`` that point's parameter, and ``normal`` the
+    field's unit gradient there (zero for every other pair: their closest points give
+    the direction; None where no pair is nearer the field).  An upper arm hangs from a
+    shoulder on the torso: it meets the capsule only.  ``field=False`` leaves the field
+    out.
+    """
+    p1 = np.stack([seg[a][:, i, 0] for a, i, _, _ in PAIRS], axis=1)
+    q1 = np.stack([seg[a][:, i, 1] for a, i, _, _ in PAIRS], axis=1)
+    torso = np.array((capsules.torso_top, capsules.torso_bottom), dtype=float)
+    p2 = np.stack([seg[b][:, k, 0] if b != 'torso' else
+                   np.broadcast_to(torso[0], p1[:, 0].shape) for _, _, b, k in PAIRS], axis=1)
+    q2 = np.stack([seg[b][:, k, 1] if b != 'torso' else
+                   np.broadcast_to(torso[1], p1[:, 0].shape) for _, _, b, k in PAIRS], axis=1)
+    d, s, t = segment_distance(p1, q1, p2, q2)
+    normal = None
+    shape = capsules.torso_field if field else None
+    if shape is not None:
+        lower = np.nonzero([b == 'torso' and i > 0 for _, i, b, _ in PAIRS])[0]
+        radius = capsules.radii[[PAIRS[p][1] for p in lower]]
+        # A segment beyond the field's reach from the torso axis, or wholly beyond one
+        # face of the box around its inside, cannot touch it.
+        lo, hi = shape.box
+        a, b = p1[:, lower], q1[:, lower]
+        r = radius[:, None]
+        apart = np.any(((a > hi + r) & (b > hi + r)) | ((a < lo - r) & (b < lo - r)), axis=-1)
+        rows, cols = np.nonzero((d[:, lower] < shape.reach + radius) & ~apart)
+        if len(rows):
+            # Nor one whose middle is farther from it than half its length plus its
+            # radius (a distance field changes by at most the distance moved).
+            mid = (p1[rows, lower[cols]] + q1[rows, lower[cols]]) / 2.0
+            half = np.linalg.norm(q1[rows, lower[cols]] - p1[rows, lower[cols]], axis=1) / 2.0
+            close = shape.lookup(mid)[0] - LIPSCHITZ * half < radius[cols] + 1.0
+            rows, cols = rows[close], cols[close]
+        if len(rows):
+            pairs = lower[cols]
+            frac = np.linspace(0.0, 1.0, FIELD_SAMPLES)
+            start, end = p1[rows, pairs], q1[rows, pairs]                 # (M, 3)
+            pts = start[:, None] + frac[:, None] * (end - start)[:, None]  # (M, S, 3)
+            dist, grad = shape.lookup(pts)
+            best = np.argmin(dist, axis=1)
+            m = np.arange(len(rows))
+            near = dist[m, best] + capsules.torso_radius
+            closer = near < d[rows, pairs]
+            rows, pairs, best, m = rows[closer], pairs[closer], best[closer], m[closer]
+            d[rows, pairs] = near[closer]
+            s[rows, pairs] = frac[best]
+            g = grad[m, best]
+            if len(rows):
+                normal = np.zeros(d.shape + (3,))
+                normal[rows, pairs] = g / np.maximum(np.linalg.norm(g, axis=1), 1e-9)[:, None]
+    return d, s, t, normal
+
+
 def pair_distances(robot, lm_right, lm_left):
     """Return the axis distance (mm) of every pair, (N, pairs), and the closest points' s, t."""
     seg = {'right': arm_segments(robot, lm_right, 'right'),
            'left': arm_segments(robot, lm_left, 'left')}
-    n = seg['right'].shape[0]
-    cap = robot.capsules
-    torso = np.array((cap.torso_top, cap.torso_bottom), dtype=float)
-    seg['torso'] = np.broadcast_to(torso[None, None], (n, 1, 2, 3))
-    p1 = np.stack([seg[a][:, i, 0] for a, i, _, _ in PAIRS], axis=1)
-    q1 = np.stack([seg[a][:, i, 1] for a, i, _, _ in PAIRS], axis=1)
-    p2 = np.stack([seg[b][:, k, 0] for _, _, b, k in PAIRS], axis=1)
-    q2 = np.stack([seg[b][:, k, 1] for _, _, b, k in PAIRS], axis=1)
-    return segment_distance(p1, q1, p2, q2)
+    return closest_pairs(robot.capsules, seg)[:3]
 
 
 def penetrations(robot, q14):

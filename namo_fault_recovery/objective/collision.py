@@ -16,12 +16,14 @@ sum(max(0, allowed - d)^2)`` (mm^2) is smooth, and its gradient comes from the l
 Jacobians.
 """
 
+import copy
+
 import numpy as np
 
 from ..model.capsules import CapsuleModel
 from ..model.kinematics import arm_joint_count, forward_kinematics, shoulder_position
-from ..model.self_contact import (arm_segments, designed_pairs, PAIR_NAMES, PAIRS,
-                                  radius_sums, segment_distance, SEGMENTS,
+from ..model.self_contact import (arm_segments, closest_pairs, designed_pairs, PAIR_NAMES,
+                                  PAIRS, radius_sums, segment_distance, SEGMENTS,
                                   TOLERANCE_MM)
 
 __all__ = ['CollisionModel', 'SEGMENTS', 'segment_distance']
@@ -38,6 +40,7 @@ class CollisionModel:
     def __init__(self, robot, targets, capsules=None):
         self.robot = robot
         self.capsules = capsules if capsules is not None else CapsuleModel()
+        self.field_penalty = False      # the torso's shape in the penalty: see shaped()
         self.shoulder = {side: shoulder_position(robot, side) for side in ('right', 'left')}
         self.torso = (np.array(self.capsules.torso_top, dtype=float),
                       np.array(self.capsules.torso_bottom, dtype=float))
@@ -57,16 +60,28 @@ class CollisionModel:
 
     def distances(self, lm_right, lm_left):
         """Return the axis distance of every pair, (N, pairs), with closest-point parameters."""
+        return self.closest(lm_right, lm_left)[:3]
+
+    def closest(self, lm_right, lm_left, field=True):
+        """Return ``(d, s, t, normal)`` (:func:`~..model.self_contact.closest_pairs`)."""
         seg = {'right': self._segments(lm_right, 'right'),
                'left': self._segments(lm_left, 'left')}
-        n = seg['right'].shape[0]
-        torso = np.broadcast_to(np.stack(self.torso)[None, None], (n, 1, 2, 3))
-        seg['torso'] = torso
-        p1 = np.stack([seg[a][:, i, 0] for a, i, _, _ in PAIRS], axis=1)
-        q1 = np.stack([seg[a][:, i, 1] for a, i, _, _ in PAIRS], axis=1)
-        p2 = np.stack([seg[b][:, k, 0] for _, _, b, k in PAIRS], axis=1)
-        q2 = np.stack([seg[b][:, k, 1] for _, _, b, k in PAIRS], axis=1)
-        return segment_distance(p1, q1, p2, q2)
+        return closest_pairs(self.capsules, seg, field)
+
+    def shaped(self):
+        """
+        Return this model with the torso's shape in its penalty too (it is in every check).
+
+        The shape (:mod:`..model.torso_field`) costs a quarter more time in the search's
+        every evaluation; the searches run on the capsules, and the repair of the poses
+        that the checks find touching (the shape included), and the search that moves
+        an idle arm clear, on this one.
+        """
+        if self.capsules.torso_field is None:
+            return self
+        model = copy.copy(self)
+        model.field_penalty = True
+        return model
 
     def penetration(self, lm_right, lm_left, target):
         """Return how far (mm) each pair is inside its allowed distance, (N, pairs) >= 0."""
@@ -76,6 +91,14 @@ class CollisionModel:
     def collides(self, lm_right, lm_left, target):
         """Return a bool (N,) per pose: some pair penetrates by more than 1 mm."""
         return np.any(self.penetration(lm_right, lm_left, target) > TOLERANCE_MM, axis=1)
+
+    def shape_hits(self, lm_right, lm_left, target):
+        """Return a bool (N,) per pose: an arm is in the torso's shape (not its capsule)."""
+        d, _, _, normal = self.closest(lm_right, lm_left)
+        if normal is None:
+            return np.zeros(d.shape[0], dtype=bool)
+        deep = np.maximum(self.allowed[target] - d, 0.0) > TOLERANCE_MM
+        return np.any(deep & np.any(normal != 0.0, axis=-1), axis=1)
 
     def colliding_pairs(self, lm_right, lm_left, target):
         """Return, per pose, the names of the pairs that penetrate."""
@@ -89,7 +112,7 @@ class CollisionModel:
         The closest-point parameters are stationary, so the derivative of a distance is
         the relative velocity of the two closest points along their separation.
         """
-        d, s, t = self.distances(lm_right, lm_left)
+        d, s, t, normal = self.closest(lm_right, lm_left, self.field_penalty)
         gap = np.maximum(self.allowed[target] - d, 0.0)
         value = self.capsules.weight * np.sum(gap ** 2, axis=1)
         grads = {}
@@ -117,6 +140,9 @@ class CollisionModel:
                     second = (seg[b][:, k, 0]
                               + t[:, p, None] * (seg[b][:, k, 1] - seg[b][:, k, 0]))
                 unit = (first - second) / np.maximum(d[:, p], 1e-9)[:, None]
+                if normal is not None:                        # the torso's shape is nearer
+                    shaped = np.any(normal[:, p] != 0.0, axis=1)
+                    unit = np.where(shaped[:, None], normal[:, p], unit)
                 if side == a:
                     idx, frac, sign = i, s[:, p], 1.0
                 else:

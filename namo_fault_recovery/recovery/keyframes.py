@@ -56,6 +56,7 @@ SHARE_POLISHED = 1         # of those restarts, the best-scoring ones are polish
 RESTART_MAXITER = 20       # polish iterations of a repair's branch restarts
 REACH_MAXITER = 20         # polish iterations of a repair's searches within reach
 STIFF_PENALTY = 10.0       # a stuck repair's penalty, times the capsules' own weight
+PUSH_MAXITER = 15          # polish iterations that push an idle arm out of the body
 PACED_NOTE = ('its keyframes were searched into branches too far apart for the joints '
               'to travel in time; repaired within the velocity limits')
 
@@ -256,12 +257,15 @@ def _solve(robot, scorer, checker, batch, algo, clock, rng, stats=None):
     if checker is None:
         return best_r, best_l, status
     ids = batch.target_ids
-    rows = np.nonzero(checker.collides(batch_forward(robot, best_r, 'right'),
-                                       batch_forward(robot, best_l, 'left'), ids))[0]
+    lm_r, lm_l = batch_forward(robot, best_r, 'right'), batch_forward(robot, best_l, 'left')
+    rows = np.nonzero(checker.collides(lm_r, lm_l, ids))[0]
     if rows.size == 0:
         return best_r, best_l, status
-    r2, l2, r3, l3, st2 = _repair(robot, scorer, checker, batch, rows, (best_r, best_l),
-                                  _repair_algorithm(algo), clock, rng, stats)
+    # The torso's shape in the repair's penalty only where it is what the rows touch.
+    if np.any(checker.shape_hits(lm_r, lm_l, ids)[rows]):
+        checker = checker.shaped()
+    r2, l2, r3, l3, st2 = _repair(robot, scorer, checker, batch, rows,
+                                  (best_r, best_l), _repair_algorithm(algo), clock, rng, stats)
     # Candidates per row: the plain result, the penalised ones (from the starting pose
     # and from the plain result), and the starting pose (collision-free unless the locks
     # themselves force a contact).  The best score among those that do not collide
@@ -982,7 +986,10 @@ def _clear_idle_arms(setup, rows, clock, rng):
     into the torso during every right-arm gesture.  Such rows are solved again on the
     idle arm's healthy joints alone: the collision term pushes it clear, and the
     ``stay_close`` pull keeps it as near its reference pose as it can be.  The score
-    does not change (the arm is not scored).  Returns a mask of the rows moved.
+    does not change (the arm is not scored).  Where the robot has a torso shape
+    (:mod:`..model.torso_field`), the rows still in it are then pushed out by a short
+    polish on it (``PUSH_MAXITER``), and searched on it where the push is blocked (a
+    hand between the chest and the other arm).  Returns a mask of the rows moved.
     """
     robot, checker = setup.robot, setup.checker
     done = np.zeros(len(rows.ids), dtype=bool)
@@ -1003,10 +1010,26 @@ def _clear_idle_arms(setup, rows, clock, rng):
                    stay_close=IDLE_STAY_CLOSE, motions=[rows.motions[k] for k in todo])
     # With the collision term from the start: the arm is not scored, so the plain
     # search would only find the colliding reference pose again (the stay_close pull).
+    # The search on the capsules; then, where the torso's own shape is still touched
+    # (model.torso_field), a local push out of it on the shaped model from there.
     r2, l2, _ = _solve_once(robot, setup.scorer, checker, batch,
                             _repair_algorithm(setup.algo), clock, rng)
-    clear = ~checker.collides(batch_forward(robot, r2, 'right'),
-                              batch_forward(robot, l2, 'left'), rows.ids[todo])
+    lm_r, lm_l = batch_forward(robot, r2, 'right'), batch_forward(robot, l2, 'left')
+    inside = np.nonzero(checker.shape_hits(lm_r, lm_l, rows.ids[todo]))[0]
+    if len(inside) and not clock.expired():
+        sub = _Batch(r2[inside], l2[inside], batch.target_ids[inside],
+                     [batch.layouts[i] for i in inside], stay_close=IDLE_STAY_CLOSE)
+        r2[inside], l2[inside] = _push_out(setup, sub, checker.shaped(), clock)
+        lm_r, lm_l = batch_forward(robot, r2, 'right'), batch_forward(robot, l2, 'left')
+    clear = ~checker.collides(lm_r, lm_l, rows.ids[todo])
+    stuck = np.intersect1d(inside, np.nonzero(~clear)[0])
+    if len(stuck) and not clock.expired():    # pushed against something else: search
+        sub = _Batch(batch.right[stuck], batch.left[stuck], batch.target_ids[stuck],
+                     [batch.layouts[i] for i in stuck], stay_close=IDLE_STAY_CLOSE)
+        r2[stuck], l2[stuck], _ = _solve_once(robot, setup.scorer, checker.shaped(), sub,
+                                              _repair_algorithm(setup.algo), clock, rng)
+        clear = ~checker.collides(batch_forward(robot, r2, 'right'),
+                                  batch_forward(robot, l2, 'left'), rows.ids[todo])
     for i, k in enumerate(todo):
         if clear[i]:
             rows.right[k], rows.left[k] = r2[i], l2[i]
@@ -1016,6 +1039,28 @@ def _clear_idle_arms(setup, rows, clock, rng):
         rows.after[done] = setup.scorer.evaluate(rows.right[done], rows.left[done],
                                                  rows.ids[done])
     return done
+
+
+def _push_out(setup, batch, checker, clock):
+    """Return (right, left) of ``batch``'s rows polished from their poses on ``checker``."""
+    robot, scorer = setup.robot, setup.scorer
+    right, left = batch.right.copy(), batch.left.copy()
+    groups = {}
+    for k, free in enumerate(batch.layouts):
+        groups.setdefault(free, []).append(k)
+    for free, members in groups.items():
+        refs = [scorer.reference(k) for k in batch.target_ids[members]]
+        designed = np.array([[ref[0 if s == 'right' else 1][j] for s, j in free]
+                             for ref in refs])
+        problem = PoseProblem(robot, scorer, batch.target_ids[members],
+                              (batch.right[members], batch.left[members]), free,
+                              collision=checker, anchor=designed,
+                              continuity=batch.stay_close[members])
+        x, _ = polish(problem, problem.x0[:, None, :], clock, maxiter=PUSH_MAXITER,
+                      restart=True)
+        qr, ql = problem.assemble(x[:, 0])
+        right[members], left[members] = qr, ql
+    return right, left
 
 
 def _cleared_note(setup, cleared):
