@@ -133,40 +133,53 @@ def closest_pairs(capsules, seg, field=True):
     normal = None
     shape = capsules.torso_field if field else None
     if shape is not None:
-        lower = np.nonzero([b == 'torso' and i > 0 for _, i, b, _ in PAIRS])[0]
-        radius = capsules.radii[[PAIRS[p][1] for p in lower]]
-        # A segment beyond the field's reach from the torso axis, or wholly beyond one
-        # face of the box around its inside, cannot touch it.
-        lo, hi = shape.box
-        a, b = p1[:, lower], q1[:, lower]
-        r = radius[:, None]
-        apart = np.any(((a > hi + r) & (b > hi + r)) | ((a < lo - r) & (b < lo - r)), axis=-1)
-        rows, cols = np.nonzero((d[:, lower] < shape.reach + radius) & ~apart)
-        if len(rows):
-            # Nor one whose middle is farther from it than half its length plus its
-            # radius (a distance field changes by at most the distance moved).
-            mid = (p1[rows, lower[cols]] + q1[rows, lower[cols]]) / 2.0
-            half = np.linalg.norm(q1[rows, lower[cols]] - p1[rows, lower[cols]], axis=1) / 2.0
-            close = shape.lookup(mid)[0] - LIPSCHITZ * half < radius[cols] + 1.0
-            rows, cols = rows[close], cols[close]
-        if len(rows):
-            pairs = lower[cols]
-            frac = np.linspace(0.0, 1.0, FIELD_SAMPLES)
-            start, end = p1[rows, pairs], q1[rows, pairs]                 # (M, 3)
-            pts = start[:, None] + frac[:, None] * (end - start)[:, None]  # (M, S, 3)
-            dist, grad = shape.lookup(pts)
-            best = np.argmin(dist, axis=1)
-            m = np.arange(len(rows))
-            near = dist[m, best] + capsules.torso_radius
-            closer = near < d[rows, pairs]
-            rows, pairs, best, m = rows[closer], pairs[closer], best[closer], m[closer]
-            d[rows, pairs] = near[closer]
-            s[rows, pairs] = frac[best]
-            g = grad[m, best]
-            if len(rows):
-                normal = np.zeros(d.shape + (3,))
-                normal[rows, pairs] = g / np.maximum(np.linalg.norm(g, axis=1), 1e-9)[:, None]
+        normal = _field_pairs(capsules, shape, (p1, q1), d, s)
     return d, s, t, normal
+
+
+def _field_pairs(capsules, shape, axes, d, s):
+    """
+    Read the forearm and hand torso pairs against the torso's shape too (in ``d``, ``s``).
+
+    ``axes`` is (p1, q1), the pairs' first segments (N, pairs, 3); return the normals
+    (N, pairs, 3) of the pairs the shape decides, or None (see :func:`closest_pairs`).
+    """
+    p1, q1 = axes
+    normal = None
+    lower = np.nonzero([b == 'torso' and i > 0 for _, i, b, _ in PAIRS])[0]
+    radius = capsules.radii[[PAIRS[p][1] for p in lower]]
+    # A segment beyond the field's reach from the torso axis, or wholly beyond one
+    # face of the box around its inside, cannot touch it.
+    lo, hi = shape.box
+    a, b = p1[:, lower], q1[:, lower]
+    r = radius[:, None]
+    apart = np.any(((a > hi + r) & (b > hi + r)) | ((a < lo - r) & (b < lo - r)), axis=-1)
+    rows, cols = np.nonzero((d[:, lower] < shape.reach + radius) & ~apart)
+    if len(rows):
+        # Nor one whose middle is farther from it than half its length plus its
+        # radius (a distance field changes by at most the distance moved).
+        mid = (p1[rows, lower[cols]] + q1[rows, lower[cols]]) / 2.0
+        half = np.linalg.norm(q1[rows, lower[cols]] - p1[rows, lower[cols]], axis=1) / 2.0
+        close = shape.lookup(mid)[0] - LIPSCHITZ * half < radius[cols] + 1.0
+        rows, cols = rows[close], cols[close]
+    if len(rows):
+        pairs = lower[cols]
+        frac = np.linspace(0.0, 1.0, FIELD_SAMPLES)
+        start, end = p1[rows, pairs], q1[rows, pairs]                 # (M, 3)
+        pts = start[:, None] + frac[:, None] * (end - start)[:, None]  # (M, S, 3)
+        dist, grad = shape.lookup(pts)
+        best = np.argmin(dist, axis=1)
+        m = np.arange(len(rows))
+        near = dist[m, best] + capsules.torso_radius
+        closer = near < d[rows, pairs]
+        rows, pairs, best, m = rows[closer], pairs[closer], best[closer], m[closer]
+        d[rows, pairs] = near[closer]
+        s[rows, pairs] = frac[best]
+        g = grad[m, best]
+        if len(rows):
+            normal = np.zeros(d.shape + (3,))
+            normal[rows, pairs] = g / np.maximum(np.linalg.norm(g, axis=1), 1e-9)[:, None]
+    return normal
 
 
 def pair_distances(robot, lm_right, lm_left):

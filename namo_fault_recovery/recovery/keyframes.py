@@ -1010,26 +1010,7 @@ def _clear_idle_arms(setup, rows, clock, rng):
                    stay_close=IDLE_STAY_CLOSE, motions=[rows.motions[k] for k in todo])
     # With the collision term from the start: the arm is not scored, so the plain
     # search would only find the colliding reference pose again (the stay_close pull).
-    # The search on the capsules; then, where the torso's own shape is still touched
-    # (model.torso_field), a local push out of it on the shaped model from there.
-    r2, l2, _ = _solve_once(robot, setup.scorer, checker, batch,
-                            _repair_algorithm(setup.algo), clock, rng)
-    lm_r, lm_l = batch_forward(robot, r2, 'right'), batch_forward(robot, l2, 'left')
-    inside = np.nonzero(checker.shape_hits(lm_r, lm_l, rows.ids[todo]))[0]
-    if len(inside) and not clock.expired():
-        sub = _Batch(r2[inside], l2[inside], batch.target_ids[inside],
-                     [batch.layouts[i] for i in inside], stay_close=IDLE_STAY_CLOSE)
-        r2[inside], l2[inside] = _push_out(setup, sub, checker.shaped(), clock)
-        lm_r, lm_l = batch_forward(robot, r2, 'right'), batch_forward(robot, l2, 'left')
-    clear = ~checker.collides(lm_r, lm_l, rows.ids[todo])
-    stuck = np.intersect1d(inside, np.nonzero(~clear)[0])
-    if len(stuck) and not clock.expired():    # pushed against something else: search
-        sub = _Batch(batch.right[stuck], batch.left[stuck], batch.target_ids[stuck],
-                     [batch.layouts[i] for i in stuck], stay_close=IDLE_STAY_CLOSE)
-        r2[stuck], l2[stuck], _ = _solve_once(robot, setup.scorer, checker.shaped(), sub,
-                                              _repair_algorithm(setup.algo), clock, rng)
-        clear = ~checker.collides(batch_forward(robot, r2, 'right'),
-                                  batch_forward(robot, l2, 'left'), rows.ids[todo])
+    r2, l2, clear = _move_idle(setup, batch, clock, rng)
     for i, k in enumerate(todo):
         if clear[i]:
             rows.right[k], rows.left[k] = r2[i], l2[i]
@@ -1039,6 +1020,36 @@ def _clear_idle_arms(setup, rows, clock, rng):
         rows.after[done] = setup.scorer.evaluate(rows.right[done], rows.left[done],
                                                  rows.ids[done])
     return done
+
+
+def _move_idle(setup, batch, clock, rng):
+    """
+    Return (right, left, clear) of idle-arm rows moved out of the body.
+
+    The search on the capsules; then, where the torso's own shape is still touched
+    (:mod:`..model.torso_field`), a local push out of it on the shaped model from there,
+    and the search on it for the rows the push leaves touching.
+    """
+    robot, checker, ids = setup.robot, setup.checker, batch.target_ids
+    r2, l2, _ = _solve_once(robot, setup.scorer, checker, batch,
+                            _repair_algorithm(setup.algo), clock, rng)
+    lm_r, lm_l = batch_forward(robot, r2, 'right'), batch_forward(robot, l2, 'left')
+    inside = np.nonzero(checker.shape_hits(lm_r, lm_l, ids))[0]
+    if len(inside) and not clock.expired():
+        sub = _Batch(r2[inside], l2[inside], ids[inside],
+                     [batch.layouts[i] for i in inside], stay_close=IDLE_STAY_CLOSE)
+        r2[inside], l2[inside] = _push_out(setup, sub, checker.shaped(), clock)
+        lm_r, lm_l = batch_forward(robot, r2, 'right'), batch_forward(robot, l2, 'left')
+    clear = ~checker.collides(lm_r, lm_l, ids)
+    stuck = np.intersect1d(inside, np.nonzero(~clear)[0])
+    if len(stuck) and not clock.expired():    # pushed against something else: search
+        sub = _Batch(batch.right[stuck], batch.left[stuck], ids[stuck],
+                     [batch.layouts[i] for i in stuck], stay_close=IDLE_STAY_CLOSE)
+        r2[stuck], l2[stuck], _ = _solve_once(robot, setup.scorer, checker.shaped(), sub,
+                                              _repair_algorithm(setup.algo), clock, rng)
+        clear = ~checker.collides(batch_forward(robot, r2, 'right'),
+                                  batch_forward(robot, l2, 'left'), ids)
+    return r2, l2, clear
 
 
 def _push_out(setup, batch, checker, clock):
