@@ -80,18 +80,25 @@ def _resolve(filename, urdf_dir):
     return None
 
 
-def _mesh_points(mesh, urdf_dir):
-    """Return a mesh's vertices (m, in its own frame, scaled), or None if not loadable."""
+def _load_mesh(mesh, urdf_dir):
+    """Return a URDF mesh as a trimesh (m, its own frame, unscaled), or None if not loadable."""
     path = _resolve(mesh.filename, urdf_dir)
     if path is None:
         return None
     try:
         import trimesh
         logging.getLogger('trimesh').setLevel(logging.ERROR)
-        loaded = trimesh.load(str(path), force='mesh')
-        points = np.asarray(loaded.vertices, dtype=float)
+        return trimesh.load(str(path), force='mesh')
     except (ImportError, OSError, ValueError, AttributeError, IndexError, KeyError):
         return None
+
+
+def _mesh_points(mesh, urdf_dir):
+    """Return a mesh's vertices (m, in its own frame, scaled), or None if not loadable."""
+    loaded = _load_mesh(mesh, urdf_dir)
+    if loaded is None:
+        return None
+    points = np.asarray(loaded.vertices, dtype=float)
     if points.size == 0:
         return None
     step = max(1, len(points) // _MAX_POINTS)
@@ -165,13 +172,18 @@ def segment_links(robot, side) -> dict:
     return groups
 
 
-def _points_at_zero(robot, side, links, urdf, urdf_dir):
-    """Return the links' collision points at the zero pose (mm, base frame), and kinds."""
+def _points_at_zero(robot, side, links, urdf, urdf_dir, points_of=None):
+    """
+    Return the links' collision points at the zero pose (mm, base frame), and kinds.
+
+    ``points_of(urdf, link, urdf_dir)`` gives a link's points (m, its frame) and kinds:
+    :func:`link_points` by default.
+    """
     chain = robot.chains[side].chain
     frames = chain.link_frames(np.zeros(chain.n_joints), links)
     pts, kinds = [], []
     for link in links:
-        local, kind = link_points(urdf, link, urdf_dir)
+        local, kind = (points_of or link_points)(urdf, link, urdf_dir)
         kinds += [f'{link}: {k}' for k in kind]
         if len(local):
             origin, rot = frames[link]
@@ -285,16 +297,13 @@ def _fit_torso(points, rest, radii, notes):
 def _torso_shape(robot, urdf, urdf_dir, rest, radii, notes):
     """Return the torso's TorsoField (:mod:`.torso_field`), or None without geometry."""
     from .torso_field import fit_field
-    surface = []
-    for side in ('right', 'left'):
-        chain = robot.chains[side].chain
-        links = segment_links(robot, side)['torso']
-        frames = chain.link_frames(np.zeros(chain.n_joints), links)
-        for link in links:
-            local = _link_surface(urdf, link, urdf_dir)
-            if len(local):
-                origin, rot = frames[link]
-                surface.append(local * 1000.0 @ rot[0].T + origin[0])
+    surface, seen = [], set()
+    for side in ('right', 'left'):      # the torso links both chains share: sampled once
+        links = [link for link in segment_links(robot, side)['torso'] if link not in seen]
+        seen.update(links)
+        points, _ = _points_at_zero(robot, side, links, urdf, urdf_dir, _link_surface)
+        if len(points):
+            surface.append(points)
     if not surface:
         return None
     segments = [(ends[i], ends[i + 1], radii[seg]) for ends in rest.values()
@@ -310,7 +319,7 @@ def _torso_shape(robot, urdf, urdf_dir, rest, radii, notes):
 
 
 def _link_surface(urdf, link_name, urdf_dir):
-    """Return points (K, 3) m spread over a link's collision surfaces, in its frame."""
+    """Return points (K, 3) m spread over a link's collision surfaces (its frame), and ()."""
     import trimesh
     from .torso_field import surface_points
     link = urdf.link_map.get(link_name)
@@ -325,10 +334,9 @@ def _link_surface(urdf, link_name, urdf_dir):
             elif g.sphere is not None:
                 shape = trimesh.creation.icosphere(radius=g.sphere.radius)
             else:
-                path = _resolve(g.mesh.filename, urdf_dir)
-                if path is None:
+                shape = _load_mesh(g.mesh, urdf_dir)
+                if shape is None:
                     continue
-                shape = trimesh.load(str(path), force='mesh')
                 if g.mesh.scale is not None:
                     shape.apply_scale(g.mesh.scale)
         except (OSError, ValueError, AttributeError, IndexError, KeyError):
@@ -336,7 +344,7 @@ def _link_surface(urdf, link_name, urdf_dir):
         origin = col.origin if col.origin is not None else np.eye(4)
         points = surface_points(shape)
         out.append(points @ origin[:3, :3].T + origin[:3, 3])
-    return np.vstack(out) if out else np.zeros((0, 3))
+    return (np.vstack(out) if out else np.zeros((0, 3))), ()
 
 
 def fit_capsules(robot) -> CapsuleModel:

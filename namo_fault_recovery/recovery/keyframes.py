@@ -403,15 +403,7 @@ def _solve_once(robot, scorer, collision, batch, algo, clock, rng, stats=None):
         x0 = None
         if batch.x0 is not None:
             x0 = np.array([batch.x0[k] for k in members])
-        refs = [scorer.reference(k) for k in batch.target_ids[members]]
-        designed = np.array([[ref[0 if s == 'right' else 1][j] for s, j in free]
-                             for ref in refs])
-        # The designed angles anchor every row, pulled or not: the kinematic starts are
-        # drawn towards them (seeding.SEED_PULL).
-        problem = PoseProblem(robot, scorer, batch.target_ids[members],
-                              (batch.right[members], batch.left[members]), free,
-                              collision=collision, x0=x0, anchor=designed,
-                              continuity=batch.stay_close[members])
+        problem, designed = _rows_problem(robot, scorer, collision, batch, free, members, x0)
         start = problem.evaluate(problem.x0[:, None, :])[:, 0]
         group_clock = clock.child(share=1.0 / n_left)
         res = minimize(problem, algo, clock=group_clock, seed=int(rng.integers(2 ** 63)))
@@ -430,6 +422,22 @@ def _solve_once(robot, scorer, collision, batch, algo, clock, rng, stats=None):
             best_r[k], best_l[k] = qr[i], ql[i]
             status[k] = _STATUS_NAMES[res.status]
     return best_r, best_l, status
+
+
+def _rows_problem(robot, scorer, collision, batch, free, members, x0=None):
+    """
+    Return (PoseProblem, designed angles) of ``batch``'s rows ``members`` with layout ``free``.
+
+    The designed angles anchor every row, pulled or not: the kinematic starts are drawn
+    towards them (seeding.SEED_PULL).
+    """
+    refs = [scorer.reference(k) for k in batch.target_ids[members]]
+    designed = np.array([[ref[0 if s == 'right' else 1][j] for s, j in free] for ref in refs])
+    problem = PoseProblem(robot, scorer, batch.target_ids[members],
+                          (batch.right[members], batch.left[members]), free,
+                          collision=collision, x0=x0, anchor=designed,
+                          continuity=batch.stay_close[members])
+    return problem, designed
 
 
 def finish_search(problem, algo, x, f, motions, designed, clock):
@@ -1060,13 +1068,7 @@ def _push_out(setup, batch, checker, clock):
     for k, free in enumerate(batch.layouts):
         groups.setdefault(free, []).append(k)
     for free, members in groups.items():
-        refs = [scorer.reference(k) for k in batch.target_ids[members]]
-        designed = np.array([[ref[0 if s == 'right' else 1][j] for s, j in free]
-                             for ref in refs])
-        problem = PoseProblem(robot, scorer, batch.target_ids[members],
-                              (batch.right[members], batch.left[members]), free,
-                              collision=checker, anchor=designed,
-                              continuity=batch.stay_close[members])
+        problem, _ = _rows_problem(robot, scorer, checker, batch, free, members)
         x, _ = polish(problem, problem.x0[:, None, :], clock, maxiter=PUSH_MAXITER,
                       restart=True)
         qr, ql = problem.assemble(x[:, 0])
