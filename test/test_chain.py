@@ -13,8 +13,10 @@ import math
 from pathlib import Path
 
 from namo_fault_recovery.errors import ConfigError
+from namo_fault_recovery.model.capsules import CapsuleModel
 from namo_fault_recovery.model.chain import ChainError, compile_chain
 from namo_fault_recovery.model.kinematics import batch_forward, forward_kinematics_jacobian
+from namo_fault_recovery.model.profile_robot import robot_from_profile
 from namo_fault_recovery.model.robot_profile import load_profile
 from namo_fault_recovery.model.urdf import urdf_string
 from namo_fault_recovery.model.urdf_tree import load_urdf_tree
@@ -129,6 +131,39 @@ def test_jacobians_match_central_differences(profiles, name):
             omega = dr @ np.swapaxes(lm.palm, -1, -2)
             vec = np.stack((omega[:, 2, 1], omega[:, 0, 2], omega[:, 1, 0]), axis=-1)
             assert np.abs(jac.axes[:, i] - vec).max() < 1e-6, i
+
+
+def test_the_shared_torso_carries_both_arms_as_pinocchio_does(profiles, capsys):
+    """Talos's torso joints move the upright arms' landmarks where the whole tree puts them."""
+    robot = robot_from_profile(profiles['talos'], capsules=CapsuleModel())
+    shared = robot.shared
+    assert shared.names == ('torso_1_joint', 'torso_2_joint')
+    rng = np.random.default_rng(3)
+    worst = 0.0
+    for side, arm in profiles['talos'].arms.items():
+        whole = compile_chain(profiles['talos'].tree, arm.chain.base, arm.chain.tip,
+                              locked=arm.held)                                   # metres
+        assert whole.joint_names[:2] == shared.names
+        q = rng.uniform(whole.lower, whole.upper, (40, whole.n_joints))
+        ref = pinocchio_frames(profiles['talos'].tree.source, whole, q)
+        upright = robot.chains[side].forward(q[:, 2:])
+        leaned = shared.carry(upright, q[:, :2])
+        for role in ('elbow', 'wrist'):
+            link = arm.landmark_links[role]
+            err = np.abs(getattr(leaned, role) / 1000.0 - ref[link][0]).max()
+            worst = max(worst, float(err))
+        palm = arm.landmark_links['palm']
+        assert np.abs(leaned.palm - ref[palm][1]).max() < 1e-9
+        back = shared.back(leaned, q[:, :2])
+        assert np.abs(back.tip - upright.tip).max() < 1e-9
+        assert np.abs(back.palm - upright.palm).max() < 1e-12
+    with capsys.disabled():
+        print(f'\ntalos torso + arm vs pinocchio: max error {worst:.1e} m')
+    assert worst < 1e-9
+
+
+def test_a_robot_without_shared_joints_has_none(profiles):
+    assert robot_from_profile(profiles['tiago_dual'], capsules=CapsuleModel()).shared is None
 
 
 def _urdf(joints):

@@ -158,9 +158,14 @@ def load_optima(bench: BenchRobot):
         return yaml.safe_load(handle)
 
 
-def run_quality(out, bench: BenchRobot, best_doc, seeds=10, joints=None, deadline=None):
-    """Run every single fault x ``seeds`` at the deadline; print and return the summary."""
-    settings = RecoverySettings()
+def run_quality(out, bench: BenchRobot, best_doc, seeds=10, joints=None, deadline=None,
+                expand_shared=False):
+    """
+    Run every single fault x ``seeds`` at the deadline; print and return the summary.
+
+    ``expand_shared`` turns the torso's lean on (the setting of that name).
+    """
+    settings = RecoverySettings(expand_shared=bool(expand_shared))
     if deadline is not None:
         settings = settings.with_changes(deadline_sec=float(deadline))
     robot, lib = bench.models()
@@ -180,7 +185,8 @@ def run_quality(out, bench: BenchRobot, best_doc, seeds=10, joints=None, deadlin
             wall = time.monotonic() - t0
             gaps = {g.name: gap(g.score_after, best[g.name]) for g in res.gestures}
             runs.append({'fault': key, 'wall_s': wall, 'met': res.deadline_met,
-                         'gaps': gaps, 'collides': any(g.collides for g in res.gestures)})
+                         'gaps': gaps, 'collides': any(g.collides for g in res.gestures),
+                         'leaned': sorted(g.name for g in res.gestures if g.shared)})
     summary = _summary(bench.name, runs, lib.names, settings.deadline_sec, seeds)
     _print(out, summary)
     return summary
@@ -206,9 +212,20 @@ def _summary(name, runs, names, deadline, seeds):
             'wall_max_ms': 1000 * max(r['wall_s'] for r in runs),
             'deadline_met_share': float(np.mean([r['met'] for r in runs])),
             'colliding_runs': sum(r['collides'] for r in runs),
+            'leaned': _leaned(runs),
             'max_gap_pct': {g: 100 * max(r['gaps'][g] for r in runs) for g in names},
             'misses_by_fault': misses,
             'slowest_faults_median_ms': {j: ms for ms, j in slowest}}
+
+
+def _leaned(runs):
+    """Return {fault joint: {gesture: runs in which the torso leaned}}."""
+    out = {}
+    for r in runs:
+        for name in r['leaned']:
+            per = out.setdefault(r['fault'].split('=')[0], {})
+            per[name] = per.get(name, 0) + 1
+    return out
 
 
 def _print(out, s):
@@ -226,5 +243,9 @@ def _print(out, s):
     if s['misses_by_fault']:
         out.write('  runs beyond 1% by fault: ' + ', '.join(
             f'{k}: {n}' for k, n in sorted(s['misses_by_fault'].items())) + '\n')
+    if s['leaned']:
+        out.write('  the torso leaned (expand_shared): ' + ', '.join(
+            f'{j} {g} {n}x' for j, per in sorted(s['leaned'].items())
+            for g, n in sorted(per.items())) + '\n')
     out.write('  slowest faults (median solve ms): ' + ', '.join(
         f'{k} {ms:.1f}' for k, ms in s['slowest_faults_median_ms'].items()) + '\n')

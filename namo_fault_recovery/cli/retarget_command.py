@@ -147,7 +147,7 @@ def cmd_bench_robots(args, out):
             raise UsageError(f'no best-known optima for {bench.name} ({exc}); run with '
                              '--update-optima first') from None
         robots.run_quality(out, bench, best, seeds=args.seeds, joints=joints,
-                           deadline=args.deadline)
+                           deadline=args.deadline, expand_shared=args.expand_shared)
     return 0
 
 
@@ -213,5 +213,8 @@ def register_bench(bench_sub):
                         'the profile: config/robots/<robot>_best_known.yaml)')
     p.add_argument('--deadline', type=float, default=None,
                    help="seconds (default: the node's 1 s)")
+    p.add_argument('--expand-shared', action='store_true',
+                   help='the setting expand_shared on: the torso leans for gestures the '
+                        'arms alone cannot reach')
     p.set_defaults(func=cmd_bench_robots)
     return p

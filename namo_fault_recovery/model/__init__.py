@@ -10,6 +10,8 @@ The robot and its gestures, free of ROS: what Namo is and what it should do.
 - :mod:`.chain`: a base-to-tip chain compiled from that tree: batched FK and Jacobians;
 - :mod:`.robot_profile`: the recovery profile (arms, landmarks, roles of joints) over a URDF;
 - :mod:`.profile_robot`: the engine's robot built from a profile (reduced chains);
+- :mod:`.shared_joints`: the joints both arms hang from (a torso) as one rigid motion
+  of the arms' base;
 - :mod:`.structure`: a correction measured on the robot, compiled into the arm's chain;
 - :mod:`.robot_capsules`: self-collision capsules fitted to a URDF's collision geometry;
 - :mod:`.torso_field`: the torso's own shape as a signed distance field, where its

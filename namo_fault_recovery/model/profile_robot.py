@@ -34,6 +34,7 @@ from .chain import compile_chain, KinematicChain
 from .kinematics import ArmJacobian, ArmLandmarks
 from .robot import ArmModel, ARMS, RobotJoints
 from .robot_profile import load_profile, MM_PER_M, RobotProfile
+from .shared_joints import shared_joints, SharedJoints
 from ..errors import ConfigError
 
 # The joint counts per arm that the engine takes from a profile robot today.
@@ -110,6 +111,7 @@ class ProfileRobot(RobotJoints):
     learned: tuple = field(default=(), compare=False, repr=False)
     arm_velocity: dict = field(default_factory=dict)
     profile: RobotProfile | None = field(default=None, compare=False, repr=False)
+    shared: SharedJoints | None = field(default=None, compare=False, repr=False)
 
     def arm_velocity_limits(self, side: str) -> tuple:
         """Speed limit (rad/s) of each joint of one arm, base first (the URDF's or profile's)."""
@@ -169,5 +171,6 @@ def robot_from_profile(profile: RobotProfile | str | os.PathLike,
     slowest = (tuple(float(v) for v in np.min([speeds[s] for s in ARMS], axis=0))
                if len(counts) == 1 else ())
     robot = ProfileRobot(profile.name, arms, chains, profile.source, CapsuleModel(),
-                         velocity_limits=slowest, arm_velocity=speeds, profile=profile)
+                         velocity_limits=slowest, arm_velocity=speeds, profile=profile,
+                         shared=shared_joints(profile))
     return replace(robot, capsules=capsules if capsules is not None else fit_capsules(robot))

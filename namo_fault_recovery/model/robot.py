@@ -44,8 +44,11 @@ class RobotJoints:
     frozen dataclass with ``arms`` ({side: ArmModel}), ``tools``, ``corrections`` and
     ``learned`` fields.  A robot
     with a ``chains`` field has its kinematics run by its compiled chains; without one
-    (the DH model) :mod:`.kinematics` runs its DH table.
+    (the DH model) :mod:`.kinematics` runs its DH table.  ``shared`` is the joints both
+    arms hang from (:class:`~.shared_joints.SharedJoints`, a torso), None on Namo.
     """
+
+    shared = None
 
     def tool_length(self, side: str) -> float:
         """Return the length (mm) of the tool held by one arm's hand; 0 without one."""

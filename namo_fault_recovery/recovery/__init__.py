@@ -14,6 +14,8 @@ From a fault set to an adapted gesture library, free of ROS.
 - :mod:`.locks`: lock strategies (``average``, ``measured``, ``optimal``) and lock angles;
 - :mod:`.keyframes`: the batched pose problems of every keyframe, solved within one
   deadline (the first paper's method, with stage 2 and the collision term);
+- :mod:`.lean`: the last stage of the staged DOF expansion, the torso's lean, on a
+  robot whose arms hang from shared joints (``expand_shared``);
 - :mod:`.seeding`: the keyframe search's starting sources, random draws taken a few
   damped least-squares steps towards the landmarks, and the design through each of the
   arm's flips (so the colony starts in good basins);

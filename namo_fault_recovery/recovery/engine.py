@@ -19,6 +19,7 @@ from typing import Optional, TYPE_CHECKING
 
 import numpy as np
 
+from .lean import lean_library
 from .motion import adapt_library, DEFAULT_STAY_CLOSE, typical_points
 from .result import LibraryResult, reference_result
 from .settings import RecoverySettings
@@ -65,7 +66,9 @@ def recover(robot: 'RobotModel', library: 'GestureLibrary', faults: Optional[dic
     library holds a motion (a gesture of several keyframes) the explored keyframes of
     its motions are also drawn gently towards their designed poses
     (``DEFAULT_STAY_CLOSE`` per deg^2), so that neighbouring keyframes stay on one
-    redundant branch; its single poses are not (they have no neighbour).
+    redundant branch; its single poses are not (they have no neighbour).  On a robot
+    whose arms hang from shared joints, ``settings.expand_shared`` adds the last stage
+    of the staged expansion, the torso's lean (:mod:`.lean`).
     """
     settings = settings or RecoverySettings()
     faults = dict(faults or {})
@@ -82,10 +85,14 @@ def recover(robot: 'RobotModel', library: 'GestureLibrary', faults: Optional[dic
     if quantisations is None:
         quantisations = typical_points(robot, library, settings.vq_distortion_mm, clock=clock)
     motion = any(len(g.keyframes) > 1 for g in library)
+    stay_close = DEFAULT_STAY_CLOSE if motion else 0.0
     result = adapt_library(robot, library, faults, settings, seed=seed, clock=clock,
                            measured=measured, quantisations=quantisations,
                            optimizer_overrides=optimizer_overrides or None,
-                           stay_close=DEFAULT_STAY_CLOSE if motion else 0.0)
+                           stay_close=stay_close)
+    result = lean_library(robot, library, result, settings, clock=clock, seed=seed,
+                          stay_close=stay_close,
+                          dense=tuple(n for n, q in quantisations.items() if q is not None))
     # The run's wall time counts the typical points too, for the library and each gesture.
     wall = float(time.monotonic() - began)
     return replace(result, wall_time=wall, corrections=learned_record(robot),

@@ -77,6 +77,10 @@ class SearchOptions:
     or gesture names) says which motions are kept within the velocity limits
     (:func:`_pace`): the motion adaptation names those it publishes as searched, not
     the typical points of a dense motion, whose whole motion it paces itself.
+    ``leans`` maps gesture names to the angles (S,) of the robot's shared joints (a
+    torso, :class:`~..model.shared_joints.SharedJoints`) held through that gesture: its
+    references are moved back by that lean, so that the upright arms searched here are
+    scored as the leaned arms will be (:mod:`.lean`).
     """
 
     stay_close: float = 0.0
@@ -84,6 +88,7 @@ class SearchOptions:
     share_branches: Union[bool, tuple] = True
     lock_start: Optional[dict] = None
     pace: Union[bool, tuple] = True
+    leans: Optional[dict] = None
 
 
 class PoseProblem(Problem):
@@ -606,6 +611,26 @@ def _named(which, name):
     return which if isinstance(which, bool) else name in which
 
 
+def _leaned_references(reference, targets, owners, selected, leans):
+    """Return the targets' reference landmarks moved back by their gesture's lean, or None."""
+    if not leans:
+        return None
+    shared = reference.shared
+    rows = [k for k, g in enumerate(owners) if selected[g].name in leans]
+    if shared is None or not rows:
+        return None
+    t = np.array([leans[selected[owners[k]].name] for k in rows], dtype=float)
+    out = []
+    for side in ARMS:
+        q = np.array([t_.q_right if side == 'right' else t_.q_left for t_ in targets])
+        lm = ArmLandmarks(*(np.array(a) for a in batch_forward(reference, q, side)))
+        moved = shared.back(take_landmarks(lm, rows), t)
+        for full, part in zip(lm, moved):
+            full[rows] = part
+        out.append(lm)
+    return tuple(out)
+
+
 class _Setup:
     """What every run on one library shares: targets, scorer, layouts and stage plans."""
 
@@ -631,7 +656,10 @@ class _Setup:
         self.paced = options.pace   # the motions kept within the velocity limits
         targets = self.targets
         self.scorer = SimilarityScore(robot, targets, settings.weights,
-                                      reference_robot=reference)
+                                      reference_robot=reference,
+                                      reference_landmarks=_leaned_references(
+                                          reference, targets, self.owners, selected,
+                                          options.leans))
         self.checker = None
         if settings.collision_check:
             self.checker = CollisionModel(robot, targets, robot.capsules)

@@ -114,7 +114,10 @@ class GestureResult:
       not stretched; 0 for a single keyframe);
     - ``right_joints``: how many of a row's columns are the right arm's (the rest are
       the left arm's; the arms may differ in joint count); 0 when not known, read as
-      half of them (arms of one joint count).
+      half of them (arms of one joint count);
+    - ``shared``: the angles (rad) of the joints shared by both arms (a torso) held
+      through the gesture, by name, when the staged expansion leaned it
+      (:mod:`.lean`); empty: those joints stay at 0, as designed.
     """
 
     name: str
@@ -147,6 +150,7 @@ class GestureResult:
     max_jump_before_deg: float = 0.0
     speed_ratio: float = 0.0
     right_joints: int = 0
+    shared: dict = field(default_factory=dict)
 
     def right_columns(self, width: int) -> Optional[int]:
         """
@@ -193,6 +197,7 @@ class GestureResult:
             'max_jump_designed_deg': self.max_jump_designed_deg,
             'max_jump_before_deg': self.max_jump_before_deg,
             'speed_ratio': self.speed_ratio, 'right_joints': self.right_joints,
+            'shared': dict(self.shared),
         }
 
     @classmethod
@@ -233,6 +238,8 @@ class GestureResult:
                 max_jump_before_deg=number(doc.get('max_jump_before_deg', 0.0)),
                 speed_ratio=number(doc.get('speed_ratio', 0.0)),
                 right_joints=arm_split(doc.get('right_joints', 0), positions),
+                shared={str(k): finite_number(v, 'angle')
+                        for k, v in dict(doc.get('shared') or {}).items()},
             )
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             if isinstance(exc, MalformedResult):

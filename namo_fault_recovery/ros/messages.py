@@ -47,15 +47,21 @@ def duration_seconds(msg):
 
 
 def library_to_msgs(joint_names, result, stamp):
-    """Return one JointTrajectory per gesture, all with the same header stamp."""
+    """
+    Return one JointTrajectory per gesture, all with the same header stamp.
+
+    A gesture whose torso leans (``GestureResult.shared``) names the shared joints after
+    the arms' and holds their angles at every point.
+    """
     msgs = []
     for gesture in result.gestures:
         msg = JointTrajectory()
         msg.header.stamp = stamp
         msg.header.frame_id = gesture.name
-        msg.joint_names = list(joint_names)
+        msg.joint_names = list(joint_names) + list(gesture.shared)
+        lean = [float(a) for a in gesture.shared.values()]
         for t, q in zip(gesture.times, gesture.positions):
-            msg.points.append(JointTrajectoryPoint(positions=[float(a) for a in q],
+            msg.points.append(JointTrajectoryPoint(positions=[float(a) for a in q] + lean,
                                                    time_from_start=duration_msg(t)))
         msgs.append(msg)
     return msgs

@@ -221,6 +221,33 @@ def explorer(player, robot, inputs, services) -> Exploration:
         lambda: dict(player._measured), player._wake.trigger), inputs, services)
 
 
+def library_track(msg):
+    """Return a /gesture_library message as a GestureTrack, or None if it holds none."""
+    try:
+        positions, times = trajectory_angles(msg)
+    except (ValueError, IndexError):
+        return None
+    track = GestureTrack(msg.header.frame_id, tuple(msg.joint_names), np.array(times),
+                         positions, stamp_key(msg.header.stamp))
+    return track if track.name and len(times) else None
+
+
+def unplayed_joints(track, joints, said):
+    """
+    Return the warning, once per gesture and joint set, for joints no controller takes.
+
+    A torso leaned by the recovery's ``expand_shared`` names its shared joints in the
+    gesture's trajectory; a player whose ``controllers`` do not list them plays the arms
+    without them, and says so once (``said`` remembers).
+    """
+    unplayed = tuple(j for j in track.joint_names if j not in joints)
+    if not unplayed or (track.name, unplayed) in said:
+        return ''
+    said.add((track.name, unplayed))
+    return (f'gesture {track.name!r} names joints that no controller takes '
+            f'({", ".join(unplayed)}): played without them')
+
+
 class GesturePlayer(Node):
     """Play gestures of the current library on trajectory controllers."""
 
@@ -230,6 +257,7 @@ class GesturePlayer(Node):
         (self._robot, self._groups, self._timing, self._monitor,
          self._waits) = _declare(self)
         self._joints = [j for group in self._groups.values() for j in group]
+        self._unplayed_said = set()
         self._limits, self._clearance = (_joint_limits(self._robot, self._joints),
                                          path_clearance(self, self._joints))
         self._book = PlayerBook()
@@ -270,15 +298,13 @@ class GesturePlayer(Node):
     # --- inputs ---------------------------------------------------------------------
 
     def _on_library(self, msg):
-        try:
-            positions, times = trajectory_angles(msg)
-        except (ValueError, IndexError):
-            return
-        track = GestureTrack(msg.header.frame_id, tuple(msg.joint_names), np.array(times),
-                             positions, stamp_key(msg.header.stamp))
-        if not track.name or not len(times):
+        track = library_track(msg)
+        if track is None:
             return
         self._book.add_gesture(track, time.monotonic())
+        said = unplayed_joints(track, self._joints, self._unplayed_said)
+        if said:
+            self.get_logger().warning(said)
         self._offer(track)
         if track.name not in self._play_services:
             self._play_services[track.name] = self.create_service(
