@@ -11,14 +11,14 @@ is searched again with the torso leaned, one lean held through the whole gesture
 A lean is a rigid motion of both arms and the chest, so the keyframe search runs on
 the upright arms against the gesture's references moved back by the lean
 (``SearchOptions.leans``): the score is the leaned robot's, and self-contact is
-unchanged.  The leans tried are a grid around upright (``LEAN_SPAN_DEG`` either way
-of each shared joint, within its limits), then a grid half as wide around the best,
-all copies of all gestures solved in one batched search per round, each round within
-``LEAN_SHARE`` of the time left (a gesture that no lean of the first round improves is
-not refined).  A lean is kept
-only if it lowers the gesture's score by ``LEAN_GAIN`` and adds no collision: leaning
-the torso is a larger motion for a guest than the arms' own.  A dense motion (one
-explored at typical points) is not leaned.
+unchanged.  The leans are screened first (:func:`screen_leans`): every lean of a grid
+(``LEAN_STEPS_DEG`` per shared joint, within its limits) polishes the published arms
+of the gesture's worst keyframe a little; the ``LEAN_KEPT`` best that promise
+``LEAN_GAIN`` are then solved in full (every keyframe, every stage), all copies of all
+gestures in one batched search.  A lean is kept only if it lowers the gesture's score
+by ``LEAN_GAIN`` and adds no collision: leaning the torso is a larger motion for a
+guest than the arms' own.  A dense motion (one explored at typical points) is not
+leaned.
 """
 
 from dataclasses import replace
@@ -26,15 +26,22 @@ import itertools
 
 import numpy as np
 
-from .keyframes import DEFAULT_EXPANSION_THRESHOLD, reconfigure_library, SearchOptions
+from .keyframes import (DEFAULT_EXPANSION_THRESHOLD, PoseProblem, reconfigure_library,
+                        SearchOptions)
 from .result import LibraryResult
 from ..model.gestures import GestureLibrary
+from ..model.kinematics import batch_forward
+from ..model.robot import ARMS
+from ..objective.collision import CollisionModel
+from ..objective.score import gesture_targets, SimilarityScore
 from ..optimize.base import Clock
+from ..optimize.polish import polish
 
-LEAN_SPAN_DEG = 15.0   # the first round's lean either way of upright, per shared joint
-LEAN_ROUNDS = 2        # rounds of grids, each half as wide around the best so far
+LEAN_STEPS_DEG = (-15.0, -7.5, 0.0, 7.5, 15.0)   # the leans screened, per shared joint
+SCREEN_MAXITER = 15    # polish iterations of each lean's screen, from the published arms
+LEAN_KEPT = 2          # the best-screened leans of each gesture that are solved in full
 LEAN_GAIN = 0.05       # a lean is kept if it lowers the gesture's score by 5 % at least
-LEAN_SHARE = 0.5       # each round's share of the time left before the deadline
+SCREEN_SHARE = 0.3     # the screen's share of the time left before the deadline
 
 
 def lean_library(robot, library: GestureLibrary, result: LibraryResult, settings, *,
@@ -53,39 +60,60 @@ def lean_library(robot, library: GestureLibrary, result: LibraryResult, settings
     if shared is None or not settings.expand_shared or not result.locks:
         return result
     todo = [g.name for g in result.gestures
-            if g.tip_error_max_mm > DEFAULT_EXPANSION_THRESHOLD and g.name not in dense]
-    if not todo:
+            if g.tip_error_max_mm > DEFAULT_EXPANSION_THRESHOLD and g.name not in dense
+            and g.free_joints]
+    if not todo or clock.expired():
         return result
-    best = {name: (np.zeros(len(shared.names)), result[name]) for name in todo}
-    span = np.radians(LEAN_SPAN_DEG)
-    rng = np.random.default_rng([int(result.seed or 0), 7])
-    for _ in range(LEAN_ROUNDS):
-        if not todo or clock.expired():
-            break
-        leans = {name: _grid(shared, best[name][0], span) for name in todo}
-        tried = _solve_leans(robot, library, result, settings, leans,
-                             clock.child(share=LEAN_SHARE), rng, stay_close)
-        for name, (t, gesture) in tried.items():
-            if gesture.score_after < best[name][1].score_after:
-                best[name] = (t, gesture)
-        # A gesture that no lean of this round improved is not refined around upright.
-        todo = [name for name in todo if np.any(best[name][0])]
-        span /= 2.0
-    return _keep_better(shared, result, best)
+    screen = clock.child(share=SCREEN_SHARE)
+    leans = {name: screen_leans(robot, library[name], result[name], settings, screen)
+             for name in todo}
+    rng = np.random.default_rng([int(seed), 7])
+    tried = _solve_leans(robot, library, result, settings, leans, clock, rng, stay_close)
+    return _keep_better(shared, result, tried)
 
 
-def _grid(shared, centre, span):
+def lean_grid(shared) -> np.ndarray:
+    """Return the leans screened (L, S): every joint at each of LEAN_STEPS_DEG, in limits."""
+    steps = np.radians(LEAN_STEPS_DEG)
+    grid = np.array(list(itertools.product(steps, repeat=len(shared.names))))
+    grid = np.clip(grid, shared.lower, shared.upper)
+    return np.unique(grid, axis=0)
+
+
+def screen_leans(robot, gesture, published, settings, clock) -> list:
     """
-    Return the leans around ``centre``: every joint at -span, 0 or +span, within limits.
+    Return the LEAN_KEPT best leans (nonzero) for one gesture, screened locally.
 
-    Two shared joints give 8 leans around the centre (the 3 x 3 grid less its middle).
+    The gesture's worst keyframe (as published) is the one screened: for every lean of
+    :func:`lean_grid` its published arm angles are polished (SCREEN_MAXITER iterations,
+    every lean in one batch) against its reference moved back by that lean.  A lean
+    that does not promise LEAN_GAIN over the upright row, polished alike, is dropped.
     """
-    out = []
-    for step in itertools.product((-span, 0.0, span), repeat=len(centre)):
-        t = np.clip(centre + np.array(step), shared.lower, shared.upper)
-        if np.any(step) and not any(np.allclose(t, u) for u in out + [centre]):
-            out.append(t)
-    return out
+    grid = lean_grid(robot.shared)
+    moving = robot.changed_model(settings.tool_length_mm, settings.tool_arm)
+    split = published.right_columns(len(published.positions[0]))
+    rows = np.array(published.positions)
+    scorer = SimilarityScore(moving, gesture_targets(gesture), settings.weights,
+                             reference_robot=robot)
+    k = int(np.argmax(scorer.evaluate(rows[:, :split], rows[:, split:],
+                                      np.arange(len(rows)))))
+    targets = gesture_targets(gesture, [k]) * len(grid)
+    design = {'right': np.array([t.q_right for t in targets]),
+              'left': np.array([t.q_left for t in targets])}
+    ref = tuple(robot.shared.back(batch_forward(robot, design[side], side), grid)
+                for side in ARMS)
+    scorer = SimilarityScore(moving, targets, settings.weights, reference_landmarks=ref)
+    collision = (CollisionModel(moving, targets, robot.capsules)
+                 if settings.collision_check else None)
+    base = np.repeat(rows[k:k + 1], len(grid), axis=0)
+    problem = PoseProblem(moving, scorer, np.arange(len(grid)),
+                          (base[:, :split], base[:, split:]),
+                          tuple(robot.locate_joint(j) for j in published.free_joints),
+                          collision)
+    f = polish(problem, problem.x0[:, None, :], clock, maxiter=SCREEN_MAXITER)[1][:, 0]
+    upright = float(f[~np.any(grid, axis=1)][0])
+    order = [i for i in np.argsort(f) if np.any(grid[i]) and f[i] < (1.0 - LEAN_GAIN) * upright]
+    return [grid[i] for i in order[:LEAN_KEPT]]
 
 
 def _solve_leans(robot, library, result, settings, leans, clock, rng, stay_close):
