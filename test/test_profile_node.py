@@ -52,7 +52,7 @@ def test_a_fault_on_talos_is_reconfigured_with_talos_joint_names(tmp_path, talos
         reference = client.wait_library(timeout=START, what="Talos's reference library")
         assert reference.names == list(library.names)
         for msg in reference.msgs.values():
-            assert list(msg.joint_names) == list(robot.joint_names)
+            assert list(msg.joint_names) == list(robot.played_joints)   # the torso's last
         assert any(abs(a - LOCK) > 0.1 for a in reference.column(FAULTED))
 
         since = client.diag_count()
@@ -60,7 +60,7 @@ def test_a_fault_on_talos_is_reconfigured_with_talos_joint_names(tmp_path, talos
         adapted = client.wait_library(after=reference.stamp, timeout=30.0,
                                       what=f'the library for {FAULTED} locked at {LOCK}')
         for msg in adapted.msgs.values():
-            assert list(msg.joint_names) == list(robot.joint_names)
+            assert list(msg.joint_names) == list(robot.played_joints)   # the torso's last
         assert all(abs(a - LOCK) < 1e-9 for a in adapted.column(FAULTED)), \
             adapted.column(FAULTED)
         moved = [j for j in robot.arms['left'].joint_names if j != FAULTED
@@ -108,7 +108,7 @@ def test_a_profile_without_urdf_waits_for_the_robot_description_topic(tmp_path, 
         publisher.publish(String(data=urdf.read_text()))
         reference = client.wait_library(timeout=START, what='the library once the URDF came')
         for msg in reference.msgs.values():
-            assert list(msg.joint_names) == list(robot.joint_names)
+            assert list(msg.joint_names) == list(robot.played_joints)   # the torso's last
         client.publish_fault([FAULTED], [LOCK])
         adapted = client.wait_library(after=reference.stamp, timeout=30.0,
                                       what=f'the library for {FAULTED}')
@@ -124,7 +124,7 @@ def test_a_profile_without_urdf_waits_for_the_robot_description_topic(tmp_path, 
 
 
 def test_the_gesture_player_runs_on_talos_and_commands_its_arm_joints(tmp_path, talos):
-    """gesture_player on the same profile: Talos's library in, Talos's joints out."""
+    """gesture_player on the same profile: Talos's library in, its arms and torso out."""
     import threading
     import time
 
@@ -144,12 +144,14 @@ def test_the_gesture_player_runs_on_talos_and_commands_its_arm_joints(tmp_path, 
                                     commands.append, 10)
     client.node.create_subscription(JointTrajectory, 'left_arm_controller/joint_trajectory',
                                     commands.append, 10)
+    client.node.create_subscription(JointTrajectory, 'torso_controller/joint_trajectory',
+                                    commands.append, 10)
     stop = threading.Event()
 
     def stream():                       # Talos at rest, as its joint_state_broadcaster
         while not stop.wait(0.02):
-            client.state_pub.publish(JointState(name=list(robot.joint_names),
-                                                position=[0.0] * len(robot.joint_names)))
+            client.state_pub.publish(JointState(name=list(robot.played_joints),
+                                                position=[0.0] * len(robot.played_joints)))
     streamer = threading.Thread(target=stream, daemon=True)
     streamer.start()
     try:
@@ -158,13 +160,16 @@ def test_the_gesture_player_runs_on_talos_and_commands_its_arm_joints(tmp_path, 
         assert play.wait_for_service(timeout_sec=START), player.describe()
         play.call_async(Trigger.Request())
         end = time.monotonic() + 20.0
-        while len(commands) < 2 and time.monotonic() < end:
+        while len(commands) < 3 and time.monotonic() < end:
             time.sleep(0.05)
-        assert len(commands) == 2, player.describe()
-        sent = {tuple(msg.joint_names) for msg in commands}
-        assert sent == {tuple(robot.arms['right'].joint_names),
-                        tuple(robot.arms['left'].joint_names)}
+        assert len(commands) == 3, player.describe()
+        sent = {tuple(msg.joint_names): msg for msg in commands}
+        assert set(sent) == {tuple(robot.arms['right'].joint_names),
+                             tuple(robot.arms['left'].joint_names), robot.shared.names}
         assert all(msg.points for msg in commands)
+        # The salute does not lean: the torso is held upright through it.
+        assert all(p.positions[0] == p.positions[1] == 0.0
+                   for p in sent[robot.shared.names].points)
     finally:
         stop.set()
         streamer.join()
@@ -174,7 +179,9 @@ def test_the_gesture_player_runs_on_talos_and_commands_its_arm_joints(tmp_path, 
     assert 'Traceback' not in player.stderr + player.stdout, player.describe()
 
 
-def test_talos_end_to_end_on_the_simulator_stuck_detected_reconfigured_replayed(tmp_path, talos):
+@pytest.mark.parametrize('lean', [False, True], ids=['upright', 'leaned'])
+def test_talos_end_to_end_on_the_simulator_stuck_detected_reconfigured_replayed(
+        tmp_path, talos, lean):
     """
     namo_sim, recovery_node and gesture_player, all on Talos's profile, over DDS.
 
@@ -183,6 +190,10 @@ def test_talos_end_to_end_on_the_simulator_stuck_detected_reconfigured_replayed(
     library reconfigured for it; salute is then played again on that library.  Rest is
     that joint's upper limit: the simulator reads it a little past (its encoder noise),
     which the node first rejected as out of limits, so nothing was reconfigured.
+
+    ``leaned``: the node's ``expand_shared`` on, salute (159 mm off with the arms alone)
+    leans the torso; the player commands it on torso_controller and the simulated torso
+    ends the replay where the library says.
     """
     from namo_fault_recovery.ros.sim_node import sim_command
     from namo_fault_recovery.runtime.private_node import player_command
@@ -192,14 +203,16 @@ def test_talos_end_to_end_on_the_simulator_stuck_detected_reconfigured_replayed(
     joint = 'arm_right_2_joint'
     robot_args = ['-p', f'robot_profile:={PROFILE}', '-p', f'gesture_file:={LIBRARY}']
     node = NodeProcess(DOMAIN, state_dir=tmp_path / 'state', args=robot_args + [
-        '-p', 'contingency_table:=false', '-p', 'refine_budget_sec:=0.0'])
+        '-p', 'contingency_table:=false', '-p', 'refine_budget_sec:=0.0',
+        '-p', f'expand_shared:={str(lean).lower()}'])
     sim = NodeProcess(DOMAIN, command=sim_command(), env=ros_env(DOMAIN),
                       args=robot_args + ['-p', f"stuck_joints:=['{joint}:0.0']"])
     player = NodeProcess(DOMAIN, command=player_command(), env=ros_env(DOMAIN),
                          args=robot_args)
     client = RosClient(DOMAIN, gestures=len(library))
-    faults = []
+    faults, states = [], []
     client.node.create_subscription(JointState, '/actuator_fault', faults.append, 10)
+    client.node.create_subscription(JointState, '/joint_states', states.append, 10)
     procs = (player, sim, node)
     try:
         reference = client.wait_library(timeout=START, what="Talos's reference library")
@@ -212,8 +225,15 @@ def test_talos_end_to_end_on_the_simulator_stuck_detected_reconfigured_replayed(
         adapted = client.wait_library(after=reference.stamp, timeout=30.0,
                                       what=f'the library for {joint}')
         assert all(abs(a) < math.radians(1.0) for a in adapted.column(joint))
+        salute = adapted.msgs['salute']
+        torso = [salute.points[-1].positions[list(salute.joint_names).index(n)]
+                 for n in robot.shared.names]
+        assert any(torso) == lean, torso
         second = _call(client, play, 60.0)
         assert second.success and 'carried on' not in second.message, second.message
+        last = dict(zip(states[-1].name, states[-1].position))
+        for name, angle in zip(robot.shared.names, torso):
+            assert abs(last[name] - angle) < math.radians(0.5), (name, last[name], angle)
     finally:
         client.close()
         codes = [proc.stop() for proc in procs]

@@ -335,7 +335,7 @@ def test_talos_from_its_profile_follows_a_key_pose_while_a_stuck_joint_holds():
     client = SimClient(OTHER_DOMAIN)
     try:
         client.wait(lambda: client.states, "Talos's first /joint_states", timeout=40.0)
-        assert list(client.latest()) == list(robot.joint_names)
+        assert list(client.latest()) == list(robot.played_joints)      # the arms, the torso
         client.reset_contacts()
         pose = gestures['bye'].keyframes[0].positions()[:len(right)]
         move_to_pose = trajectory(right, [(1.5, pose)])
@@ -356,7 +356,11 @@ def test_talos_from_its_profile_follows_a_key_pose_while_a_stuck_joint_holds():
 
 
 def test_a_robot_of_unequal_arms_starts_where_told_and_its_six_joint_arm_follows():
-    """Talos with a 7-joint right arm and a 6-joint left one: 13 joints, started at 0 rad."""
+    """
+    Talos with a 7-joint right arm and a 6-joint left one: 13 joints, started at 0 rad.
+
+    Its torso (2 shared joints) is simulated too: 15 joints on /joint_states.
+    """
     installed_urdf('talos')
     data = Path(__file__).resolve().parent / 'data'
     profile, library = data / 'talos76.yaml', data / 'talos76_gestures.yaml'
@@ -370,7 +374,7 @@ def test_a_robot_of_unequal_arms_starts_where_told_and_its_six_joint_arm_follows
     try:
         client.wait(lambda: client.states, 'the first /joint_states', timeout=40.0)
         first = client.latest()
-        assert list(first) == list(robot.joint_names) and len(first) == 13
+        assert list(first) == list(robot.played_joints) and len(first) == 13 + 2
         assert np.abs(np.array(list(first.values()))).max() < math.radians(1.0), first
         pose = gestures['wai'].keyframes[0].left
         client.send('left_arm_controller', trajectory(left, [(1.5, list(pose))]))

@@ -78,6 +78,35 @@ def test_the_capsules_are_the_optimisers_at_any_pose(talos):
             assert np.linalg.norm(ends[0] - a) < 1e-6 and np.linalg.norm(ends[1] - b) < 1e-6
 
 
+def _geom_ends(sim, name):
+    """Return a capsule geom's two axis ends (mm, world = the arms' base frame)."""
+    m, d = sim.model, sim.data
+    g = m.geom(name).id
+    axis = d.geom_xmat[g].reshape(3, 3)[:, 2] * m.geom_size[g, 1]
+    return (d.geom_xpos[g] - axis) * 1e3, (d.geom_xpos[g] + axis) * 1e3
+
+
+def test_with_its_torso_the_arms_and_the_torso_capsule_lean_together(talos):
+    robot, _, allowances = talos
+    sim = NamoSim(robot, allowances=allowances, shared=True)
+    assert sim.joint_names == robot.joint_names + ('torso_1_joint', 'torso_2_joint')
+    assert sim.model.nu == sim.model.nq == 16
+    q = np.radians([30, -20, -20, -60, 10, -20, 30, -30, -20, 20, -60, -10, 20, -30])
+    t = np.radians([12.0, 9.0])
+    sim.set_positions(np.concatenate((q, t)))
+    rot, d = robot.shared.motion(t)
+    for name, (a, b) in segments_mm(robot, q).items():
+        moved = [rot[0] @ p + d[0] for p in (a, b)]
+        ends = sorted(_geom_ends(sim, name), key=lambda p: np.linalg.norm(p - moved[0]))
+        assert max(np.linalg.norm(e - p) for e, p in zip(ends, moved)) < 1e-6, name
+    upright = NamoSim(robot, allowances=allowances)
+    top = [rot[0] @ p + d[0] for p in _geom_ends(upright, 'torso')]
+    assert max(np.linalg.norm(e - p) for e, p in zip(_geom_ends(sim, 'torso'), top)) < 1e-6
+    run(sim, np.concatenate((q, t)), 600)       # the torso settles on its lean, no contact
+    assert np.abs(sim.positions()[-2:] - t).max() < math.radians(0.05)
+    assert sim.contact_steps == 0
+
+
 @pytest.mark.parametrize('name', ['talos', 'tiago_dual'])
 def test_every_key_pose_of_the_library_is_held_without_contact(name):
     robot, library, allowances = shipped(name)

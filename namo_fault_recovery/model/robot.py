@@ -132,6 +132,26 @@ class RobotJoints:
         """All joint names, arm by arm in ARMS order (right first): 14 on Namo."""
         return sum((self.arms[side].joint_names for side in ARMS if side in self.arms), ())
 
+    @property
+    def played_joints(self) -> tuple:
+        """
+        Every joint a played gesture commands: :attr:`joint_names`, then the shared ones.
+
+        The shared joints (a torso, :attr:`shared`) are commanded at 0 unless the
+        recovery leans them (``GestureResult.shared``); Namo has none.
+        """
+        return self.joint_names + (self.shared.names if self.shared is not None else ())
+
+    def joint_bounds(self, name: str) -> tuple[float, float, float]:
+        """Return ``(lower, upper, velocity limit)`` (rad, rad/s) of a played joint."""
+        if self.shared is not None and name in self.shared.names:
+            i = self.shared.names.index(name)
+            return (float(self.shared.lower[i]), float(self.shared.upper[i]),
+                    float(self.shared.velocity[i]))
+        side, i = self.locate_joint(name)
+        return (float(self.arms[side].lower[i]), float(self.arms[side].upper[i]),
+                float(self.arm_velocity_limits(side)[i]))
+
     def locate_joint(self, name: str) -> tuple[str, int]:
         """Return ``(arm, index)`` for a joint name, or raise KeyError naming the choices."""
         for side in ARMS:

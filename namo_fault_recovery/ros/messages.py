@@ -50,16 +50,19 @@ def library_to_msgs(joint_names, result, stamp):
     """
     Return one JointTrajectory per gesture, all with the same header stamp.
 
-    A gesture whose torso leans (``GestureResult.shared``) names the shared joints after
-    the arms' and holds their angles at every point.
+    ``joint_names`` are the arms' joints, then any joints shared by both arms (a torso,
+    ``RobotJoints.played_joints``): a shared joint holds the gesture's lean
+    (``GestureResult.shared``) at every point, 0 (upright) when it does not lean.
     """
     msgs = []
     for gesture in result.gestures:
         msg = JointTrajectory()
         msg.header.stamp = stamp
         msg.header.frame_id = gesture.name
-        msg.joint_names = list(joint_names) + list(gesture.shared)
-        lean = [float(a) for a in gesture.shared.values()]
+        names = list(joint_names) + [n for n in gesture.shared if n not in joint_names]
+        msg.joint_names = names
+        arms = len(gesture.positions[0])
+        lean = [float(gesture.shared.get(n, 0.0)) for n in names[arms:]]
         for t, q in zip(gesture.times, gesture.positions):
             msg.points.append(JointTrajectoryPoint(positions=[float(a) for a in q] + lean,
                                                    time_from_start=duration_msg(t)))

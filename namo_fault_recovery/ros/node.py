@@ -153,7 +153,7 @@ class RecoveryNode(Node):
                                   self._library, self._book, self.get_logger().error)
         self._intake = FaultIntake(self._book, self._state.commit_faults, self._on_accepted,
                                    self._inputs.measured, on_error=self._intake_error)
-        self._prepared = conv.PreparedMessages(self._robot.joint_names)
+        self._prepared = conv.PreparedMessages(self._robot.played_joints)
         self._table = ContingencyKeeper(self._robot, self._library, self._state.store.directory,
                                         self._log, values['contingency_file'] or None,
                                         hold=self._intake.busy, prepare=self._prepared.prepare)

@@ -118,15 +118,16 @@ def _robot(node):
 def _declare(node):
     """Declare the parameters; return (robot, controllers, timing, monitor, waits)."""
     robot = _robot(node)
-    controllers = list(node.declare_parameter(
-        'controllers', ['right_arm_controller', 'left_arm_controller']).value)
-    groups = {}
     defaults = {'right_arm_controller': robot.arms['right'].joint_names,
                 'left_arm_controller': robot.arms['left'].joint_names}
+    if robot.shared is not None:        # a torso both arms hang from: its own controller
+        defaults['torso_controller'] = robot.shared.names
+    controllers = list(node.declare_parameter('controllers', list(defaults)).value)
+    groups = {}
     for name in controllers:
         default = list(defaults.get(name, ())) or Parameter.Type.STRING_ARRAY
         joints = node.declare_parameter(f'{name}.joints', default).value or []
-        unknown = [j for j in joints if j not in robot.joint_names]
+        unknown = [j for j in joints if j not in robot.played_joints]
         if not joints or unknown:
             raise ValueError(f'{name}.joints: expected joints of the robot, got {joints!r}')
         groups[name] = list(joints)
@@ -180,13 +181,8 @@ def reading_age(now, stamp):
 
 def _joint_limits(robot, joints):
     """Return (velocity limits, lower, upper) of ``joints`` (rad/s, rad), in that order."""
-    arms = {j: (side, i) for side in ('right', 'left')
-            for i, j in enumerate(robot.arms[side].joint_names)}
-    speed = dict(zip(robot.joint_names, robot.joint_velocity_limits))
-    limits = [speed[j] for j in joints]
-    lower = [robot.arms[arms[j][0]].lower[arms[j][1]] for j in joints]
-    upper = [robot.arms[arms[j][0]].upper[arms[j][1]] for j in joints]
-    return np.array(limits), np.array(lower), np.array(upper)
+    lower, upper, speed = np.array([robot.joint_bounds(j) for j in joints]).T
+    return speed, lower, upper
 
 
 def plan_message(plan, joints) -> JointTrajectory:

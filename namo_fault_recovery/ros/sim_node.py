@@ -10,10 +10,13 @@ What it offers, so that a gesture player can be tried without the robot:
 
 - Two trajectory controllers, as ros2_control's JointTrajectoryController on
   ``/<controller>/joint_trajectory`` (trajectory_msgs/JointTrajectory): by default
-  ``right_arm_controller`` (right_arm_joint1..7) and ``left_arm_controller``.  The rules
+  ``right_arm_controller`` (right_arm_joint1..7) and ``left_arm_controller``; a third,
+  ``torso_controller``, for a profile robot whose arms hang from shared joints (Talos's
+  torso_1/2_joint; the recovery leans them with ``expand_shared``).  The rules
   (what is rejected, with the reason logged; zero stamp = now; interpolation) are in
   :mod:`..sim.trajectory`.
-- ``/joint_states`` (all joints, 14 on Namo, position and velocity) at ``joint_state_rate``
+- ``/joint_states`` (all joints, 14 on Namo, 16 on Talos with its torso; position and
+  velocity) at ``joint_state_rate``
   (100 Hz).
 - Stuck joints, as a failed actuator: the ``stuck_joints`` parameter (``'NAME'`` = where
   it is, ``'NAME:DEG'`` = at that angle) and the ``~/stick`` topic
@@ -94,6 +97,9 @@ PARAMETERS = {
                          'right arm', _T.PARAMETER_STRING),
     'left_controller': ('left_arm_controller', 'trajectory controller of the '
                         'left arm', _T.PARAMETER_STRING),
+    'torso_controller': ('torso_controller', 'trajectory controller of the joints both '
+                         'arms hang from (a profile robot with shared joints: a torso)',
+                         _T.PARAMETER_STRING),
     'timestep': (0.002, 'physics step (s), run in real time',
                  _T.PARAMETER_DOUBLE),
     'kp': (300.0, 'position actuator stiffness (N m/rad)', _T.PARAMETER_DOUBLE),
@@ -168,6 +174,20 @@ def _describe(text, kind, read_only=True):
     return ParameterDescriptor(description=text, type=kind, read_only=read_only)
 
 
+def controller_groups(robot, params) -> list:
+    """
+    Return ``[(controller, joints)]``: each arm's, then a torso's if there is one.
+
+    A torso is the joints both arms hang from
+    (:attr:`~..model.robot.RobotJoints.shared`, Talos's torso_1/2_joint).
+    """
+    groups = [(params[f'{side}_controller'], tuple(robot.arms[side].joint_names))
+              for side in ('right', 'left')]
+    if robot.shared is not None:
+        groups.append((params['torso_controller'], tuple(robot.shared.names)))
+    return groups
+
+
 class SimNode(Node):
     """The simulator node; see the module docstring for its interface."""
 
@@ -184,7 +204,8 @@ class SimNode(Node):
         self.sim = NamoSim(self.robot, timestep=self.p['timestep'], kp=self.p['kp'],
                            kv=self.p['kv'], gravity=self.p['gravity'],
                            allowances=designed_allowances(self.robot, library),
-                           tolerance=self.p['contact_tolerance_mm'] * 1e-3, urdf=urdf)
+                           tolerance=self.p['contact_tolerance_mm'] * 1e-3, urdf=urdf,
+                           shared=True)
         self.sim.set_reading_noise(math.radians(self.p['joint_state_noise_deg']))
         self.tracker, self.tracker_pubs = create_tracker(self, self.truth.chains)
         self.desired = self._initial_state()
@@ -252,11 +273,9 @@ class SimNode(Node):
         return np.array(q0, dtype=float), np.zeros(len(q0))
 
     def _create_controllers(self):
-        """Subscribe each arm's trajectory controller; return {controller: its state}."""
+        """Subscribe each arm's (and a torso's) controller; return {controller: its state}."""
         controllers = {}
-        for side in ('right', 'left'):
-            controller = self.p[f'{side}_controller']
-            joints = tuple(self.robot.arms[side].joint_names)
+        for controller, joints in controller_groups(self.robot, self.p):
             controllers[controller] = {
                 'joints': joints, 'index': [self.sim.index(j) for j in joints],
                 'active': None}

@@ -54,6 +54,8 @@ GRAVITY = (0.0, 0.0, -9.81)
 # of a 14-bit absolute encoder (0.022 deg), the order of a servo's position reading.
 READING_NOISE_DEG = 0.02
 CONTACT_TOLERANCE = 1e-3     # m of penetration tolerated, as the objective's 1 mm
+ARMATURE = 0.05              # kg m^2 added to each actuated joint (a motor's rotor inertia)
+DAMPING = 0.5                # N m s/rad of each actuated joint's own damping
 _RGBA = {'right': (1.0, 0.55, 0.1, 1.0), 'left': (0.1, 0.6, 1.0, 1.0),
          'torso': (0.75, 0.75, 0.75, 1.0)}
 
@@ -140,16 +142,17 @@ def add_capsules(spec, robot, allowances):
             spec.add_pair(name=f'{a}-{b}', geomname1=a, geomname2=b)
 
 
-def _spec(robot, urdf, allowances):
+def _spec(robot, urdf, allowances, joints):
     """
     Return the MjSpec of ``robot`` with its capsules and contact pairs.
 
     Namo: its generated URDF (or ``urdf``, the simulator's own copy: a change the
     planner does not know), rigid capsules.  A profile robot: its own URDF (or
-    ``urdf``) through :func:`.profile_model.profile_spec`, moving capsules.
+    ``urdf``) through :func:`.profile_model.profile_spec`, moving capsules, ``joints``
+    the ones that move.
     """
     if is_profile_robot(robot):
-        spec = profile_spec(robot, urdf)
+        spec = profile_spec(robot, urdf, joints)
         add_profile_capsules(spec, robot, contact_pairs(), allowances)
         return spec
     spec = mujoco.MjSpec.from_string(urdf or urdf_string(robot))
@@ -162,21 +165,21 @@ class NamoSim:
     The simulated robot: step it, command its actuators, stick joints, read contacts.
 
     Namo, or any two-armed robot from a URDF profile (:mod:`.profile_model`): its arm
-    joints (``robot.joint_names``, in that order) are actuated, every other joint is
+    joints (``robot.joint_names``, in that order; with ``shared``, then the joints both
+    arms hang from, ``robot.played_joints``: a torso) are actuated, every other joint is
     fixed.  Not thread-safe: the caller serialises access (the node holds one lock).
     """
 
-    def __init__(self, robot, timestep=0.002, kp=300.0, kv=30.0, armature=0.05,
-                 damping=0.5, gravity=True, allowances=None,
-                 tolerance=CONTACT_TOLERANCE, urdf=None):
+    def __init__(self, robot, timestep=0.002, kp=300.0, kv=30.0, gravity=True,
+                 allowances=None, tolerance=CONTACT_TOLERANCE, urdf=None, shared=False):
         if timestep <= 0 or kp <= 0 or kv < 0:
             raise ValueError('timestep and kp must be > 0 and kv >= 0')
         self.set_reading_noise(0.0)
         self.robot = robot
-        self.joint_names = tuple(robot.joint_names)
+        self.joint_names = tuple(robot.played_joints if shared else robot.joint_names)
         self.kp, self.kv = float(kp), float(kv)
         self.allowances = dict(allowances or {})
-        spec = _spec(robot, urdf, self.allowances)
+        spec = _spec(robot, urdf, self.allowances, self.joint_names)
         spec.option.timestep = timestep
         spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
         spec.option.gravity = GRAVITY if gravity else (0.0, 0.0, 0.0)
@@ -185,8 +188,8 @@ class NamoSim:
                 body.gravcomp = 1.0
         for name in self.joint_names:
             joint = spec.joint(name)
-            joint.armature = armature
-            joint.damping = [damping, 0.0, 0.0]
+            joint.armature = ARMATURE
+            joint.damping = [DAMPING, 0.0, 0.0]
             act = spec.add_actuator(name=name, target=name,
                                     trntype=mujoco.mjtTrn.mjTRN_JOINT)
             act.set_to_position(kp=kp, kv=kv)

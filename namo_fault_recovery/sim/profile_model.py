@@ -47,13 +47,14 @@ def is_profile_robot(robot):
             and getattr(robot, 'profile', None) is not None)
 
 
-def sim_urdf(robot, urdf=None):
+def sim_urdf(robot, urdf=None, joints=None):
     """
     Return the robot's URDF as MuJoCo takes it: no geometry, only the arms' joints move.
 
     ``urdf`` is the simulator's own copy (a document or a path); by default the
-    profile's URDF file.  The joints of ``robot.joint_names`` keep their type and
-    limits; every other joint becomes fixed (and loses any mimic).
+    profile's URDF file.  The ``joints`` that move (default ``robot.joint_names``; the
+    simulator node adds the shared ones, a torso: ``robot.played_joints``) keep their
+    type and limits; every other joint becomes fixed (and loses any mimic).
     """
     source = robot.profile.tree.source
     if urdf is None:
@@ -61,7 +62,7 @@ def sim_urdf(robot, urdf=None):
     elif not (isinstance(urdf, str) and urdf.lstrip().startswith('<')):
         source, urdf = str(urdf), Path(urdf)
     doc = load_urdf_document(urdf, source)
-    moving = set(robot.joint_names)
+    moving = set(robot.joint_names if joints is None else joints)
     for link in doc.robot.links:
         link.visuals = []
         link.collisions = []
@@ -102,15 +103,16 @@ def _check_inertias(doc, moving):
             link.inertial.inertia = (axes * np.maximum(values, MIN_INERTIA)) @ axes.T
 
 
-def profile_spec(robot, urdf=None):
+def profile_spec(robot, urdf=None, joints=None):
     """Return the MjSpec of a profile robot: its URDF without geometry, links kept apart."""
-    spec = mujoco.MjSpec.from_string(sim_urdf(robot, urdf))
+    joints = tuple(robot.joint_names if joints is None else joints)
+    spec = mujoco.MjSpec.from_string(sim_urdf(robot, urdf, joints))
     spec.compiler.fusestatic = False
-    missing = [name for name in robot.joint_names if spec.joint(name) is None]
+    missing = [name for name in joints if spec.joint(name) is None]
     if missing:
         raise ValueError(f'joint {missing[0]!r} of the profile robot {robot.name} is not '
-                         'in the simulated URDF; expected its arm joints')
-    for name in robot.joint_names:
+                         'in the simulated URDF; expected its arm and shared joints')
+    for name in joints:
         spec.joint(name).frictionloss = 0.0     # the same PD design as Namo's arms
     return spec
 
@@ -141,17 +143,32 @@ def add_profile_capsules(spec, robot, pairs, allowances):
         ends = _landmark_links(robot, side)
         for k, seg in enumerate(SEGMENTS):
             body = spec.body(ends[LANDMARK_SITES[k + 1]][0])
-            _capsule(body, f'{side}_arm_{seg}', getattr(cap, seg) * 1e-3,
-                     np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1e-3]), _RGBA[side])
-    base = spec.body(robot.chains['right'].chain.base) or spec.worldbody
-    _capsule(base, 'torso', cap.torso_radius * 1e-3,
-             np.concatenate((cap.torso_top, cap.torso_bottom)) * 1e-3, _RGBA['torso'])
+            _capsule(body, np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1e-3]), f'{side}_arm_{seg}',
+                     getattr(cap, seg) * 1e-3, _RGBA[side])
+    _capsule(*_torso_body(spec, robot), 'torso', cap.torso_radius * 1e-3, _RGBA['torso'])
     for a, b in pairs:
         if (a, b) not in allowances:
             spec.add_pair(name=f'{a}-{b}', geomname1=a, geomname2=b)
 
 
-def _capsule(body, name, radius, fromto, rgba):
+def _torso_body(spec, robot):
+    """
+    Return the torso capsule's body and its ends there (``fromto``, m).
+
+    The capsule is the optimiser's, in the arms' base frame at rest; with joints shared
+    by both arms (a torso) it rides on the link they end on, as the arms do.
+    """
+    ends = np.stack((robot.capsules.torso_top, robot.capsules.torso_bottom)).astype(float)
+    link = robot.chains['right'].chain.base
+    if robot.shared is not None:
+        link = robot.shared.link
+        zero = np.zeros((1, len(robot.shared.names)))
+        origin, rot = (a[0] for a in robot.shared.chain.link_frames(zero, [link])[link])
+        ends = (ends - origin) @ rot          # into the link's frame: R^T (p - o)
+    return spec.body(link) or spec.worldbody, ends.reshape(-1) * 1e-3
+
+
+def _capsule(body, fromto, name, radius, rgba):
     """Add a capsule; radius 0 (no geometry to fit: a bare segment) becomes MIN_RADIUS."""
     geom = body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=fromto,
                          size=[max(radius, MIN_RADIUS), 0.0, 0.0], rgba=rgba)
