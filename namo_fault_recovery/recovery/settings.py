@@ -121,10 +121,10 @@ class RecoverySettings:
     expand_shared: bool = setting(
         False, "staged DOF expansion into the joints shared by both arms (the profile's "
         'shared, a torso): a gesture whose fingertip stays over 5 mm off with the arms '
-        'alone is searched again with the torso leaned, one lean per gesture (published '
-        'as extra joints of its trajectory); off by default: the gesture player and the '
-        'simulator do not command a torso yet', cli_help='lean the torso (shared joints) '
-        'for gestures the arms alone cannot reach')
+        'alone is searched again with the torso leaned, one lean per gesture (its shared '
+        'joints in the trajectory, for a torso controller); off by default: it costs time '
+        'at the deadline and a guest sees the torso move', cli_help='lean the torso '
+        '(shared joints) for gestures the arms alone cannot reach')
     tool_length_mm: float = setting(
         0.0, "a tool in the hand of tool_arm lengthens it by this much (the second paper's "
         '50 and 100 mm): a structure change; setting it re-adapts the library even with no '
