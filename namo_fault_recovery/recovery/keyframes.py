@@ -1022,10 +1022,12 @@ def _clear_idle_arms(setup, rows, clock, rng):
     into the torso during every right-arm gesture.  Such rows are solved again on the
     idle arm's healthy joints alone: the collision term pushes it clear, and the
     ``stay_close`` pull keeps it as near its reference pose as it can be.  The score
-    does not change (the arm is not scored).  Where the robot has a torso shape
-    (:mod:`..model.torso_field`), the rows still in it are then pushed out by a short
-    polish on it (``PUSH_MAXITER``), and searched on it where the push is blocked (a
-    hand between the chest and the other arm).  Returns a mask of the rows moved.
+    does not change (the arm is not scored).  Rows whose idle arm holds the same pose
+    are solved once (:func:`_move_rows` on the first, :func:`_take_idle_pose` for the
+    others where it is clear with their own moving arm).  Each is first pushed out
+    from where it is by a short polish (``PUSH_MAXITER``, the torso's shape included,
+    :mod:`..model.torso_field`), and searched only where the push leaves it touching
+    (:func:`_search_idle`).  Returns a mask of the rows moved.
     """
     robot, checker = setup.robot, setup.checker
     done = np.zeros(len(rows.ids), dtype=bool)
@@ -1041,16 +1043,16 @@ def _clear_idle_arms(setup, rows, clock, rng):
     todo = [k for k, h in zip(todo, hit) if h]
     if not todo:
         return done
-    lay = [free_layout(robot, idle[k], setup.locked, setup.faulted) for k in todo]
-    batch = _Batch(rows.right[todo], rows.left[todo], rows.ids[todo], lay,
-                   stay_close=IDLE_STAY_CLOSE, motions=[rows.motions[k] for k in todo])
-    # With the collision term from the start: the arm is not scored, so the plain
-    # search would only find the colliding reference pose again (the stay_close pull).
-    r2, l2, clear = _move_idle(setup, batch, clock, rng)
-    for i, k in enumerate(todo):
-        if clear[i]:
-            rows.right[k], rows.left[k] = r2[i], l2[i]
-            done[k] = True
+    # Rows whose idle arm holds one pose (a resting arm, through every one-armed
+    # gesture) are solved once, on the first of them; the others take that pose where
+    # it is clear with their own moving arm, and are solved themselves where it is not.
+    first = {}
+    for k in todo:
+        first.setdefault(_idle_key(rows, idle[k], k), k)
+    _move_rows(setup, rows, idle, sorted(first.values()), done, clock, rng, shared=False)
+    _take_idle_pose(setup, rows, idle, [(k, first[_idle_key(rows, idle[k], k)])
+                                        for k in todo if not done[k]], done)
+    _move_rows(setup, rows, idle, [k for k in todo if not done[k]], done, clock, rng)
     _hold_idle_still(setup, rows, idle, done)
     if done.any():
         rows.after[done] = setup.scorer.evaluate(rows.right[done], rows.left[done],
@@ -1058,9 +1060,81 @@ def _clear_idle_arms(setup, rows, clock, rng):
     return done
 
 
+def _idle_key(rows, sides, k):
+    """Return what identifies row ``k``'s idle-arm problem: its arms and their poses."""
+    arm = {'right': rows.right, 'left': rows.left}
+    return (sides, angle_bytes(arm[s][k] for s in sides))
+
+
+def angle_bytes(arrays):
+    """Return the bytes of some angle arrays, one key for a dict."""
+    return b''.join(np.ascontiguousarray(a, dtype=float).tobytes() for a in arrays)
+
+
+def _move_rows(setup, rows, idle, ks, done, clock, rng, shared=True):
+    """Move the idle arm of rows ``ks`` out of the body; mark the rows cleared in ``done``."""
+    if not ks or clock.expired():
+        return
+    robot = setup.robot
+    lay = [free_layout(robot, idle[k], setup.locked, setup.faulted) for k in ks]
+    # With the collision term from the start: the arm is not scored, so the plain
+    # search would only find the colliding reference pose again (the stay_close pull).
+    batch = _Batch(rows.right[ks], rows.left[ks], rows.ids[ks], lay,
+                   stay_close=IDLE_STAY_CLOSE,
+                   motions=[rows.motions[k] if shared else -1 for k in ks])
+    r2, l2, clear = _move_idle(setup, batch, clock, rng)
+    for i, k in enumerate(ks):
+        if clear[i]:
+            rows.right[k], rows.left[k] = r2[i], l2[i]
+            done[k] = True
+
+
+def _take_idle_pose(setup, rows, idle, pairs, done):
+    """Give each row of ``pairs`` (row, solved row) the solved row's idle arm if clear."""
+    pairs = [(k, j) for k, j in pairs if done[j]]
+    if not pairs:
+        return
+    ks = [k for k, _ in pairs]
+    trial = {'right': rows.right[ks].copy(), 'left': rows.left[ks].copy()}
+    for i, (k, j) in enumerate(pairs):
+        for s in idle[k]:
+            trial[s][i] = (rows.right if s == 'right' else rows.left)[j]
+    clear = ~setup.checker.collides(batch_forward(setup.robot, trial['right'], 'right'),
+                                    batch_forward(setup.robot, trial['left'], 'left'),
+                                    rows.ids[ks])
+    for i, k in enumerate(ks):
+        if clear[i]:
+            rows.right[k], rows.left[k] = trial['right'][i], trial['left'][i]
+            done[k] = True
+
+
 def _move_idle(setup, batch, clock, rng):
     """
     Return (right, left, clear) of idle-arm rows moved out of the body.
+
+    A local push out of the body (the torso's shape included) from the locked pose;
+    the rows it leaves touching are searched (:func:`_search_idle`).  With Talos's or
+    TIAGo++'s left elbow stuck, the push alone clears every row.
+    """
+    robot, checker, ids = setup.robot, setup.checker, batch.target_ids
+    # First a push out of the body from the locked pose: most idle arms only rest a
+    # little inside it, and the nearest clear pose is a local step away.
+    r2, l2 = _push_out(setup, batch, checker.shaped(), clock)
+    clear = ~checker.shaped().collides(batch_forward(robot, r2, 'right'),
+                                       batch_forward(robot, l2, 'left'), ids)
+    if clear.all() or clock.expired():
+        return r2, l2, clear
+    rest = np.nonzero(~clear)[0]
+    sub = _Batch(batch.right[rest], batch.left[rest], ids[rest],
+                 [batch.layouts[i] for i in rest], stay_close=IDLE_STAY_CLOSE,
+                 motions=batch.motions[rest])
+    r2[rest], l2[rest], clear[rest] = _search_idle(setup, sub, clock, rng)
+    return r2, l2, clear
+
+
+def _search_idle(setup, batch, clock, rng):
+    """
+    Return (right, left, clear) of idle-arm rows searched out of the body.
 
     The search on the capsules; then, where the torso's own shape is still touched
     (:mod:`..model.torso_field`), a local push out of it on the shaped model from there,
