@@ -264,3 +264,24 @@ def test_a_library_of_arms_of_unequal_joint_counts_comes_back_split_where_the_no
             [(7, 6)] * len(sent.times)
     undescribed = rebuild_library(STAMP, _msgs(robot, result), None, received=2.0)
     assert undescribed.result.gestures[0].right_joints == 0       # not known: halves
+
+
+def test_a_torso_leaned_by_the_node_comes_back_as_the_gestures_lean():
+    """Talos: every trajectory ends with its torso's joints; the client splits them out."""
+    installed_urdf('talos')
+    robots = Path(__file__).resolve().parent.parent / 'config' / 'robots'
+    robot = robot_from_profile(robots / 'talos.yaml')
+    library = load_library(robot, robots / 'talos_gestures.yaml')
+    result = recover(robot, library, {'arm_right_2_joint': None},
+                     RecoverySettings(deadline_sec=5.0, expand_shared=True), seed=3)
+    assert result['salute'].shared and not result['wai'].shared
+    diagnostics = node_diagnostics(DiagnosticArray(status=_statuses(robot, ROOT, result)),
+                                   ROOT, arrival=1.0)
+    header = Time(sec=STAMP // 1_000_000_000, nanosec=STAMP % 1_000_000_000)
+    msgs = {m.header.frame_id: m
+            for m in library_to_msgs(robot.played_joints, result, header)}
+    assert all(list(m.joint_names) == list(robot.played_joints) for m in msgs.values())
+    back = rebuild_library(STAMP, msgs, diagnostics, received=2.0)
+    assert back.joint_names == robot.joint_names
+    for sent, got in zip(result.gestures, back.result.gestures):
+        assert got.positions == sent.positions and got.shared == sent.shared, sent.name

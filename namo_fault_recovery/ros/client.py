@@ -104,7 +104,7 @@ class PublishedLibrary:
     """One complete library version received on gesture_library."""
 
     stamp: int               # header stamp, ns: the version key
-    joint_names: tuple       # column order of every GestureResult.positions
+    joint_names: tuple       # column order of every GestureResult.positions (the arms')
     result: LibraryResult
     received: float          # time.monotonic() when its last gesture arrived
     described: bool          # False: no /diagnostics of it, scores NaN, locks unknown
@@ -169,11 +169,20 @@ def _count(value, width):
 
 
 def _gesture(name, msg, values):
-    """Return one GestureResult from its trajectory and the 'reconfiguration' values."""
+    """
+    Return one GestureResult from its trajectory and the 'reconfiguration' values.
+
+    The trailing columns the values name ``shared_joints`` (a torso) become the
+    gesture's ``shared`` angles (their first point's; empty if upright), the others
+    its positions.
+    """
     def field(key, default=None):
         return values.get(keys.gesture_key(name, key), default)
     times = tuple(duration_seconds(p.time_from_start) for p in msg.points)
-    positions = tuple(tuple(float(a) for a in p.positions) for p in msg.points)
+    arms = _arm_columns(msg, values)
+    positions = tuple(tuple(float(a) for a in p.positions[:arms]) for p in msg.points)
+    lean = {n: float(a) for n, a in zip(msg.joint_names[arms:], msg.points[0].positions[arms:])
+            } if msg.points else {}
     pairs = field(keys.COLLIDING_PAIRS, '')
     return GestureResult(
         name=name, times=times, positions=positions,
@@ -188,7 +197,17 @@ def _gesture(name, msg, values):
         typical_points=int(field(keys.TYPICAL_POINTS, 0)),
         tip_error_mm=_number(values, keys.gesture_key(name, keys.TIP_ERROR_MM)),
         max_jump_deg=_number(values, keys.gesture_key(name, keys.MAX_JUMP_DEG)),
-        right_joints=_count(field(keys.RIGHT_JOINTS, 0), len(positions[0]) if positions else 0))
+        right_joints=_count(field(keys.RIGHT_JOINTS, 0), len(positions[0]) if positions else 0),
+        shared=lean if any(lean.values()) else {})
+
+
+def _arm_columns(msg, values):
+    """Return how many leading columns of a gesture's trajectory are the arms'."""
+    shared = set(values.get(keys.SHARED_JOINTS, '').split())
+    names = list(msg.joint_names)
+    while names and names[-1] in shared:
+        names.pop()
+    return len(names)
 
 
 def rebuild_library(stamp, msgs, diagnostics, received, delivered_ns=None):
@@ -227,7 +246,9 @@ def rebuild_library(stamp, msgs, diagnostics, received, delivered_ns=None):
                        if keys.REFINED_AFTER_SEC in values else None))
     first = next(iter(msgs.values()))
     version = values.get(keys.LIBRARY_VERSION)
-    return PublishedLibrary(stamp=stamp, joint_names=tuple(first.joint_names), result=result,
+    arms = _arm_columns(first, values)
+    return PublishedLibrary(stamp=stamp, joint_names=tuple(first.joint_names[:arms]),
+                            result=result,
                             received=received, described=diagnostics is not None,
                             library_version=int(version) if version else None,
                             delivered_ns=delivered_ns)

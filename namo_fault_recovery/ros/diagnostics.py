@@ -95,7 +95,8 @@ def statuses(robot, snap, prefix=DEFAULT_PREFIX):
             f'all {len(robot.arms[side].joint_names)} joints of the {side} arm failed: the '
             f'arm is frozen at its lock angles; the other arm is still reconfigured', hw,
             [(dk.ARM, side), (dk.FROZEN, dk.TRUE)]))
-    out.append(reconfiguration_status(snap, up_to_date, hw, prefix))
+    out.append(reconfiguration_status(snap, up_to_date, hw, prefix,
+                                      robot.shared.names if robot.shared else ()))
     out.append(_inputs_status(snap, hw, prefix))
     problem = snap.state_problem
     out.append(status(prefix, dk.STATE, 'WARN' if problem else 'OK',
@@ -149,8 +150,13 @@ def _seconds(value, digits=4):
     return '' if value is None else f'{value:.{digits}f}'
 
 
-def reconfiguration_status(snap, up_to_date, hw, prefix):
-    """Return the ``reconfiguration`` status: the library published and how it was made."""
+def reconfiguration_status(snap, up_to_date, hw, prefix, shared=()):
+    """
+    Return the ``reconfiguration`` status: the library published and how it was made.
+
+    ``shared`` names the joints both arms hang from (a torso), which end every
+    gesture's ``joint_names``.
+    """
     current, running, failed = snap.current, snap.running, snap.failed
     version, stamp, settings = snap.version, snap.stamp_ns, snap.settings
     pairs = [(dk.LIBRARY_VERSION, version), (dk.LIBRARY_STAMP, dk.format_stamp(stamp)),
@@ -172,6 +178,7 @@ def reconfiguration_status(snap, up_to_date, hw, prefix):
               (dk.DEADLINE_MET, dk.flag(current.deadline_met)),
               (dk.SUCCESS, dk.flag(current.success)),
               (dk.FROZEN_ARMS, ' '.join(current.frozen_arms)),
+              (dk.SHARED_JOINTS, ' '.join(shared)),
               (dk.SEED, '' if current.seed is None else current.seed),
               (dk.TOOL_LENGTH_MM, f'{current.tool_mm:g}'), (dk.TOOL_ARM, current.tool_arm),
               (dk.CORRECTIONS, corrections_text(current))]

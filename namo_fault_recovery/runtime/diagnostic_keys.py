@@ -72,6 +72,7 @@ DEADLINE_MET = 'deadline_met'
 REFINED_AFTER_SEC = 'refined_after_sec'
 SUCCESS = 'success'
 FROZEN_ARMS = 'frozen_arms'         # space-separated sides
+SHARED_JOINTS = 'shared_joints'      # the trailing joint_names both arms hang from (a torso)
 SEED = 'seed'
 TOOL_LENGTH_MM = 'tool_length_mm'
 TOOL_ARM = 'tool_arm'
