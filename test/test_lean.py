@@ -4,14 +4,18 @@ from dataclasses import replace
 from pathlib import Path
 
 from builtin_interfaces.msg import Time
+from namo_fault_recovery.model.capsules import CapsuleModel
 from namo_fault_recovery.model.gestures import load_library
 from namo_fault_recovery.model.kinematics import batch_forward
 from namo_fault_recovery.model.profile_robot import robot_from_profile
+from namo_fault_recovery.model.robot_profile import load_profile
 from namo_fault_recovery.recovery.engine import recover
 from namo_fault_recovery.recovery.lean import LEAN_GAIN
 from namo_fault_recovery.recovery.result import GestureResult
 from namo_fault_recovery.recovery.settings import RecoverySettings
 from namo_fault_recovery.ros.messages import library_to_msgs
+from namo_fault_recovery.runtime.explored_version import explored_library
+from namo_fault_recovery.runtime.restore import check_result
 import numpy as np
 import pytest
 
@@ -63,13 +67,50 @@ def test_the_salute_leans_and_reaches_better(talos, runs):
     assert worst == pytest.approx(after.tip_error_max_mm, abs=1e-6)
 
 
-def test_a_gesture_within_reach_is_not_leaned(runs):
+def test_only_the_gestures_a_lean_helps_lean_and_name_the_torso_last(runs):
     _, leaned = runs
     for g in leaned.gestures:
         if not g.shared:
             continue
         assert g.free_joints[-2:] == ('torso_1_joint', 'torso_2_joint')
     assert not leaned['side_invite'].shared
+
+
+def test_the_before_figures_stay_the_upright_locked_designs(runs):
+    upright, leaned = runs
+    for name in ('salute', 'bye'):
+        assert leaned[name].score_before == upright[name].score_before
+        assert leaned[name].tip_error_before_mm == upright[name].tip_error_before_mm
+
+
+def test_a_published_lean_is_checked_before_it_is_restored(talos, runs):
+    robot, library = talos
+    _, leaned = runs
+    assert check_result(robot, library, leaned, leaned.locks) is None
+    salute = leaned['salute']
+    bad = replace(leaned, gestures=tuple(
+        replace(g, shared={'torso_2_joint': 3.0}) if g is salute else g
+        for g in leaned.gestures))
+    assert 'outside its limits' in check_result(robot, library, bad, leaned.locks)
+
+
+def test_a_leaned_gesture_is_not_explored(talos, runs):
+    robot, _ = talos
+    _, leaned = runs
+    salute = leaned['salute']
+    with pytest.raises(ValueError, match='leans the torso'):
+        explored_library(robot, leaned, 'salute', salute.times,
+                         [list(q) for q in salute.positions], None)
+
+
+def test_shared_joints_take_the_urdf_speed_without_an_expansion_key(tmp_path):
+    text = (ROBOTS / 'talos.yaml').read_text().replace(
+        '    expansion: [torso_1_joint, torso_2_joint]\n', '')
+    assert 'expansion' not in text.split('arms:')[1]
+    profile = tmp_path / 'talos.yaml'
+    profile.write_text(text)
+    robot = robot_from_profile(load_profile(profile), capsules=CapsuleModel())
+    assert robot.shared.velocity == (5.4, 5.4)
 
 
 def test_a_robot_without_shared_joints_is_unchanged(robot, library):

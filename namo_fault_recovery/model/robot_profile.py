@@ -189,8 +189,8 @@ def _check_shared(arms, shared, path):
                               'expected a joint of both arms')
 
 
-def _velocity_limits(data, arms, tree, path):
-    """Return joint -> rad/s for every moving joint: the URDF's, else the profile's."""
+def _velocity_limits(data, arms, tree, path, shared=()):
+    """Return joint -> rad/s of every moving and shared joint: the URDF's, else the profile's."""
     given = data.get('velocity_limits') or {}
     if not isinstance(given, dict):
         raise ConfigError(path, 'velocity_limits', f'expected joint: rad/s, got {given!r}')
@@ -202,8 +202,8 @@ def _velocity_limits(data, arms, tree, path):
             raise ConfigError(path, f'velocity_limits.{name}', f'expected rad/s above 0, '
                               f'got {value!r}')
     limits = {}
-    for arm in arms.values():
-        for name in arm.joints + arm.expansion:
+    for names in [arm.joints + arm.expansion for arm in arms.values()] + [tuple(shared)]:
+        for name in names:
             value = given.get(name, tree.joints[name].velocity)
             if value is None or not math.isfinite(value):
                 raise ConfigError(path, f'velocity_limits.{name}', f'missing key: joint '
@@ -235,7 +235,8 @@ def load_profile(path: str | os.PathLike, urdf: str | os.PathLike | None = None)
     shared = _names(data.get('shared', []), path, 'shared')
     _check_shared(arms, shared, path)
     return RobotProfile(str(data.get('name', tree.name)), str(path), tree, arms, shared,
-                        _velocity_limits(data, arms, tree, path), _capsules(data, path),
+                        _velocity_limits(data, arms, tree, path, shared),
+                        _capsules(data, path),
                         text, _mesh_dir(data, path) if text is not None else None)
 
 

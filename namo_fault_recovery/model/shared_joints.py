@@ -24,6 +24,7 @@ import numpy as np
 from .chain import compile_chain, KinematicChain
 from .kinematics import ArmLandmarks
 from .robot_profile import MM_PER_M, RobotProfile
+from ..errors import ConfigError
 
 
 @dataclass(frozen=True)
@@ -98,9 +99,9 @@ def shared_joints(profile: RobotProfile) -> SharedJoints | None:
     chain = compile_chain(profile.tree, arm.chain.base, link, None, MM_PER_M, where=where,
                           locked=others)
     if tuple(chain.joint_names) != tuple(profile.shared):
-        raise ValueError(f'{where}: the shared joints are {list(profile.shared)}, but the '
-                         f'chain {arm.chain.base} -> {link} moves '
-                         f'{list(chain.joint_names)}; expected them in chain order')
+        raise ConfigError(profile.source, 'shared', f'{list(profile.shared)}, but the chain '
+                          f'{arm.chain.base} -> {link} moves {list(chain.joint_names)}; '
+                          'expected them in chain order')
     velocity = tuple(float(profile.velocity_limits[n]) for n in chain.joint_names)
     return SharedJoints(tuple(chain.joint_names), chain.lower.copy(), chain.upper.copy(),
                         velocity, chain, link)

@@ -561,7 +561,8 @@ def reconfigure_library(robot, library, faults, settings, *,
     mm off (staged DOF expansion).  ``options`` (:class:`SearchOptions`) holds what the
     motion adaptation adds: ``stay_close`` and the gestures it ``pulled``,
     ``share_branches`` and the ``lock_start`` of ``lock_strategy='optimal'`` (see
-    :func:`_optimise_locks`).  Returns a
+    :func:`_optimise_locks`), and what the torso's lean adds: ``leans``, the gestures
+    scored as with their torso leaned (:mod:`.lean`).  Returns a
     :class:`~.result.LibraryResult`, a pure function of the inputs and ``seed`` (None
     draws one) up to where a deadline cuts.
     """
@@ -1049,7 +1050,8 @@ def _clear_idle_arms(setup, rows, clock, rng):
     first = {}
     for k in todo:
         first.setdefault(_idle_key(rows, idle[k], k), k)
-    _move_rows(setup, rows, idle, sorted(first.values()), done, clock, rng, shared=False)
+    _move_rows(setup, rows, idle, sorted(first.values()), done, clock, rng,
+               share_branches=False)
     _take_idle_pose(setup, rows, idle, [(k, first[_idle_key(rows, idle[k], k)])
                                         for k in todo if not done[k]], done)
     _move_rows(setup, rows, idle, [k for k in todo if not done[k]], done, clock, rng)
@@ -1071,7 +1073,7 @@ def angle_bytes(arrays):
     return b''.join(np.ascontiguousarray(a, dtype=float).tobytes() for a in arrays)
 
 
-def _move_rows(setup, rows, idle, ks, done, clock, rng, shared=True):
+def _move_rows(setup, rows, idle, ks, done, clock, rng, share_branches=True):
     """Move the idle arm of rows ``ks`` out of the body; mark the rows cleared in ``done``."""
     if not ks or clock.expired():
         return
@@ -1081,7 +1083,7 @@ def _move_rows(setup, rows, idle, ks, done, clock, rng, shared=True):
     # search would only find the colliding reference pose again (the stay_close pull).
     batch = _Batch(rows.right[ks], rows.left[ks], rows.ids[ks], lay,
                    stay_close=IDLE_STAY_CLOSE,
-                   motions=[rows.motions[k] if shared else -1 for k in ks])
+                   motions=[rows.motions[k] if share_branches else -1 for k in ks])
     r2, l2, clear = _move_idle(setup, batch, clock, rng)
     for i, k in enumerate(ks):
         if clear[i]:

@@ -26,6 +26,7 @@ import itertools
 
 import numpy as np
 
+from .budget import PUBLISH_RESERVE
 from .keyframes import (DEFAULT_EXPANSION_THRESHOLD, PoseProblem, reconfigure_library,
                         SearchOptions)
 from .result import LibraryResult
@@ -50,20 +51,21 @@ def lean_library(robot, library: GestureLibrary, result: LibraryResult, settings
     """
     Return ``result`` with the gestures that reach better with the torso leaned replaced.
 
-    ``settings.expand_shared`` turns it on; a robot without shared joints, a result
-    without a changed structure, or a gesture within ``DEFAULT_EXPANSION_THRESHOLD`` mm
-    is returned unchanged.  ``dense`` names the motions explored at typical points (not
+    ``settings.expand_shared`` turns it on; a robot without shared joints, or a gesture
+    within ``DEFAULT_EXPANSION_THRESHOLD`` mm, is returned unchanged (a fault or a tool:
+    whatever changed the structure).  ``dense`` names the motions explored at typical points (not
     leaned).  ``stay_close`` is the run's pull towards the design, as for the arms.
     The lean's search runs within ``clock``, the caller's deadline.
     """
     shared = robot.shared
-    if shared is None or not settings.expand_shared or not result.locks:
+    if shared is None or not settings.expand_shared:
         return result
     todo = [g.name for g in result.gestures
             if g.tip_error_max_mm > DEFAULT_EXPANSION_THRESHOLD and g.name not in dense
             and g.free_joints]
     if not todo or clock.expired():
         return result
+    clock = clock.child(reserve=PUBLISH_RESERVE)     # recover() builds, the node publishes
     screen = clock.child(share=SCREEN_SHARE)
     leans = {name: screen_leans(robot, library[name], result[name], settings, screen)
              for name in todo}
@@ -111,7 +113,10 @@ def screen_leans(robot, gesture, published, settings, clock) -> list:
                           tuple(robot.locate_joint(j) for j in published.free_joints),
                           collision)
     f = polish(problem, problem.x0[:, None, :], clock, maxiter=SCREEN_MAXITER)[1][:, 0]
-    upright = float(f[~np.any(grid, axis=1)][0])
+    zero = ~np.any(grid, axis=1)
+    if not zero.any():           # a shared joint whose limits exclude upright: not leaned
+        return []
+    upright = float(f[zero][0])
     order = [i for i in np.argsort(f) if np.any(grid[i]) and f[i] < (1.0 - LEAN_GAIN) * upright]
     return [grid[i] for i in order[:LEAN_KEPT]]
 
@@ -136,7 +141,7 @@ def _solve_leans(robot, library, result, settings, leans, clock, rng, stay_close
     found = {}
     for gesture in out.gestures:
         name, t = names[gesture.name]
-        if gesture.status in ('deadline', 'cancelled') and clock.expired():
+        if gesture.status in ('deadline', 'cancelled'):    # cut short: not published
             continue
         if name not in found or gesture.score_after < found[name][1].score_after:
             found[name] = (t, gesture)
@@ -154,8 +159,12 @@ def _keep_better(shared, result, best):
             continue
         angles = {n: float(a) for n, a in zip(shared.names, t)}
         said = ', '.join(f'{n} {np.degrees(a):+.1f} deg' for n, a in angles.items())
+        # The "before" figures are the locked design's upright, as every gesture's are.
         gestures.append(replace(
             new, name=old.name, shared=angles, wall_time=old.wall_time,
+            score_before=old.score_before, score_before_mean=old.score_before_mean,
+            tip_error_before_mm=old.tip_error_before_mm,
+            max_jump_before_deg=old.max_jump_before_deg,
             free_joints=tuple(new.free_joints) + tuple(shared.names),
             message=f'{new.message.replace(new.name, old.name)}; the torso leans ({said})'))
         notes.append(f'{old.name}: the torso leans ({said}): score {old.score_after:.2f} -> '

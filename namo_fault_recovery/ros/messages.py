@@ -61,7 +61,7 @@ def library_to_msgs(joint_names, result, stamp):
         msg.header.frame_id = gesture.name
         names = list(joint_names) + [n for n in gesture.shared if n not in joint_names]
         msg.joint_names = names
-        arms = len(gesture.positions[0])
+        arms = len(gesture.positions[0]) if gesture.positions else len(joint_names)
         lean = [float(gesture.shared.get(n, 0.0)) for n in names[arms:]]
         for t, q in zip(gesture.times, gesture.positions):
             msg.points.append(JointTrajectoryPoint(positions=[float(a) for a in q] + lean,

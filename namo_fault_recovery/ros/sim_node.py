@@ -113,8 +113,9 @@ PARAMETERS = {
                               'encoder reads (0: exact)', _T.PARAMETER_DOUBLE),
     'contact_tolerance_mm': (1.0, 'penetration (mm) below which a contact '
                              'is not counted', _T.PARAMETER_DOUBLE),
-    'initial_positions': ([0.0], 'start angles (rad): one per joint, right arm first (14 on '
-                          'Namo), or one angle for every joint', _T.PARAMETER_DOUBLE_ARRAY),
+    'initial_positions': ([0.0], 'start angles (rad): one per joint, right arm first, then '
+                          'any torso (14 on Namo, 16 on Talos), or one angle for every '
+                          'joint', _T.PARAMETER_DOUBLE_ARRAY),
     'stuck_joints': ([''], "joints stuck from the start: 'NAME' (where it "
                      "is) or 'NAME:DEG'", _T.PARAMETER_STRING_ARRAY),
     'allow_partial_joints_goal': (False, 'accept trajectories naming only '

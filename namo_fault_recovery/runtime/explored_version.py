@@ -27,13 +27,17 @@ def explored_library(robot, current, name, times, positions, correction):
     """
     Return ``current`` with gesture ``name`` explored: ``positions`` (T, J) rad at ``times``.
 
-    Raises ValueError (one line) if ``name`` is not in ``current`` or the keyframes do
-    not match its keyframe count.
+    Raises ValueError (one line) if ``name`` is not in ``current``, the keyframes do
+    not match its keyframe count, or its published version leans the torso (the
+    exploration moves the arms only).
     """
     if name not in current.names:
         raise ValueError(f'explored gesture {name!r} is not in the library '
                          f'({", ".join(current.names)})')
     base = current[name]
+    if base.shared:
+        raise ValueError(f'explored {name}: its published version leans the torso '
+                         f'({", ".join(base.shared)}); a leaned gesture is not explored')
     positions = np.asarray(positions, dtype=float)
     if positions.shape != (len(base.times), len(robot.joint_names)):
         raise ValueError(f'explored {name}: {positions.shape[0]} keyframes of '

@@ -39,6 +39,9 @@ def check_result(robot, library, result, faults=None):
     for gesture in result.gestures:
         if len(gesture.times) != len(library[gesture.name].keyframes):
             return f'{gesture.name}: wrong number of keyframes'
+        lean = _lean_problem(robot, gesture)
+        if lean:
+            return lean
         split = gesture.right_columns(len(joint_names))
         if split != right:
             return (f'{gesture.name}: rows split after {split or "unknown"} columns, not '
@@ -55,6 +58,18 @@ def check_result(robot, library, result, faults=None):
                     return (f'{gesture.name}: failed joint {joint_names[k]} at '
                             f'{angle!r}, not at its lock angle {columns[k]!r}')
     return None
+
+
+def _lean_problem(robot, gesture):
+    """Return why a gesture's torso lean (``shared``) cannot be published, or ''."""
+    names = robot.shared.names if robot.shared is not None else ()
+    for joint, angle in gesture.shared.items():
+        if joint not in names:
+            return f'{gesture.name}: leans {joint!r}, not a joint both arms hang from'
+        lower, upper, _ = robot.joint_bounds(joint)
+        if not (math.isfinite(angle) and lower <= angle <= upper):
+            return f'{gesture.name}: lean {angle!r} of {joint} is not finite or outside its limits'
+    return ''
 
 
 def validate_faults(robot, faults):

@@ -49,7 +49,7 @@ def is_profile_robot(robot):
 
 def sim_urdf(robot, urdf=None, joints=None):
     """
-    Return the robot's URDF as MuJoCo takes it: no geometry, only the arms' joints move.
+    Return the robot's URDF as MuJoCo takes it: no geometry, only ``joints`` move.
 
     ``urdf`` is the simulator's own copy (a document or a path); by default the
     profile's URDF file.  The ``joints`` that move (default ``robot.joint_names``; the

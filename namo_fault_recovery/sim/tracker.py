@@ -150,7 +150,8 @@ class TrueFingertips:
         Return {side: (x, y, z) mm} for ``angles`` ({joint: rad}).
 
         A chain joint missing from ``angles`` is at 0: a joint the simulator holds fixed
-        (a profile robot's torso, which only the recovery's staged expansion moves).
+        (a profile robot's legs or head); the torso's joints, which the simulator node
+        actuates, come with the arms'.
         """
         return {side: chain.forward([angles.get(j, 0.0) for j in chain.joint_names]).tip
                 for side, chain in self.chains.items()}
