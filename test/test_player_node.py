@@ -238,3 +238,20 @@ def test_play_without_a_controller_fails_with_the_reason(player):
     assert not response.success
     assert 'nobody subscribes to ghost_controller/joint_trajectory' in response.message
     assert not fake.commands
+
+
+def test_a_torso_no_controller_takes_is_said_once_and_only_when_it_leans():
+    from namo_fault_recovery.playback.book import GestureTrack
+    from namo_fault_recovery.ros.player_node import unplayed_joints
+    arms = tuple(NAMES)
+    names = arms + ('torso_1_joint', 'torso_2_joint')
+    upright = GestureTrack('wai', names, np.array([2.0]), np.zeros((1, 16)), stamp=5)
+    said = set()
+    assert unplayed_joints(upright, arms, said) == ''        # at 0: nothing is lost
+    leaned = np.zeros((1, 16))
+    leaned[0, -1] = -0.26
+    track = GestureTrack('wai', names, np.array([2.0]), leaned, stamp=6)
+    text = unplayed_joints(track, arms, said)
+    assert 'torso_2_joint' in text and 'torso_1_joint' not in text
+    assert unplayed_joints(track, arms, said) == ''          # once per gesture and joints
+    assert unplayed_joints(track, names, set()) == ''        # a torso controller takes it

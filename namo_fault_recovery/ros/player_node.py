@@ -232,15 +232,18 @@ def unplayed_joints(track, joints, said):
     """
     Return the warning, once per gesture and joint set, for joints no controller takes.
 
-    A torso leaned by the recovery's ``expand_shared`` names its shared joints in the
-    gesture's trajectory; a player whose ``controllers`` do not list them plays the arms
-    without them, and says so once (``said`` remembers).
+    On a robot with a torso every gesture's trajectory names its shared joints, at 0
+    unless the recovery's ``expand_shared`` leaned it.  A player whose ``controllers``
+    do not list them plays the arms without them: silently while they stay at 0 (the
+    torso is where the design has it), with one warning per gesture and joint set
+    (``said`` remembers) for a lean it does not play.
     """
-    unplayed = tuple(j for j in track.joint_names if j not in joints)
+    unplayed = tuple(j for i, j in enumerate(track.joint_names)
+                     if j not in joints and np.any(track.positions[:, i]))
     if not unplayed or (track.name, unplayed) in said:
         return ''
     said.add((track.name, unplayed))
-    return (f'gesture {track.name!r} names joints that no controller takes '
+    return (f'gesture {track.name!r} leans joints that no controller takes '
             f'({", ".join(unplayed)}): played without them')
 
 
