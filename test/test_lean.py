@@ -131,3 +131,55 @@ def test_the_lean_survives_the_record_and_reaches_the_message(talos, runs):
     assert len(msg.joint_names) == len(robot.joint_names) + 2
     for point in msg.points:
         assert list(point.positions[-2:]) == list(salute.shared.values())
+
+
+STUCK = {'torso_2_joint': np.radians(10.0)}     # the torso stuck 10 deg forward
+
+
+@pytest.fixture(scope='module')
+def held(talos):
+    robot, library = talos
+    return recover(robot, library, STUCK, RecoverySettings(deadline_sec=5.0), seed=1)
+
+
+def test_a_torso_that_stuck_is_made_up_for_by_the_arms(talos, held):
+    robot, library = talos
+    assert held.locks == STUCK and held.faults == STUCK
+    t = np.array([0.0, np.radians(10.0)])
+    for g in held.gestures:
+        assert g.shared == {'torso_1_joint': 0.0, 'torso_2_joint': np.radians(10.0)}
+        assert g.score_after < 0.3 * g.score_before, g.name         # 46-74 -> 5-11
+        assert g.tip_error_before_mm > 80.0 and not g.collides, g.name
+        # The published arms, carried by the held lean, put the fingertips where the
+        # reported error says, measured from the upright design.
+        worst = 0.0
+        for kf, q in zip(library[g.name].keyframes, g.positions):
+            for side, arm in (('right', q[:g.right_joints]), ('left', q[g.right_joints:])):
+                if side not in library[g.name].arms:
+                    continue
+                tip = robot.shared.carry(batch_forward(robot, np.array(arm)[None], side),
+                                         t[None]).tip[0]
+                ref = batch_forward(robot, kf.arm(side)[None], side).tip[0]
+                worst = max(worst, float(np.linalg.norm(tip - ref)))
+        assert worst == pytest.approx(g.tip_error_max_mm, abs=1e-6), g.name
+    assert any('held where it stuck' in n for n in held.notes)
+    assert check_result(robot, library, held, STUCK) is None
+    upright = replace(held, gestures=tuple(replace(g, shared={}) for g in held.gestures))
+    assert 'not held at its lock' in check_result(robot, library, upright, STUCK)
+
+
+def test_a_torso_stuck_upright_changes_nothing(talos):
+    robot, library = talos
+    result = recover(robot, library, {'torso_1_joint': None}, RecoverySettings(), seed=1)
+    assert result.locks == {'torso_1_joint': 0.0}
+    assert all(g.status == 'unchanged' and not g.shared for g in result.gestures)
+
+
+def test_a_torso_fault_is_parsed_within_its_limits(talos):
+    from namo_fault_recovery.runtime.inputs import BadInput, parse_fault
+    robot, _ = talos
+    assert parse_fault(robot, ['torso_2_joint'], [0.2]) == {'torso_2_joint': 0.2}
+    with pytest.raises(BadInput, match='outside its limits'):
+        parse_fault(robot, ['torso_2_joint'], [1.5])
+    with pytest.raises(BadInput, match='unknown joint'):
+        parse_fault(robot, ['head_1_joint'], [0.0])

@@ -253,3 +253,50 @@ def _call(client, service, timeout):
         time.sleep(0.05)
     assert future.done(), f'no answer within {timeout:g} s'
     return future.result()
+
+
+def test_talos_torso_stuck_on_the_simulator_the_arms_make_up_for_it(tmp_path, talos):
+    """
+    Talos's torso_2_joint stuck 10 deg forward in namo_sim: salute detects and reports it.
+
+    The node takes a fault of a joint both arms hang from: every gesture holds the torso
+    where it stuck and the arms make up for it; the play carries on with that library.
+    """
+    from namo_fault_recovery.ros.sim_node import sim_command
+    from namo_fault_recovery.runtime.private_node import player_command
+    from sensor_msgs.msg import JointState
+    from std_srvs.srv import Trigger
+    robot, library = talos
+    joint = 'torso_2_joint'
+    robot_args = ['-p', f'robot_profile:={PROFILE}', '-p', f'gesture_file:={LIBRARY}']
+    node = NodeProcess(DOMAIN, state_dir=tmp_path / 'state', args=robot_args + [
+        '-p', 'contingency_table:=false', '-p', 'refine_budget_sec:=0.0'])
+    sim = NodeProcess(DOMAIN, command=sim_command(), env=ros_env(DOMAIN),
+                      args=robot_args + ['-p', f"stuck_joints:=['{joint}:10.0']"])
+    player = NodeProcess(DOMAIN, command=player_command(), env=ros_env(DOMAIN),
+                         args=robot_args)
+    client = RosClient(DOMAIN, gestures=len(library))
+    faults = []
+    client.node.create_subscription(JointState, '/actuator_fault', faults.append, 10)
+    procs = (player, sim, node)
+    try:
+        reference = client.wait_library(timeout=START, what="Talos's reference library")
+        play = client.node.create_client(Trigger, '/gesture_player/play/salute')
+        assert play.wait_for_service(timeout_sec=START), player.describe()
+        first = _call(client, play, 60.0)
+        assert first.success and 'carried on' in first.message, (
+            first.message + player.describe() + node.describe())
+        assert any(joint in msg.name for msg in faults), faults
+        adapted = client.wait_library(after=reference.stamp, timeout=30.0,
+                                      what=f'the library for {joint}')
+        held = adapted.column(joint)
+        assert all(abs(a - math.radians(10.0)) < math.radians(0.5) for a in held), held
+        assert len(set(held)) == 1              # one angle, where it stuck, everywhere
+        second = _call(client, play, 60.0)
+        assert second.success and 'carried on' not in second.message, second.message
+    finally:
+        client.close()
+        codes = [proc.stop() for proc in procs]
+    assert codes == [0, 0, 0], ''.join(p.describe() for p in procs)
+    for proc in procs:
+        assert 'Traceback' not in proc.stderr + proc.stdout, proc.describe()

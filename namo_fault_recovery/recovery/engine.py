@@ -19,7 +19,8 @@ from typing import Optional, TYPE_CHECKING
 
 import numpy as np
 
-from .lean import lean_library
+from .keyframes import SearchOptions
+from .lean import held_angles, held_lean, lean_library, with_held
 from .motion import adapt_library, DEFAULT_STAY_CLOSE, typical_points
 from .result import LibraryResult, reference_result
 from .settings import RecoverySettings
@@ -62,37 +63,41 @@ def recover(robot: 'RobotModel', library: 'GestureLibrary', faults: Optional[dic
     preset (e.g. ``{'max_cycles': 10 ** 9}`` so that a deadline binds); they are for
     benchmarks, not node parameters.  ``settings`` goes down to the optimiser unchanged.
 
-    A library of single poses is the paper's problem and is solved as such; when the
-    library holds a motion (a gesture of several keyframes) the explored keyframes of
-    its motions are also drawn gently towards their designed poses
-    (``DEFAULT_STAY_CLOSE`` per deg^2), so that neighbouring keyframes stay on one
-    redundant branch; its single poses are not (they have no neighbour).  On a robot
-    whose arms hang from shared joints, ``settings.expand_shared`` adds the last stage
-    of the staged expansion, the torso's lean (:mod:`.lean`).
+    A library with a motion draws its motions' keyframes gently towards their design
+    (``DEFAULT_STAY_CLOSE`` per deg^2: neighbouring keyframes stay on one branch).  On a
+    robot whose arms hang from shared joints (a torso, :mod:`.lean`),
+    ``settings.expand_shared`` adds the torso's lean as the last expansion stage, and a
+    shared joint in ``faults`` (stuck) holds its lean in every gesture, made up for by
+    the arms.
     """
     settings = settings or RecoverySettings()
-    faults = dict(faults or {})
-    if clock is None:
-        clock = Clock(settings.deadline_sec)
+    reported = dict(faults or {})
+    clock = Clock(settings.deadline_sec) if clock is None else clock
     if seed is None:
         seed = int(np.random.SeedSequence().entropy % (2 ** 63))
     seed = int(seed)
-    if not structure_changed(faults, settings, robot):
+    faults, held = held_lean(robot, reported, measured)        # a torso that stuck
+    given, t = {j: a for j, a in reported.items() if j in held}, held_angles(robot, held)
+    if not structure_changed(faults, settings, robot) and t is None:
         budget = None if clock.end is None else float(clock.end - clock.start)
-        return reference_result(library, budget, settings.public(), seed,
-                                velocity_limits=robot.joint_velocity_limits)
+        return with_held(robot, reference_result(
+            library, budget, settings.public(), seed,
+            velocity_limits=robot.joint_velocity_limits), held, given)
     began = time.monotonic()
     if quantisations is None:
         quantisations = typical_points(robot, library, settings.vq_distortion_mm, clock=clock)
     motion = any(len(g.keyframes) > 1 for g in library)
-    stay_close = DEFAULT_STAY_CLOSE if motion else 0.0
+    options = SearchOptions(stay_close=DEFAULT_STAY_CLOSE if motion else 0.0,
+                            leans=None if t is None else {g.name: t for g in library})
     result = adapt_library(robot, library, faults, settings, seed=seed, clock=clock,
                            measured=measured, quantisations=quantisations,
-                           optimizer_overrides=optimizer_overrides or None,
-                           stay_close=stay_close)
-    result = lean_library(robot, library, result, settings, clock=clock, seed=seed,
-                          stay_close=stay_close,
-                          dense=tuple(n for n, q in quantisations.items() if q is not None))
+                           optimizer_overrides=optimizer_overrides or None, options=options)
+    if held:
+        result = with_held(robot, result, held, given)
+    else:
+        result = lean_library(robot, library, result, settings, clock=clock, seed=seed,
+                              stay_close=options.stay_close, dense=tuple(
+                                  n for n, q in quantisations.items() if q is not None))
     # The run's wall time counts the typical points too, for the library and each gesture.
     wall = float(time.monotonic() - began)
     return replace(result, wall_time=wall, corrections=learned_record(robot),

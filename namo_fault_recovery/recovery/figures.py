@@ -15,7 +15,7 @@ import numpy as np
 
 from . import pacing
 from .result import GestureResult
-from ..model.kinematics import arm_columns, batch_forward, split_arms
+from ..model.kinematics import batch_forward, split_arms
 from ..model.robot import ARMS
 from ..objective.collision import CollisionModel
 from ..objective.score import gesture_targets
@@ -32,16 +32,6 @@ def largest_jump(q):
     if len(q) < 2:
         return 0.0
     return float(np.degrees(np.abs(np.diff(q, axis=0))).max())
-
-
-def tip_errors(robot, model, gesture, design, q_r, q_l):
-    """Return per point the fingertip distance (mm) to the design, the larger hand's."""
-    err = np.zeros(len(design))
-    for side in gesture.arms:
-        want = batch_forward(robot, design[:, arm_columns(robot)[side]], side).tip
-        q = q_r if side == 'right' else q_l
-        err = np.maximum(err, np.linalg.norm(batch_forward(model, q, side).tip - want, axis=1))
-    return err
 
 
 def collisions(model, checker, ids, q_r, q_l):
@@ -68,8 +58,10 @@ def describe_motion(ctx, motion, picks) -> GestureResult:
     after, parts = ctx.scorer.evaluate(m.q_r, m.q_l, m.ids, breakdown=True)
     worst = int(np.argmax(after))
     collides, pairs = collisions(ctx.model, ctx.checker, m.ids, m.q_r, m.q_l)
-    err_before = tip_errors(ctx.robot, ctx.model, gesture, m.design, m.base_r, m.base_l)
-    err_after = tip_errors(ctx.robot, ctx.model, gesture, m.design, m.q_r, m.q_l)
+    # The fingertip's distance to the design, the larger hand's: as the score measures it
+    # (on the changed model, against the design, moved back by a torso held leaned).
+    err_before = ctx.scorer.tip_error(m.base_r, m.base_l, m.ids)
+    err_after = ctx.scorer.tip_error(m.q_r, m.q_l, m.ids)
     searched = m.searched
     if searched is not None and m.how == 'keyframes':
         message = searched.message

@@ -612,8 +612,13 @@ def _named(which, name):
     return which if isinstance(which, bool) else name in which
 
 
-def _leaned_references(reference, targets, owners, selected, leans):
-    """Return the targets' reference landmarks moved back by their gesture's lean, or None."""
+def leaned_references(reference, targets, owners, selected, leans):
+    """
+    Return the targets' reference landmarks moved back by their gesture's lean, or None.
+
+    ``owners[k]`` is target k's gesture in ``selected``; ``leans`` maps gesture names
+    to shared-joint angles (:class:`SearchOptions`).  None without any lean.
+    """
     if not leans:
         return None
     shared = reference.shared
@@ -658,7 +663,7 @@ class _Setup:
         targets = self.targets
         self.scorer = SimilarityScore(robot, targets, settings.weights,
                                       reference_robot=reference,
-                                      reference_landmarks=_leaned_references(
+                                      reference_landmarks=leaned_references(
                                           reference, targets, self.owners, selected,
                                           options.leans))
         self.checker = None
@@ -666,11 +671,12 @@ class _Setup:
             self.checker = CollisionModel(robot, targets, robot.capsules)
         self.ref_r = np.array([t.q_right for t in targets])
         self.ref_l = np.array([t.q_left for t in targets])
-        # The arms whose structure changed: a failed joint, a tool or a learned correction.
-        # Every lock set tried for this library locks the same joints: all of it is shared.
+        # The arms whose structure changed: a failed joint, a tool or a learned correction,
+        # both under a torso's lean.  Every lock set tried for this library locks the
+        # same joints: all of it is shared.
         self.faulted = {side for side in ARMS
                         if any(robot.locate_joint(j)[0] == side for j in locks)
-                        or robot.changed(side)}
+                        or robot.changed(side) or options.leans}
         self.locked = locked_sets(robot, locks)
         self.frozen = tuple(side for side in ARMS
                             if len(self.locked[side]) == arm_joint_count(robot, side))

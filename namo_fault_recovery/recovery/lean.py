@@ -171,3 +171,55 @@ def _keep_better(shared, result, best):
                      f'{new.score_after:.2f}, fingertip {old.tip_error_max_mm:.1f} -> '
                      f'{new.tip_error_max_mm:.1f} mm')
     return replace(result, gestures=tuple(gestures), notes=tuple(notes))
+
+
+def held_lean(robot, faults: dict, measured: dict | None = None) -> tuple[dict, dict]:
+    """
+    Split ``faults`` into ``(the arms' faults, {shared joint: lock angle})``.
+
+    A joint both arms hang from (a torso) that fails holds the lean where it stuck:
+    its reported angle, else its measured one, else 0 (upright, as designed).  Raises
+    ValueError (one line) for an angle outside the joint's limits.
+    """
+    shared = robot.shared
+    arms, held = {}, {}
+    for joint, angle in dict(faults).items():
+        if shared is None or joint not in shared.names:
+            arms[joint] = angle
+            continue
+        if angle is None:
+            angle = (measured or {}).get(joint)
+        angle = 0.0 if angle is None else float(angle)
+        lower, upper, _ = robot.joint_bounds(joint)
+        if not (np.isfinite(angle) and lower - 1e-9 <= angle <= upper + 1e-9):
+            raise ValueError(f'lock angle of {joint}: {angle!r} rad is outside the joint '
+                             f'limits [{lower:.6g}, {upper:.6g}] rad')
+        held[joint] = float(min(max(angle, lower), upper))
+    return arms, held
+
+
+def held_angles(robot, held: dict):
+    """Return the shared joints' angles (S,) that ``held`` locks, or None if all upright."""
+    if robot.shared is None or not held:
+        return None
+    t = np.array([held.get(n, 0.0) for n in robot.shared.names])
+    return t if np.any(t) else None
+
+
+def with_held(robot, result: LibraryResult, held: dict, given: dict) -> LibraryResult:
+    """
+    Return ``result`` with the torso held where it stuck: its locks, faults and leans.
+
+    ``given`` are the shared joints' faults as reported (angle or None).  Every gesture
+    holds the lean: the arms were searched against the references moved back by it.
+    """
+    t = held_angles(robot, held)
+    gestures, notes = result.gestures, list(result.notes)
+    if t is not None:
+        angles = {n: float(a) for n, a in zip(robot.shared.names, t)}
+        gestures = tuple(replace(g, shared=angles) for g in gestures)
+        said = ', '.join(f'{n} {np.degrees(a):+.1f} deg' for n, a in angles.items())
+        notes.append(f'the torso is held where it stuck ({said}): every gesture was '
+                     'searched for the arms to make up for it')
+    return replace(result, gestures=gestures, notes=tuple(notes),
+                   locks=dict(result.locks, **held), faults=dict(result.faults, **given))

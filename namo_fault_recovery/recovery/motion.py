@@ -37,8 +37,8 @@ from . import pacing
 from .budget import FINISH_RESERVE, PUBLISH_RESERVE, TYPICAL_SHARE, VQ_SHARE
 from .figures import describe_motion, no_worse_than_locked
 from .keyframes import (apply_locks, free_layout, joint_bounds, joint_set, layout_columns,
-                        locked_sets, PACED_NOTE, pose_values, PoseProblem,
-                        reconfigure_library, SearchOptions)
+                        leaned_references, locked_sets, PACED_NOTE, pose_values,
+                        PoseProblem, reconfigure_library, SearchOptions)
 from .kriging import OrdinaryKriging
 from .locks import frozen_arms, resolve_locks
 from .result import LibraryResult
@@ -100,8 +100,9 @@ class _Job:
     """What every adaptation run of one call shares (everything but the locks)."""
 
     def __init__(self, robot, library, settings, quantisations, optimizer_overrides,
-                 stay_close):
+                 stay_close, leans=None):
         self.robot = robot
+        self.leans = leans          # gesture -> shared-joint angles held (a stuck torso)
         self.library = library
         self.settings = settings
         self.method = settings.trajectory_method
@@ -129,13 +130,13 @@ class _Job:
         return {'optimizer_overrides': self.optimizer_overrides,
                 'options': SearchOptions(stay_close=self.stay_close, pulled=pulled,
                                          share_branches=shared, lock_start=lock_start,
-                                         pace=shared)}
+                                         pace=shared, leans=self.leans)}
 
 
 def adapt_library(robot, library, faults, settings, *,
                   seed: Optional[int] = None, clock: Optional[Clock] = None, measured=None,
                   quantisations=None, optimizer_overrides=None,
-                  stay_close=DEFAULT_STAY_CLOSE) -> LibraryResult:
+                  options: Optional[SearchOptions] = None) -> LibraryResult:
     """
     Adapt every motion of ``library`` to a changed structure (faults and/or a tool).
 
@@ -151,9 +152,12 @@ def adapt_library(robot, library, faults, settings, *,
     ``average`` adaptation first (the very same run), then tries the lock angles that
     do best at the typical points, and keeps whichever adapted library has the lower
     total (the sum over motions of their worst point's score): never worse than
-    ``average``.  ``stay_close`` (per deg^2) draws the typical points towards their
-    design.  Returns a :class:`~.result.LibraryResult`; a pure function of the inputs
-    and ``seed`` up to where the deadline cuts the search.
+    ``average``.  ``options`` (:class:`~.keyframes.SearchOptions`) carries what the
+    caller sets of the keyframe search: ``stay_close`` (per deg^2, default
+    ``DEFAULT_STAY_CLOSE``) draws the typical points towards their design, and ``leans``
+    holds a torso's lean through the gestures (a shared joint stuck).  Returns a
+    :class:`~.result.LibraryResult`; a pure function of the inputs and ``seed`` up to
+    where the deadline cuts the search.
     """
     start = time.monotonic()
     clock = Clock(settings.deadline_sec) if clock is None else clock
@@ -166,7 +170,9 @@ def adapt_library(robot, library, faults, settings, *,
     notes = [q.note for q in quantisations.values() if q is not None and q.note]
     # Kriging, the figures and the caller's publishing run after the search.
     search = clock.child(reserve=FINISH_RESERVE + PUBLISH_RESERVE)
-    job = _Job(robot, library, settings, quantisations, optimizer_overrides, stay_close)
+    options = options or SearchOptions(stay_close=DEFAULT_STAY_CLOSE)
+    job = _Job(robot, library, settings, quantisations, optimizer_overrides,
+               options.stay_close, options.leans)
     if settings.lock_strategy == 'optimal':
         out = _adapt_optimal(job, faults, measured, seed, search)
     else:
@@ -255,10 +261,14 @@ class _Context:
         robot, model = job.robot, job.model
         self.robot, self.model, self.locks = robot, model, locks
         self.locked = locked_sets(robot, locks)
-        self.faulted = {s for s in ARMS if self.locked[s] or model.changed(s)}
+        self.faulted = {s for s in ARMS if self.locked[s] or model.changed(s) or job.leans}
         targets = [t for g in job.library for t in gesture_targets(g)]
+        owners = [i for i, g in enumerate(job.library) for _ in g.keyframes]
         self.scorer = SimilarityScore(model, targets, job.settings.weights,
-                                      reference_robot=robot)
+                                      reference_robot=robot,
+                                      reference_landmarks=leaned_references(
+                                          robot, targets, owners, list(job.library),
+                                          job.leans))
         # Every point of the final motions is checked, Kriging-interpolated ones included.
         self.checker = None
         if job.settings.collision_check:

@@ -119,7 +119,9 @@ class Dispatcher:
         if all(math.isfinite(g.score_after) for g in result.gestures):
             self._log(level, summary(result))
         if self._table is not None and config.contingency_table:
-            self._table.configure(settings, active=dict(result.locks))
+            # The table is keyed by the arms' locks: a torso held where it stuck is not in it.
+            self._table.configure(settings, active={
+                j: a for j, a in result.locks.items() if j in self._robot.joint_names})
         if refine:
             self._refine(run, result, config)
 

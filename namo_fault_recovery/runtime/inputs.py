@@ -46,7 +46,9 @@ def parse_fault(robot, names, positions=(), velocities=(), efforts=()):
 
     ``position[i]``, when present and finite, is the lock angle of ``name[i]``; when the
     position array is empty or the entry is NaN the lock strategy chooses the angle
-    (None).  Rejected with :class:`BadInput`: an empty message, an unknown or repeated
+    (None).  A joint both arms hang from (a torso) is a fault like an arm's: the engine
+    holds the torso's lean there (:func:`~..recovery.lean.held_lean`).  Rejected with
+    :class:`BadInput`: an empty message, an unknown or repeated
     joint name, arrays whose length does not match ``name``, an infinite position, and
     a position further than :data:`MEASURED_LIMIT_TOLERANCE` outside the joint's limits
     (one within it is clamped onto the limit: a joint stuck on its stop).
@@ -59,8 +61,8 @@ def parse_fault(robot, names, positions=(), velocities=(), efforts=()):
                            'effort': list(efforts)})
     faults = {}
     for i, name in enumerate(names):
-        try:
-            side, index = robot.locate_joint(name)
+        try:                         # an arm's joint, or one both arms hang from (a torso)
+            lower, upper, _ = robot.joint_bounds(name)
         except KeyError as exc:
             raise BadInput(exc.args[0]) from None
         if name in faults:
@@ -73,16 +75,15 @@ def parse_fault(robot, names, positions=(), velocities=(), efforts=()):
                                f'(use NaN or an empty position array to let the lock '
                                f'strategy choose)')
             if not math.isnan(value):
-                if not robot.within_limits(side, index, value, MEASURED_LIMIT_TOLERANCE):
-                    arm = robot.arms[side]
+                if not (lower - MEASURED_LIMIT_TOLERANCE <= value
+                        <= upper + MEASURED_LIMIT_TOLERANCE):
                     raise BadInput(
                         f'position {value:.6g} rad ({math.degrees(value):.4g} deg) of joint '
-                        f'{name!r} is outside its limits [{arm.lower[index]:.6g}, '
-                        f'{arm.upper[index]:.6g}] rad (by more than '
-                        f'{MEASURED_LIMIT_TOLERANCE:g} rad)')
+                        f'{name!r} is outside its limits [{lower:.6g}, {upper:.6g}] rad (by '
+                        f'more than {MEASURED_LIMIT_TOLERANCE:g} rad)')
                 # Within the tolerance of the limits: clamp, so that every published
                 # angle is within its limits bit for bit (the engine's own clamp).
-                angle = clamp_lock(robot, name, value)
+                angle = float(min(max(value, lower), upper))
         faults[name] = angle
     return faults
 

@@ -26,15 +26,18 @@ def check_result(robot, library, result, faults=None):
         return (f'locked joints {sorted(result.locks)} do not match the fault set '
                 f'{sorted(faults)}')
     joint_names = tuple(robot.joint_names)
-    columns = {}
+    columns, held = {}, {}
     for joint, angle in result.locks.items():
         try:
-            side, index = robot.locate_joint(joint)
+            lower, upper, _ = robot.joint_bounds(joint)
         except KeyError as exc:
             return exc.args[0]
-        if not (math.isfinite(angle) and within_exactly(robot, side, index, angle)):
+        if not (math.isfinite(angle) and lower <= angle <= upper):
             return f'lock angle {angle!r} of {joint} is not usable'
-        columns[joint_names.index(robot.arms[side].joint_names[index])] = angle
+        if joint in joint_names:
+            columns[joint_names.index(joint)] = angle
+        else:                         # a torso held where it stuck: every gesture holds it
+            held[joint] = angle
     right = len(robot.arms['right'].joint_names)
     for gesture in result.gestures:
         if len(gesture.times) != len(library[gesture.name].keyframes):
@@ -42,6 +45,8 @@ def check_result(robot, library, result, faults=None):
         lean = _lean_problem(robot, gesture)
         if lean:
             return lean
+        if any(gesture.shared.get(j, 0.0) != a for j, a in held.items()):
+            return f'{gesture.name}: the torso is not held at its lock angles {held}'
         split = gesture.right_columns(len(joint_names))
         if split != right:
             return (f'{gesture.name}: rows split after {split or "unknown"} columns, not '
@@ -76,11 +81,11 @@ def validate_faults(robot, faults):
     """Return why a persisted fault set cannot be used, or None."""
     for joint, fault in faults.items():
         try:
-            side, index = robot.locate_joint(joint)
+            lower, upper, _ = robot.joint_bounds(joint)
         except KeyError as exc:
             return f'fault on {exc.args[0]}'
         for value in (fault.angle, fault.measured):
-            if value is not None and not robot.within_limits(side, index, value):
+            if value is not None and not lower - 1e-9 <= value <= upper + 1e-9:
                 return f'angle {value!r} of faulted joint {joint} is outside its limits'
     return None
 
