@@ -10,7 +10,7 @@ from namo_fault_recovery.model.kinematics import batch_forward
 from namo_fault_recovery.model.profile_robot import robot_from_profile
 from namo_fault_recovery.model.robot_profile import load_profile
 from namo_fault_recovery.recovery.engine import recover
-from namo_fault_recovery.recovery.lean import LEAN_GAIN
+from namo_fault_recovery.recovery.lean import held_lean, LEAN_GAIN
 from namo_fault_recovery.recovery.result import GestureResult
 from namo_fault_recovery.recovery.settings import RecoverySettings
 from namo_fault_recovery.ros.messages import library_to_msgs
@@ -183,3 +183,13 @@ def test_a_torso_fault_is_parsed_within_its_limits(talos):
         parse_fault(robot, ['torso_2_joint'], [1.5])
     with pytest.raises(BadInput, match='unknown joint'):
         parse_fault(robot, ['head_1_joint'], [0.0])
+
+
+def test_the_torso_is_read_on_joint_states_and_held_where_it_was_seen(talos):
+    from namo_fault_recovery.runtime.inputs import parse_joint_state
+    robot, library = talos
+    seen = parse_joint_state(robot, ['torso_2_joint', 'head_1_joint', 'arm_left_1_joint'],
+                             [0.1, 0.3, 0.2])
+    assert seen == {'torso_2_joint': 0.1, 'arm_left_1_joint': 0.2}    # not the head
+    arms, held = held_lean(robot, {'torso_2_joint': None, 'arm_left_1_joint': None}, seen)
+    assert held == {'torso_2_joint': 0.1} and arms == {'arm_left_1_joint': None}

@@ -8,8 +8,6 @@ message changes nothing: the caller keeps its previous state.
 
 import math
 
-from ..recovery.locks import clamp_lock
-
 
 MAX_REASON = 300      # characters: a rejected value never makes a reason unbounded
 # rad: how far past a limit a *measured* angle may read and still be taken (clamped onto
@@ -90,7 +88,7 @@ def parse_fault(robot, names, positions=(), velocities=(), efforts=()):
 
 def parse_joint_state(robot, names, positions):
     """
-    Parse a measured joint state; return a dict joint -> angle (rad) for the arm joints.
+    Parse a measured joint state; return joint -> angle (rad) of the arms' and torso's.
 
     Joints the robot model does not know (head, wheels, grippers...) are ignored, as on a
     real robot's ``/joint_states``.  Rejected with :class:`BadInput`: a message without
@@ -104,15 +102,15 @@ def parse_joint_state(robot, names, positions):
     _check_lengths(names, {'position': positions})
     measured = {}
     for name, value in zip(names, positions):
-        try:
-            side, index = robot.locate_joint(name)
+        try:                         # an arm's joint, or one both arms hang from (a torso)
+            lower, upper, _ = robot.joint_bounds(name)
         except KeyError:
             continue
         value = float(value)
         if not math.isfinite(value):
             raise BadInput(f'non-finite measured position {_fmt(value)} for joint {name!r}')
-        if not robot.within_limits(side, index, value, MEASURED_LIMIT_TOLERANCE):
+        if not lower - MEASURED_LIMIT_TOLERANCE <= value <= upper + MEASURED_LIMIT_TOLERANCE:
             raise BadInput(f'measured position {value:.6g} rad of joint {name!r} is outside '
                            f'its limits (by more than {MEASURED_LIMIT_TOLERANCE:g} rad)')
-        measured[name] = clamp_lock(robot, name, value)   # on its stop: at its limit
+        measured[name] = float(min(max(value, lower), upper))   # on its stop: at its limit
     return measured
