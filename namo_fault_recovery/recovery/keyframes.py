@@ -1045,8 +1045,7 @@ def _clear_idle_arms(setup, rows, clock, rng):
     todo = [k for k, sides in idle.items() if sides]
     if not todo:
         return done
-    hit = checker.collides(batch_forward(robot, rows.right[todo], 'right'),
-                           batch_forward(robot, rows.left[todo], 'left'), rows.ids[todo])
+    hit = _rows_collide(checker, robot, rows.right[todo], rows.left[todo], rows.ids[todo])
     todo = [k for k, h in zip(todo, hit) if h]
     if not todo:
         return done
@@ -1107,9 +1106,8 @@ def _take_idle_pose(setup, rows, idle, pairs, done):
     for i, (k, j) in enumerate(pairs):
         for s in idle[k]:
             trial[s][i] = (rows.right if s == 'right' else rows.left)[j]
-    clear = ~setup.checker.collides(batch_forward(setup.robot, trial['right'], 'right'),
-                                    batch_forward(setup.robot, trial['left'], 'left'),
-                                    rows.ids[ks])
+    clear = ~_rows_collide(setup.checker, setup.robot, trial['right'], trial['left'],
+                           rows.ids[ks])
     for i, k in enumerate(ks):
         if clear[i]:
             rows.right[k], rows.left[k] = trial['right'][i], trial['left'][i]
@@ -1128,8 +1126,7 @@ def _move_idle(setup, batch, clock, rng):
     # First a push out of the body from the locked pose: most idle arms only rest a
     # little inside it, and the nearest clear pose is a local step away.
     r2, l2 = _push_out(setup, batch, checker.shaped(), clock)
-    clear = ~checker.shaped().collides(batch_forward(robot, r2, 'right'),
-                                       batch_forward(robot, l2, 'left'), ids)
+    clear = ~_rows_collide(checker, robot, r2, l2, ids)     # the shape is in every check
     if clear.all() or clock.expired():
         return r2, l2, clear
     rest = np.nonzero(~clear)[0]
@@ -1165,8 +1162,7 @@ def _search_idle(setup, batch, clock, rng):
                      [batch.layouts[i] for i in stuck], stay_close=IDLE_STAY_CLOSE)
         r2[stuck], l2[stuck], _ = _solve_once(robot, setup.scorer, checker.shaped(), sub,
                                               _repair_algorithm(setup.algo), clock, rng)
-        clear = ~checker.collides(batch_forward(robot, r2, 'right'),
-                                  batch_forward(robot, l2, 'left'), ids)
+        clear = ~_rows_collide(checker, robot, r2, l2, ids)
     return r2, l2, clear
 
 
@@ -1219,9 +1215,8 @@ def _hold_idle_still(setup, rows, idle, done):
             trial = {s: arm[s][ks].copy() for s in ARMS}
             for s in sides:
                 trial[s] = robot.arms[s].clip(design[s][ks] + offset[s])
-            if not checker.collides(batch_forward(robot, trial['right'], 'right'),
-                                    batch_forward(robot, trial['left'], 'left'),
-                                    rows.ids[ks]).any():
+            if not _rows_collide(checker, robot, trial['right'], trial['left'],
+                                 rows.ids[ks]).any():
                 for s in sides:
                     arm[s][ks] = trial[s]
                 done[ks] = True
@@ -1379,6 +1374,12 @@ def apply_locks(robot, ref_r, ref_l, locks):
         side, j = robot.locate_joint(joint)
         base[side][..., j] = angle
     return base['right'], base['left']
+
+
+def _rows_collide(checker, robot, right, left, ids):
+    """Return a bool per row: the poses ``right``/``left`` (rad) touch (``checker.collides``)."""
+    return checker.collides(batch_forward(robot, right, 'right'),
+                            batch_forward(robot, left, 'left'), ids)
 
 
 def _no_worse_collision(checker, r_new, l_new, r_old, l_old, k):
