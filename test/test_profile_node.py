@@ -10,6 +10,7 @@ A profile that names no URDF makes the node wait for the ``/robot_description`` 
 (as ``robot_state_publisher`` publishes it) and say so on ``/diagnostics``.
 """
 
+import contextlib
 import math
 from pathlib import Path
 
@@ -179,6 +180,56 @@ def test_the_gesture_player_runs_on_talos_and_commands_its_arm_joints(tmp_path, 
     assert 'Traceback' not in player.stderr + player.stdout, player.describe()
 
 
+@contextlib.contextmanager
+def _talos_loop(tmp_path, library, stuck, node_args=()):
+    """
+    Run namo_sim (``stuck``: its stuck_joints entry), recovery_node and gesture_player.
+
+    Yields ``(client, faults, states, describe)``: a RosClient, the /actuator_fault and
+    /joint_states messages it received, and what the player and the node said so far;
+    stops the three and checks they ended cleanly.
+    """
+    from namo_fault_recovery.ros.sim_node import sim_command
+    from namo_fault_recovery.runtime.private_node import player_command
+    from sensor_msgs.msg import JointState
+    robot_args = ['-p', f'robot_profile:={PROFILE}', '-p', f'gesture_file:={LIBRARY}']
+    node = NodeProcess(DOMAIN, state_dir=tmp_path / 'state', args=robot_args + [
+        '-p', 'contingency_table:=false', '-p', 'refine_budget_sec:=0.0', *node_args])
+    sim = NodeProcess(DOMAIN, command=sim_command(), env=ros_env(DOMAIN),
+                      args=robot_args + ['-p', f"stuck_joints:=['{stuck}']"])
+    player = NodeProcess(DOMAIN, command=player_command(), env=ros_env(DOMAIN),
+                         args=robot_args)
+    client = RosClient(DOMAIN, gestures=len(library))
+    faults, states = [], []
+    client.node.create_subscription(JointState, '/actuator_fault', faults.append, 10)
+    client.node.create_subscription(JointState, '/joint_states', states.append, 10)
+    procs = (player, sim, node)
+    try:
+        yield client, faults, states, lambda: player.describe() + node.describe()
+    finally:
+        client.close()
+        codes = [proc.stop() for proc in procs]
+    assert codes == [0, 0, 0], ''.join(p.describe() for p in procs)
+    for proc in procs:
+        assert 'Traceback' not in proc.stderr + proc.stdout, proc.describe()
+
+
+def _salute_carried_on(loop, joint):
+    """Play salute with ``joint`` stuck; return (its play client, the fault's library)."""
+    from std_srvs.srv import Trigger
+    client, faults, _, describe = loop
+    reference = client.wait_library(timeout=START, what="Talos's reference library")
+    play = client.node.create_client(Trigger, '/gesture_player/play/salute')
+    assert play.wait_for_service(timeout_sec=START), describe()
+    first = _call(client, play, 60.0)
+    assert first.success, first.message + describe()
+    assert 'carried on' in first.message and joint in first.message, first.message
+    assert any(joint in msg.name for msg in faults), faults
+    adapted = client.wait_library(after=reference.stamp, timeout=30.0,
+                                  what=f'the library for {joint}')
+    return play, adapted
+
+
 @pytest.mark.parametrize('lean', [False, True], ids=['upright', 'leaned'])
 def test_talos_end_to_end_on_the_simulator_stuck_detected_reconfigured_replayed(
         tmp_path, talos, lean):
@@ -195,35 +246,12 @@ def test_talos_end_to_end_on_the_simulator_stuck_detected_reconfigured_replayed(
     leans the torso; the player commands it on torso_controller and the simulated torso
     ends the replay where the library says.
     """
-    from namo_fault_recovery.ros.sim_node import sim_command
-    from namo_fault_recovery.runtime.private_node import player_command
-    from sensor_msgs.msg import JointState
-    from std_srvs.srv import Trigger
     robot, library = talos
     joint = 'arm_right_2_joint'
-    robot_args = ['-p', f'robot_profile:={PROFILE}', '-p', f'gesture_file:={LIBRARY}']
-    node = NodeProcess(DOMAIN, state_dir=tmp_path / 'state', args=robot_args + [
-        '-p', 'contingency_table:=false', '-p', 'refine_budget_sec:=0.0',
-        '-p', f'expand_shared:={str(lean).lower()}'])
-    sim = NodeProcess(DOMAIN, command=sim_command(), env=ros_env(DOMAIN),
-                      args=robot_args + ['-p', f"stuck_joints:=['{joint}:0.0']"])
-    player = NodeProcess(DOMAIN, command=player_command(), env=ros_env(DOMAIN),
-                         args=robot_args)
-    client = RosClient(DOMAIN, gestures=len(library))
-    faults, states = [], []
-    client.node.create_subscription(JointState, '/actuator_fault', faults.append, 10)
-    client.node.create_subscription(JointState, '/joint_states', states.append, 10)
-    procs = (player, sim, node)
-    try:
-        reference = client.wait_library(timeout=START, what="Talos's reference library")
-        play = client.node.create_client(Trigger, '/gesture_player/play/salute')
-        assert play.wait_for_service(timeout_sec=START), player.describe()
-        first = _call(client, play, 60.0)
-        assert first.success, first.message + player.describe() + node.describe()
-        assert 'carried on' in first.message and joint in first.message, first.message
-        assert any(joint in msg.name for msg in faults), faults
-        adapted = client.wait_library(after=reference.stamp, timeout=30.0,
-                                      what=f'the library for {joint}')
+    with _talos_loop(tmp_path, library, f'{joint}:0.0',
+                     ['-p', f'expand_shared:={str(lean).lower()}']) as loop:
+        client, _, states, _ = loop
+        play, adapted = _salute_carried_on(loop, joint)
         assert all(abs(a) < math.radians(1.0) for a in adapted.column(joint))
         salute = adapted.msgs['salute']
         torso = [salute.points[-1].positions[list(salute.joint_names).index(n)]
@@ -234,12 +262,6 @@ def test_talos_end_to_end_on_the_simulator_stuck_detected_reconfigured_replayed(
         last = dict(zip(states[-1].name, states[-1].position))
         for name, angle in zip(robot.shared.names, torso):
             assert abs(last[name] - angle) < math.radians(0.5), (name, last[name], angle)
-    finally:
-        client.close()
-        codes = [proc.stop() for proc in procs]
-    assert codes == [0, 0, 0], ''.join(p.describe() for p in procs)
-    for proc in procs:
-        assert 'Traceback' not in proc.stderr + proc.stdout, proc.describe()
 
 
 def _call(client, service, timeout):
@@ -262,41 +284,13 @@ def test_talos_torso_stuck_on_the_simulator_the_arms_make_up_for_it(tmp_path, ta
     The node takes a fault of a joint both arms hang from: every gesture holds the torso
     where it stuck and the arms make up for it; the play carries on with that library.
     """
-    from namo_fault_recovery.ros.sim_node import sim_command
-    from namo_fault_recovery.runtime.private_node import player_command
-    from sensor_msgs.msg import JointState
-    from std_srvs.srv import Trigger
-    robot, library = talos
+    _, library = talos
     joint = 'torso_2_joint'
-    robot_args = ['-p', f'robot_profile:={PROFILE}', '-p', f'gesture_file:={LIBRARY}']
-    node = NodeProcess(DOMAIN, state_dir=tmp_path / 'state', args=robot_args + [
-        '-p', 'contingency_table:=false', '-p', 'refine_budget_sec:=0.0'])
-    sim = NodeProcess(DOMAIN, command=sim_command(), env=ros_env(DOMAIN),
-                      args=robot_args + ['-p', f"stuck_joints:=['{joint}:10.0']"])
-    player = NodeProcess(DOMAIN, command=player_command(), env=ros_env(DOMAIN),
-                         args=robot_args)
-    client = RosClient(DOMAIN, gestures=len(library))
-    faults = []
-    client.node.create_subscription(JointState, '/actuator_fault', faults.append, 10)
-    procs = (player, sim, node)
-    try:
-        reference = client.wait_library(timeout=START, what="Talos's reference library")
-        play = client.node.create_client(Trigger, '/gesture_player/play/salute')
-        assert play.wait_for_service(timeout_sec=START), player.describe()
-        first = _call(client, play, 60.0)
-        assert first.success and 'carried on' in first.message, (
-            first.message + player.describe() + node.describe())
-        assert any(joint in msg.name for msg in faults), faults
-        adapted = client.wait_library(after=reference.stamp, timeout=30.0,
-                                      what=f'the library for {joint}')
+    with _talos_loop(tmp_path, library, f'{joint}:10.0') as loop:
+        client = loop[0]
+        play, adapted = _salute_carried_on(loop, joint)
         held = adapted.column(joint)
         assert all(abs(a - math.radians(10.0)) < math.radians(0.5) for a in held), held
         assert len(set(held)) == 1              # one angle, where it stuck, everywhere
         second = _call(client, play, 60.0)
         assert second.success and 'carried on' not in second.message, second.message
-    finally:
-        client.close()
-        codes = [proc.stop() for proc in procs]
-    assert codes == [0, 0, 0], ''.join(p.describe() for p in procs)
-    for proc in procs:
-        assert 'Traceback' not in proc.stderr + proc.stdout, proc.describe()
