@@ -29,6 +29,7 @@ import numpy as np
 from .budget import PUBLISH_RESERVE
 from .keyframes import (DEFAULT_EXPANSION_THRESHOLD, PoseProblem, reconfigure_library,
                         SearchOptions)
+from .locks import clamp_lock
 from .result import LibraryResult
 from ..model.gestures import GestureLibrary
 from ..model.kinematics import batch_forward
@@ -194,7 +195,7 @@ def held_lean(robot, faults: dict, measured: dict | None = None) -> tuple[dict, 
         if not (np.isfinite(angle) and lower - 1e-9 <= angle <= upper + 1e-9):
             raise ValueError(f'lock angle of {joint}: {angle!r} rad is outside the joint '
                              f'limits [{lower:.6g}, {upper:.6g}] rad')
-        held[joint] = float(min(max(angle, lower), upper))
+        held[joint] = clamp_lock(robot, joint, angle)
     return arms, held
 
 

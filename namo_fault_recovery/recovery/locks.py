@@ -51,11 +51,11 @@ def clamp_lock(robot, joint, angle):
 
     :func:`validate_angle` accepts an angle within ``robot.within_limits``'s tolerance
     of a limit (1e-9 rad); a lock must still never be published beyond the limit, so
-    every accepted lock passes through here.
+    every accepted lock passes through here.  An arm's joint, or one both arms hang from
+    (a torso, ``RobotJoints.joint_bounds``).
     """
-    side, index = robot.locate_joint(joint)
-    arm = robot.arms[side]
-    return float(min(max(float(angle), float(arm.lower[index])), float(arm.upper[index])))
+    lower, upper, _ = robot.joint_bounds(joint)
+    return float(min(max(float(angle), lower), upper))
 
 
 def resolve_locks(robot, library, faults, lock_strategy='average', measured=None):

@@ -8,6 +8,8 @@ message changes nothing: the caller keeps its previous state.
 
 import math
 
+from ..recovery.locks import clamp_lock
+
 
 MAX_REASON = 300      # characters: a rejected value never makes a reason unbounded
 # rad: how far past a limit a *measured* angle may read and still be taken (clamped onto
@@ -81,7 +83,7 @@ def parse_fault(robot, names, positions=(), velocities=(), efforts=()):
                         f'more than {MEASURED_LIMIT_TOLERANCE:g} rad)')
                 # Within the tolerance of the limits: clamp, so that every published
                 # angle is within its limits bit for bit (the engine's own clamp).
-                angle = float(min(max(value, lower), upper))
+                angle = clamp_lock(robot, name, value)
         faults[name] = angle
     return faults
 
@@ -112,5 +114,5 @@ def parse_joint_state(robot, names, positions):
         if not lower - MEASURED_LIMIT_TOLERANCE <= value <= upper + MEASURED_LIMIT_TOLERANCE:
             raise BadInput(f'measured position {value:.6g} rad of joint {name!r} is outside '
                            f'its limits (by more than {MEASURED_LIMIT_TOLERANCE:g} rad)')
-        measured[name] = float(min(max(value, lower), upper))   # on its stop: at its limit
+        measured[name] = clamp_lock(robot, name, value)   # on its stop: at its limit
     return measured
