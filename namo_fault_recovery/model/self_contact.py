@@ -53,6 +53,12 @@ def pair_name(pair):
 
 
 PAIR_NAMES = tuple(pair_name(p) for p in PAIRS)
+# closest_pairs gathers all pairs' ends from one table: rows 0-5 the right arm's segments
+# (two ends each), 6-11 the left arm's, 12-13 the torso capsule's top and bottom.
+_END_ROWS = {'right': slice(0, 6), 'left': slice(6, 12), 'torso': slice(12, 14)}
+_FIRST = np.array([(0 if a == 'right' else 6) + 2 * i for a, i, _, _ in PAIRS])
+_SECOND = np.array([12 if b == 'torso' else (0 if b == 'right' else 6) + 2 * k
+                    for _, _, b, k in PAIRS])
 
 
 def designed_pairs(two_handed):
@@ -100,10 +106,10 @@ def radius_sums(capsules):
 
 def arm_segments(robot, lm, side):
     """Return an arm's segment end points (N, 3 segments, 2, 3) mm from its landmarks."""
-    shoulder = np.broadcast_to(shoulder_position(robot, side), lm.elbow.shape)
-    return np.stack((np.stack((shoulder, lm.elbow), axis=1),
-                     np.stack((lm.elbow, lm.wrist), axis=1),
-                     np.stack((lm.wrist, lm.tip), axis=1)), axis=1)
+    points = np.empty(lm.elbow.shape[:-1] + (4, 3))
+    points[..., 0, :] = shoulder_position(robot, side)
+    points[..., 1, :], points[..., 2, :], points[..., 3, :] = lm.elbow, lm.wrist, lm.tip
+    return np.stack((points[..., :3, :], points[..., 1:, :]), axis=-2)
 
 
 def closest_pairs(capsules, seg, field=True):
@@ -122,13 +128,13 @@ def closest_pairs(capsules, seg, field=True):
     shoulder on the torso: it meets the capsule only.  ``field=False`` leaves the field
     out.
     """
-    p1 = np.stack([seg[a][:, i, 0] for a, i, _, _ in PAIRS], axis=1)
-    q1 = np.stack([seg[a][:, i, 1] for a, i, _, _ in PAIRS], axis=1)
-    torso = np.array((capsules.torso_top, capsules.torso_bottom), dtype=float)
-    p2 = np.stack([seg[b][:, k, 0] if b != 'torso' else
-                   np.broadcast_to(torso[0], p1[:, 0].shape) for _, _, b, k in PAIRS], axis=1)
-    q2 = np.stack([seg[b][:, k, 1] if b != 'torso' else
-                   np.broadcast_to(torso[1], p1[:, 0].shape) for _, _, b, k in PAIRS], axis=1)
+    n = seg['right'].shape[0]
+    ends = np.empty((n, 14, 3))      # every segment's two ends, then the torso's: _END_ROWS
+    ends[:, _END_ROWS['right']] = seg['right'].reshape(n, 6, 3)
+    ends[:, _END_ROWS['left']] = seg['left'].reshape(n, 6, 3)
+    ends[:, _END_ROWS['torso']] = (capsules.torso_top, capsules.torso_bottom)
+    p1, q1 = ends[:, _FIRST], ends[:, _FIRST + 1]
+    p2, q2 = ends[:, _SECOND], ends[:, _SECOND + 1]
     d, s, t = segment_distance(p1, q1, p2, q2)
     normal = None
     shape = capsules.torso_field if field else None

@@ -112,14 +112,14 @@ class CollisionModel:
         The closest-point parameters are stationary, so the derivative of a distance is
         the relative velocity of the two closest points along their separation.
         """
-        d, s, t, normal = self.closest(lm_right, lm_left, self.field_penalty)
+        seg = {'right': self._segments(lm_right, 'right'),
+               'left': self._segments(lm_left, 'left')}
+        d, s, t, normal = closest_pairs(self.capsules, seg, self.field_penalty)
         gap = np.maximum(self.allowed[target] - d, 0.0)
         value = self.capsules.weight * np.sum(gap ** 2, axis=1)
         grads = {}
         if jac_right is None and jac_left is None:
             return value, grads
-        seg = {'right': self._segments(lm_right, 'right'),
-               'left': self._segments(lm_left, 'left')}
         for side, jac in (('right', jac_right), ('left', jac_left)):
             if jac is None:
                 continue
