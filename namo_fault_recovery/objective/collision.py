@@ -90,15 +90,19 @@ class CollisionModel:
 
     def collides(self, lm_right, lm_left, target):
         """Return a bool (N,) per pose: some pair penetrates by more than 1 mm."""
-        return np.any(self.penetration(lm_right, lm_left, target) > TOLERANCE_MM, axis=1)
+        return self.verdicts(lm_right, lm_left, target)[0]
 
     def shape_hits(self, lm_right, lm_left, target):
         """Return a bool (N,) per pose: an arm is in the torso's shape (not its capsule)."""
+        return self.verdicts(lm_right, lm_left, target)[1]
+
+    def verdicts(self, lm_right, lm_left, target):
+        """Return :meth:`collides` and :meth:`shape_hits` of the poses, from one check."""
         d, _, _, normal = self.closest(lm_right, lm_left)
-        if normal is None:
-            return np.zeros(d.shape[0], dtype=bool)
         deep = np.maximum(self.allowed[target] - d, 0.0) > TOLERANCE_MM
-        return np.any(deep & np.any(normal != 0.0, axis=-1), axis=1)
+        if normal is None:
+            return np.any(deep, axis=1), np.zeros(d.shape[0], dtype=bool)
+        return np.any(deep, axis=1), np.any(deep & np.any(normal != 0.0, axis=-1), axis=1)
 
     def colliding_pairs(self, lm_right, lm_left, target):
         """Return, per pose, the names of the pairs that penetrate."""

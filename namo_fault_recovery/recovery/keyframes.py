@@ -263,11 +263,12 @@ def _solve(robot, scorer, checker, batch, algo, clock, rng, stats=None):
         return best_r, best_l, status
     ids = batch.target_ids
     lm_r, lm_l = batch_forward(robot, best_r, 'right'), batch_forward(robot, best_l, 'left')
-    rows = np.nonzero(checker.collides(lm_r, lm_l, ids))[0]
+    collides, shape_hits = checker.verdicts(lm_r, lm_l, ids)
+    rows = np.nonzero(collides)[0]
     if rows.size == 0:
         return best_r, best_l, status
     # The torso's shape in the repair's penalty only where it is what the rows touch.
-    if np.any(checker.shape_hits(lm_r, lm_l, ids)[rows]):
+    if np.any(shape_hits[rows]):
         checker = checker.shaped()
     r2, l2, r3, l3, st2 = _repair(robot, scorer, checker, batch, rows,
                                   (best_r, best_l), _repair_algorithm(algo), clock, rng, stats)
@@ -1149,13 +1150,15 @@ def _search_idle(setup, batch, clock, rng):
     r2, l2, _ = _solve_once(robot, setup.scorer, checker, batch,
                             _repair_algorithm(setup.algo), clock, rng)
     lm_r, lm_l = batch_forward(robot, r2, 'right'), batch_forward(robot, l2, 'left')
-    inside = np.nonzero(checker.shape_hits(lm_r, lm_l, ids))[0]
+    collides, shape_hits = checker.verdicts(lm_r, lm_l, ids)
+    inside = np.nonzero(shape_hits)[0]
     if len(inside) and not clock.expired():
         sub = _Batch(r2[inside], l2[inside], ids[inside],
                      [batch.layouts[i] for i in inside], stay_close=IDLE_STAY_CLOSE)
         r2[inside], l2[inside] = _push_out(setup, sub, checker.shaped(), clock)
         lm_r, lm_l = batch_forward(robot, r2, 'right'), batch_forward(robot, l2, 'left')
-    clear = ~checker.collides(lm_r, lm_l, ids)
+        collides = checker.collides(lm_r, lm_l, ids)
+    clear = ~collides
     stuck = np.intersect1d(inside, np.nonzero(~clear)[0])
     if len(stuck) and not clock.expired():    # pushed against something else: search
         sub = _Batch(batch.right[stuck], batch.left[stuck], ids[stuck],
