@@ -13,6 +13,8 @@ from namo_fault_recovery.explore.safety import capsule_clearance
 from namo_fault_recovery.explore.task import ExploreTask
 from namo_fault_recovery.explore.trial import (KinematicTrialRobot, SafetyCheck,
                                                TrialSession, UnsafeTrial)
+from namo_fault_recovery.model.circle_design import (PAPER_CENTRE_MM, PAPER_UNADAPTED_MM,
+                                                     torso_clearance)
 from namo_fault_recovery.model.gestures import load_library
 from namo_fault_recovery.model.robot import load_robot
 from namo_fault_recovery.model.robot_profile import load_profile
@@ -253,3 +255,22 @@ def test_bench_explore_smoke(tmp_path):
     assert 'Targets (issue 18)' in text and 'bye' in text
     data = json.loads((tmp_path / 'explore.json').read_text())
     assert len(data['rows']) == 1 + 1 + 1 + 1 and math.isfinite(data['rows'][0]['mean_mm'])
+
+
+def test_the_paper_circle_is_where_the_papers_straight_elbow_is_216_mm_off():
+    """Placed by the paper's starting condition: the elbow locked at 0, 216 mm unadapted."""
+    robot = load_robot()
+    library = bench.explore_library(robot)
+    circle = library['circle']
+    paper = library[bench.PAPER_MOTION]
+    assert (paper.weights, paper.joints, paper.expand) == (circle.weights, circle.joints,
+                                                           circle.expand)
+    assert len(paper.keyframes) == len(circle.keyframes)
+    cases = bench._cases(robot, library, (bench.PAPER_MOTION,), None)
+    assert [c.label for c in cases] == list(bench.PAPER_CASES)
+    case = cases[0]
+    assert abs(case.errors(case.design).mean() - PAPER_UNADAPTED_MM) < 1.0
+    tips = case.nominal.batch_forward(case.design).tip
+    assert np.allclose(tips.mean(axis=0), PAPER_CENTRE_MM, atol=1.0)
+    assert torso_clearance(robot, case.design) > 0.0
+    assert bench.PAPER_MOTION not in bench.explore_library(robot, ('circle',)).names

@@ -17,6 +17,8 @@ from ..errors import EXIT_USAGE
 # ``bench explore``'s runs (benchmarks.explore.RUNS, named here so that the parser does not
 # import the simulator; a test checks that they agree).
 EXPLORE_RUNS = ('sa', 'ours', 'every', 'ik_true')
+# Its motions (benchmarks.explore.MOTIONS, likewise).
+EXPLORE_MOTIONS = ('circle', 'bye', 'paper_circle')
 # Where the SA starts at each typical point (explore.annealing.START_POSES, likewise).
 EXPLORE_SA_STARTS = ('design', 'previous', 'kriging')
 
@@ -428,8 +430,10 @@ def _add_explore(bench_sub):
     p.add_argument('--sigma', type=float, nargs='+', default=[1.0, 4.0], metavar='MM',
                    help='tracker noise: the first for every run, further ones (a head '
                         'camera) for ours only (default 1 4)')
-    p.add_argument('--motions', nargs='+', default=['circle', 'bye'],
-                   choices=['circle', 'bye'], help='motions (default circle bye)')
+    p.add_argument('--motions', nargs='+', default=list(EXPLORE_MOTIONS),
+                   choices=EXPLORE_MOTIONS,
+                   help='motions (default all: circle bye paper_circle; paper_circle, the '
+                        "circle placed for the paper's elbow lock, runs its two elbow cases)")
     p.add_argument('--cases', nargs='+', default=None, metavar='TEXT',
                    help='only the cases whose name contains one of these (default all)')
     p.add_argument('--runs', nargs='+', default=list(EXPLORE_RUNS), choices=EXPLORE_RUNS,
