@@ -5,7 +5,7 @@ import json
 import math
 
 from namo_fault_recovery.benchmarks import explore as bench
-from namo_fault_recovery.cli.bench import EXPLORE_RUNS, EXPLORE_SA_STARTS
+from namo_fault_recovery.cli.bench import EXPLORE_MOTIONS, EXPLORE_RUNS, EXPLORE_SA_STARTS
 from namo_fault_recovery.explore.annealing import AnnealingSchedule, start_pose, START_POSES
 from namo_fault_recovery.explore.motion import (explore_motion, locked, motion_layouts,
                                                 MotionSpec)
@@ -247,7 +247,7 @@ def test_bench_explore_smoke(tmp_path):
                            schedule=AnnealingSchedule(trials_per_stage=20))
     summary = bench.bench_explore(Sink(), str(tmp_path), run, progress=False)
     assert {r['run'] for r in summary} == set(bench.RUNS) == set(EXPLORE_RUNS)
-    assert START_POSES == EXPLORE_SA_STARTS
+    assert START_POSES == EXPLORE_SA_STARTS and bench.MOTIONS == EXPLORE_MOTIONS
     ours = next(r for r in summary if r['run'] == 'ours')
     sa = next(r for r in summary if r['run'] == 'sa')
     assert ours['mean_mm'] < ours['unadapted_mean_mm'] and sa['trials'] > ours['trials']
