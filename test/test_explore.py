@@ -274,3 +274,25 @@ def test_the_paper_circle_is_where_the_papers_straight_elbow_is_216_mm_off():
     assert np.allclose(tips.mean(axis=0), PAPER_CENTRE_MM, atol=1.0)
     assert torso_clearance(robot, case.design) > 0.0
     assert bench.PAPER_MOTION not in bench.explore_library(robot, ('circle',)).names
+
+
+def test_the_pose_solve_keeps_out_of_the_body_when_asked():
+    """A redundant target with one branch 'in the body': keep_clear takes the other."""
+    from namo_fault_recovery.explore.corrections import solve_poses
+
+    def tip(q, idx):        # a planar two-link arm, 300 mm links
+        a, b = q[:, 0], q[:, 0] + q[:, 1]
+        return np.stack((300 * (np.cos(a) + np.cos(b)), 300 * (np.sin(a) + np.sin(b)),
+                         np.zeros(len(q))), axis=1)
+
+    def clearance(q):       # the elbow bent one way is in the body
+        return 100.0 * q[:, 1]
+
+    target = tip(np.array([[0.3, 1.0]]), None)
+    start = np.array([[0.9, -0.6]])          # near the other branch (elbow -1.0 rad)
+    lower, upper, free = np.full(2, -3.0), np.full(2, 3.0), np.array([0, 1])
+    plain, err = solve_poses(tip, start, target, free, lower, upper, start, stay=0.1)
+    assert err[0] < 1.0 and clearance(plain)[0] < 0.0
+    clear, err = solve_poses(tip, start, target, free, lower, upper, start, stay=0.1,
+                             keep_clear=(clearance, 7.0))
+    assert err[0] < 1.0 and clearance(clear)[0] >= 7.0 - 0.5

@@ -383,7 +383,7 @@ class ExploreRun:
     """What one ``bench explore`` runs: seeds, noise, motions, cases, robots, runs."""
 
     seeds: int = 10
-    every_seeds: int = 3
+    every_seeds: int = 10
     sigmas: tuple = (1.0, 4.0)
     motions: tuple = MOTIONS
     labels: tuple | None = None      # case names (None: all)

@@ -425,8 +425,8 @@ def _add_explore(bench_sub):
     p = bench_sub.add_parser('explore', help='adapt to a change the model does not know: '
                                              "the paper's SA, ours, every point, the IK floor")
     p.add_argument('--seeds', type=int, default=10, help='noise seeds (default 10)')
-    p.add_argument('--every-seeds', type=int, default=3,
-                   help='seeds of the explore-every-point upper bound (default 3)')
+    p.add_argument('--every-seeds', type=int, default=10,
+                   help='seeds of the explore-every-point upper bound (default 10)')
     p.add_argument('--sigma', type=float, nargs='+', default=[1.0, 4.0], metavar='MM',
                    help='tracker noise: the first for every run, further ones (a head '
                         'camera) for ours only (default 1 4)')

@@ -32,6 +32,9 @@ from ..model.rotations import rotation_vectors
 PRIOR = {'tip_offset': 100.0, 'offset': 10.0, 'bend': 10.0}   # prior std: mm, deg, deg
 SIZES = {'tip_offset': 3, 'offset': 1, 'bend': 3}
 MAX_GROUPS = 2
+CLEAR_WEIGHT = 10.0     # mm of tip error per mm of clearance short of the margin (solve_poses)
+SOLVE_ITERATIONS = 40   # solve_poses: damped least-squares iterations
+SOLVE_MAX_STEP = 0.3    # rad: its longest step of a joint per iteration
 
 
 @dataclass(frozen=True)
@@ -153,35 +156,46 @@ def select(chain, q, y, sigma, max_groups=MAX_GROUPS, candidates=None):
     return best
 
 
-def solve_poses(tip_fn, q0, targets, free, lower, upper, anchor, stay=2.0, iters=40,
-                max_step=0.3):
+def solve_poses(tip_fn, q0, targets, free, lower, upper, anchor, stay=2.0, keep_clear=None):
     """
     Damped least squares IK for K points at once; return (q (K, n), error (K,) mm).
 
     ``tip_fn(q, idx)`` returns the model's tip (N, 3) for poses q (N, n) of points
     ``idx`` (N,) (so each point may carry its own bias and secant term).  Only the
     joint indices ``free`` move, within [lower, upper]; ``stay`` (mm per rad) draws
-    them to ``anchor`` (K, n), which picks one solution of a redundant arm.
+    them to ``anchor`` (K, n), which picks one solution of a redundant arm.  With
+    ``keep_clear`` = ``(clearance, margin)`` (``clearance(q)``: (N, n) -> (N,) mm, as
+    :func:`.safety.capsule_clearance`), every millimetre of clearance below ``margin``
+    costs :data:`CLEAR_WEIGHT` mm of tip error: the IK keeps out of the body.
     """
+    iters, max_step = SOLVE_ITERATIONS, SOLVE_MAX_STEP
     q = np.clip(np.array(q0, dtype=float), lower, upper)
     k, nf = len(q), len(free)
     idx = np.arange(k)
     lam = np.full(k, 1e-2)
     eps = 1e-6
 
+    def residuals(x):
+        r = tip_fn(x, idx if len(x) == k else np.repeat(idx, nf)) - targets.repeat(
+            len(x) // k, axis=0)
+        if keep_clear is None:
+            return r
+        inside = np.maximum(keep_clear[1] - keep_clear[0](x), 0.0)
+        return np.concatenate((r, CLEAR_WEIGHT * inside[:, None]), axis=1)
+
     def cost(x):
-        r = tip_fn(x, idx) - targets
+        r = residuals(x)
         d = (x - anchor)[:, free]
         return np.sum(r * r, axis=1) + stay ** 2 * np.sum(d * d, axis=1), r
 
     c, r = cost(q)
     if nf == 0:
-        return q, np.sqrt(np.sum(r * r, axis=1))
+        return q, np.sqrt(np.sum(r[:, :3] * r[:, :3], axis=1))
     for _ in range(iters):
         probe = np.repeat(q[:, None], nf, axis=1)
         probe[:, np.arange(nf), free] += eps
-        jac = (tip_fn(probe.reshape(-1, q.shape[1]), np.repeat(idx, nf)).reshape(k, nf, 3)
-               - (r + targets)[:, None]) / eps                       # (K, nf, 3)
+        jac = (residuals(probe.reshape(-1, q.shape[1])).reshape(k, nf, -1)
+               - r[:, None]) / eps                                   # (K, nf, 3 or 4)
         jtj = np.einsum('kia,kja->kij', jac, jac) + stay ** 2 * np.eye(nf)[None]
         grad = np.einsum('kia,ka->ki', jac, r) + stay ** 2 * (q - anchor)[:, free]
         damped = jtj + lam[:, None, None] * np.eye(nf)[None]
@@ -196,4 +210,4 @@ def solve_poses(tip_fn, q0, targets, free, lower, upper, anchor, stay=2.0, iters
         lam = np.where(better, lam * 0.3, lam * 10.0)
         if np.all(np.abs(step).max(axis=1) < 1e-7):
             break
-    return q, np.sqrt(np.sum(r * r, axis=1))
+    return q, np.sqrt(np.sum(r[:, :3] * r[:, :3], axis=1))
