@@ -266,7 +266,7 @@ def test_the_paper_circle_is_where_the_papers_straight_elbow_is_216_mm_off():
     assert (paper.weights, paper.joints, paper.expand) == (circle.weights, circle.joints,
                                                            circle.expand)
     assert len(paper.keyframes) == len(circle.keyframes)
-    cases = bench._cases(robot, library, (bench.PAPER_MOTION,), None)
+    cases = bench.explore_cases(robot, library, (bench.PAPER_MOTION,), None)
     assert [c.label for c in cases] == list(bench.PAPER_CASES)
     case = cases[0]
     assert abs(case.errors(case.design).mean() - PAPER_UNADAPTED_MM) < 1.0

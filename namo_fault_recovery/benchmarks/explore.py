@@ -282,12 +282,12 @@ def _fmt(value, spec):
 
 def print_table(out, summary):
     """Print the summary rows as the README shows them."""
-    out.write(f'{"motion":6s} {"case":34s} {"run":7s} {"sigma":>5s} {"robot":9s} '
+    out.write(f'{"motion":12s} {"case":34s} {"run":7s} {"sigma":>5s} {"robot":9s} '
               f'{"K":>3s} {"trials":>7s} {"tr/pt":>5s} {"max":>3s} {"robot s":>8s} '
               f'{"err0":>6s} {"mean":>6s} {"p95":>6s} {"max":>6s} {"typ":>6s} '
               f'{"interp":>6s} {"sim %":>6s} {"stage":>5s}\n')
     for r in summary:
-        out.write(f'{r["motion"]:6s} {r["case"]:34s} {r["run"]:7s} {r["sigma_mm"]:5g} '
+        out.write(f'{r["motion"]:12s} {r["case"]:34s} {r["run"]:7s} {r["sigma_mm"]:5g} '
                   f'{r["robot"]:9s} {r["typical"]:3d} {r["trials"]:7.0f} '
                   f'{r["trials_per_point_mean"]:5.1f} {r["trials_per_point_max"]:3.0f} '
                   f'{r["robot_seconds"]:8.1f} {r["unadapted_mean_mm"]:6.1f} '
@@ -323,7 +323,8 @@ def targets(summary, head_sigma=4.0):  # noqa: C901 - one line per target
         sa = _pick(summary, motion, PAPER_CASES[0], 'sa')
         floor = _pick(summary, motion, PAPER_CASES[0], 'ik_true')
         if sa is not None and floor is not None:
-            add(f'SA elbow lock, designed DOF, within 1 mm of the IK floor ({motion})',
+            add(f'SA elbow lock, designed DOF, within 1 mm of the IK floor '
+                f'({motion.replace("_", " ")})',
                 {'gap': sa['mean_mm'] - floor['mean_mm']}, 'gap', lambda v: v <= 1.0,
                 '{:+.2f} mm')
     ours = [r for r in summary if r['run'] == 'ours']
@@ -358,7 +359,8 @@ def targets(summary, head_sigma=4.0):  # noqa: C901 - one line per target
     return out
 
 
-def _cases(robot, library, motions, labels):
+def explore_cases(robot, library, motions, labels):
+    """Return the cases of ``motions`` whose labels are in ``labels`` (None: all)."""
     chosen = [c for c in CASES if labels is None or c[0] in labels]
     return [_Case(robot, library, m, c) for m in motions for c in chosen
             if m != PAPER_MOTION or c[0] in PAPER_CASES]
@@ -407,7 +409,7 @@ def bench_explore(out, out_dir, run=ExploreRun(), progress=True):
     robot = load_robot()
     library = explore_library(robot, run.motions)
     rows = []
-    for case in _cases(robot, library, run.motions, run.labels):
+    for case in explore_cases(robot, library, run.motions, run.labels):
         for name in runs:
             kind = sa_robot if name == 'sa' else robot_kind
             n = 1 if name == 'ik_true' else (every_seeds if name == 'every' else seeds)
@@ -476,7 +478,7 @@ def tune_sa(out, out_dir, seeds=2, grid=None, robot_kind='kinematic', progress=T
     robot = load_robot()
     library = explore_library(robot)
     cases = [case for motion, label in TUNE_CASES
-             for case in _cases(robot, library, (motion,), (label,))]
+             for case in explore_cases(robot, library, (motion,), (label,))]
     results = []
     for start, step, temp, n in itertools.product(
             grid.get('start', ('design',)), grid['step_deg'], grid['temperature_mm'],

@@ -447,7 +447,7 @@ def _add_explore(bench_sub):
                    help="where the SA starts at each typical point: 'design' (the paper's "
                         "reading), or carried on in the motion's order from the previous "
                         "point's correction ('previous') or the Kriging of those explored "
-                        "('kriging'); default: the tuned schedule's (kriging)")
+                        "('kriging'); default: the tuned schedule's (previous)")
     p.add_argument('--merge', nargs='+', default=None, metavar='JSON',
                    help='report the rows of several explore.json files (partial runs) as one')
     p.add_argument('--tune-sa', action='store_true',

@@ -175,16 +175,15 @@ def solve_poses(tip_fn, q0, targets, free, lower, upper, anchor, stay=2.0, keep_
     lam = np.full(k, 1e-2)
     eps = 1e-6
 
-    def residuals(x):
-        r = tip_fn(x, idx if len(x) == k else np.repeat(idx, nf)) - targets.repeat(
-            len(x) // k, axis=0)
+    def residuals(x, rows):
+        r = tip_fn(x, rows) - targets[rows]
         if keep_clear is None:
             return r
         inside = np.maximum(keep_clear[1] - keep_clear[0](x), 0.0)
         return np.concatenate((r, CLEAR_WEIGHT * inside[:, None]), axis=1)
 
     def cost(x):
-        r = residuals(x)
+        r = residuals(x, idx)
         d = (x - anchor)[:, free]
         return np.sum(r * r, axis=1) + stay ** 2 * np.sum(d * d, axis=1), r
 
@@ -194,8 +193,8 @@ def solve_poses(tip_fn, q0, targets, free, lower, upper, anchor, stay=2.0, keep_
     for _ in range(iters):
         probe = np.repeat(q[:, None], nf, axis=1)
         probe[:, np.arange(nf), free] += eps
-        jac = (residuals(probe.reshape(-1, q.shape[1])).reshape(k, nf, -1)
-               - r[:, None]) / eps                                   # (K, nf, 3 or 4)
+        jac = (residuals(probe.reshape(-1, q.shape[1]), np.repeat(idx, nf)).reshape(
+            k, nf, r.shape[1]) - r[:, None]) / eps                  # (K, nf, 3 or 4)
         jtj = np.einsum('kia,kja->kij', jac, jac) + stay ** 2 * np.eye(nf)[None]
         grad = np.einsum('kia,ka->ki', jac, r) + stay ** 2 * (q - anchor)[:, free]
         damped = jtj + lam[:, None, None] * np.eye(nf)[None]

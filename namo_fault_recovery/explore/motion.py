@@ -159,7 +159,8 @@ def explore_motion(session: TrialSession, spec: MotionSpec, method: str = 'secan
                        chain.upper)
         trend, _ = solve_poses(lambda q, idx: found.model.tip(q), warm,
                                chain.batch_forward(design_all).tip, np.asarray(found.free),
-                               chain.lower, chain.upper, warm)
+                               chain.lower, chain.upper, warm,
+                               keep_clear=session.safety.keep_clear())
     q, sigma = spread(design, picks, found.q, trend)
     q = np.clip(locked(q, locks), chain.lower, chain.upper)
     names = tuple(joint_names[j] for j in found.free) if joint_names else found.free

@@ -13,9 +13,9 @@ measured error).  Each later round:
    successive trials, applied only where the secant mismatch is larger than noise;
 3. solves every point's pose on that local model (damped least squares: a
    Gauss-Newton step on the measured error with the model's Jacobian, iterated to the
-   corrected model's solution, kept out of the body by the safety check's clearance:
-   :func:`_clear`) and commands it, unless it moves less than ``tol_deg`` (the point
-   has converged on its last measured pose).
+   corrected model's solution, kept out of the body by the safety check's clearance,
+   :meth:`.trial.SafetyCheck.keep_clear`) and commands it, unless it moves less than
+   ``tol_deg`` (the point has converged on its last measured pose).
 
 When the designed DOF cannot reach (the corrected model leaves a point more than the
 expansion threshold away), the next stage's joints are freed, as the paper does.
@@ -29,8 +29,6 @@ import numpy as np
 from .corrections import select, solve_poses
 from .task import ExploreTask, PointOutcome
 from .trial import recording_end, TrialSession
-
-CLEAR_BEYOND_MM = 2.0    # the pose solve keeps the safety margin's clearance plus this
 
 
 @dataclass(frozen=True)
@@ -180,7 +178,8 @@ def _run_stage(session, task, st, free, options, out, later=0):
         out.correction, out.model = correction.describe(), correction
         tip_fn = _local_model(task, st, correction, options)
         q_new, predicted = solve_poses(tip_fn, st.q, task.targets, free, task.lower,
-                                       task.upper, task.start, keep_clear=_clear(session))
+                                       task.upper, task.start,
+                                       keep_clear=session.safety.keep_clear())
         moves = np.degrees(np.abs(q_new - st.q).max(axis=1))
         done |= (moves < options.tol_deg) | (st.trials >= options.max_trials_per_point)
         done |= _waiting(task, st, tip_fn, predicted, options, later)
@@ -202,22 +201,6 @@ def _run_stage(session, task, st, free, options, out, later=0):
             st.prev[p] = (trial.q.copy(), trial.tip.copy())
             st.q[p] = goal
             st.record(p, trial)
-
-
-def _clear(session):
-    """
-    Return the IK's ``keep_clear`` (:func:`.corrections.solve_poses`): the safety check's.
-
-    The model's solution knows nothing of self-collision, and on a redundant arm it may
-    lie on a branch through the body where none of its step would be allowed (the
-    circle's elbow lock with the wrist free: 20 points of 100 in a row, 55-132 mm off,
-    on one seed of ten): the IK keeps the check's clearance, a little beyond its
-    margin, so that its steps land on a clear branch.  None without a clearance check.
-    """
-    safety = session.safety
-    if safety.clearance is None:
-        return None
-    return safety.clearance, safety.margin_mm + CLEAR_BEYOND_MM
 
 
 def _safe_step(session, q_from, q_to, halvings):

@@ -19,6 +19,7 @@ import numpy as np
 
 SMOOTH_PEAK = 1.5        # a cubic (smoothstep) move's peak speed / its mean speed
 MIN_MOVE_SEC = 0.2       # the shortest move a trial commands
+CLEAR_BEYOND_MM = 2.0    # pose solves keep the safety margin's clearance plus this (keep_clear)
 
 
 class Trial(NamedTuple):
@@ -94,6 +95,20 @@ class SafetyCheck:
     margin_mm: float = 5.0
     limit_margin: float = 0.0
     path_samples: int = 8
+
+    def keep_clear(self):
+        """
+        Return the pose solves' ``keep_clear`` (:func:`.corrections.solve_poses`), or None.
+
+        A model's solution knows nothing of self-collision, and on a redundant arm it may
+        lie on a branch through the body where no step towards it would be allowed (the
+        circle's elbow lock with the wrist free: 20 points of 100 in a row left 55-132 mm
+        off, on one seed of ten): the solves keep this check's clearance, a little beyond
+        its margin (:data:`CLEAR_BEYOND_MM`).  None without a clearance check.
+        """
+        if self.clearance is None:
+            return None
+        return self.clearance, self.margin_mm + CLEAR_BEYOND_MM
 
     def clip(self, q):
         """Return ``q`` clipped into the limits less their margin (a step never leaves them)."""

@@ -101,10 +101,11 @@ def paper_circle(robot, circle):
     only the centre moves (see :data:`PAPER_CENTRE_MM`).  Named ``paper_circle``.
     """
     times, right, _ = design_circle(robot, centre=PAPER_CENTRE_MM)
-    left = np.zeros(right.shape[1])
+    rest = circle.keyframes[0].left        # the left arm rests through the circle
     return replace(circle, name='paper_circle',
                    description="the circle where the paper's elbow lock is 216 mm off",
-                   keyframes=tuple(Keyframe(float(t), q, left) for t, q in zip(times, right)))
+                   keyframes=tuple(Keyframe(float(t), q, np.zeros_like(rest))
+                                   for t, q in zip(times, right)))
 
 
 def write_circle(robot, path, **kwargs):

@@ -1156,8 +1156,7 @@ def _search_idle(setup, batch, clock, rng):
         sub = _Batch(r2[inside], l2[inside], ids[inside],
                      [batch.layouts[i] for i in inside], stay_close=IDLE_STAY_CLOSE)
         r2[inside], l2[inside] = _push_out(setup, sub, checker.shaped(), clock)
-        lm_r, lm_l = batch_forward(robot, r2, 'right'), batch_forward(robot, l2, 'left')
-        collides = checker.collides(lm_r, lm_l, ids)
+        collides[inside] = _rows_collide(checker, robot, r2[inside], l2[inside], ids[inside])
     clear = ~collides
     stuck = np.intersect1d(inside, np.nonzero(~clear)[0])
     if len(stuck) and not clock.expired():    # pushed against something else: search
