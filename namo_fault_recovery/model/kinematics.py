@@ -77,10 +77,14 @@ def as_joint_array(q, name='q', n_joints=N_JOINTS):
     return arr
 
 
+def angle_bytes(arrays) -> bytes:
+    """Return the bytes of some float arrays, one key for a dict (exact values, in order)."""
+    return b''.join(np.asarray(a, dtype=float).tobytes() for a in arrays)
+
+
 def _link_plan(robot):
     """Per-link constants, with exact 0/+-1 for the common right-angle twists."""
-    key = b''.join(np.asarray(a, dtype=float).tobytes()
-                   for a in (robot.a_prev, robot.d, robot.alpha_prev))
+    key = angle_bytes((robot.a_prev, robot.d, robot.alpha_prev))
     cached = _PLANS.get(key)
     if cached is not None:
         return cached

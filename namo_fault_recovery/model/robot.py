@@ -142,15 +142,37 @@ class RobotJoints:
         """
         return self.joint_names + (self.shared.names if self.shared is not None else ())
 
+    def locate_played(self, name: str) -> tuple[str, int]:
+        """
+        Return ``(arm, index)`` of a played joint, or ``('shared', index)`` for a torso's.
+
+        A joint both arms hang from is in :attr:`shared`; every other is an arm's
+        (:meth:`locate_joint`).  KeyError for an unknown name.
+        """
+        if self.shared is not None and name in self.shared.names:
+            return 'shared', self.shared.names.index(name)
+        return self.locate_joint(name)
+
     def joint_bounds(self, name: str) -> tuple[float, float, float]:
         """Return ``(lower, upper, velocity limit)`` (rad, rad/s) of a played joint."""
-        if self.shared is not None and name in self.shared.names:
-            i = self.shared.names.index(name)
+        side, i = self.locate_played(name)
+        if side == 'shared':
             return (float(self.shared.lower[i]), float(self.shared.upper[i]),
                     float(self.shared.velocity[i]))
-        side, i = self.locate_joint(name)
         return (float(self.arms[side].lower[i]), float(self.arms[side].upper[i]),
                 float(self.arm_velocity_limits(side)[i]))
+
+    def joint_within_limits(self, name: str, angle: float, tol: float = 1e-9) -> bool:
+        """
+        Return True if ``angle`` (rad) lies within a played joint's limits, ``tol`` beyond.
+
+        An arm's joint or one both arms hang from (:meth:`locate_played`; without the
+        speed :meth:`joint_bounds` adds: it runs per published angle); KeyError for an
+        unknown name.  ``tol=0`` asks for the limits exactly (what is published).
+        """
+        side, i = self.locate_played(name)
+        limits = self.shared if side == 'shared' else self.arms[side]
+        return float(limits.lower[i]) - tol <= angle <= float(limits.upper[i]) + tol
 
     def locate_joint(self, name: str) -> tuple[str, int]:
         """Return ``(arm, index)`` for a joint name, or raise KeyError naming the choices."""

@@ -34,8 +34,9 @@ from .least_squares import refine
 from .locks import clamp_lock, resolve_locks
 from .result import GestureResult, LibraryResult
 from .seeding import kinematic_starts
-from ..model.kinematics import (arm_columns, arm_joint_count, ArmLandmarks, batch_forward,
-                                batch_forward_jacobian, split_arms, take_landmarks)
+from ..model.kinematics import (angle_bytes, arm_columns, arm_joint_count, ArmLandmarks,
+                                batch_forward, batch_forward_jacobian, split_arms,
+                                take_landmarks)
 from ..model.robot import ARMS
 from ..objective.collision import CollisionModel
 from ..objective.score import gesture_targets, SimilarityScore
@@ -1072,11 +1073,6 @@ def _idle_key(rows, sides, k):
     """Return what identifies row ``k``'s idle-arm problem: its arms and their poses."""
     arm = {'right': rows.right, 'left': rows.left}
     return (sides, angle_bytes(arm[s][k] for s in sides))
-
-
-def angle_bytes(arrays):
-    """Return the bytes of some angle arrays, one key for a dict."""
-    return b''.join(np.ascontiguousarray(a, dtype=float).tobytes() for a in arrays)
 
 
 def _move_rows(setup, rows, idle, ks, done, clock, rng, share_branches=True):

@@ -191,8 +191,8 @@ def held_lean(robot, faults: dict, measured: dict | None = None) -> tuple[dict, 
         if angle is None:
             angle = (measured or {}).get(joint)
         angle = 0.0 if angle is None else float(angle)
-        lower, upper, _ = robot.joint_bounds(joint)
-        if not (np.isfinite(angle) and lower - 1e-9 <= angle <= upper + 1e-9):
+        if not (np.isfinite(angle) and robot.joint_within_limits(joint, angle)):
+            lower, upper, _ = robot.joint_bounds(joint)
             raise ValueError(f'lock angle of {joint}: {angle!r} rad is outside the joint '
                              f'limits [{lower:.6g}, {upper:.6g}] rad')
         held[joint] = clamp_lock(robot, joint, angle)

@@ -108,10 +108,7 @@ def statuses(robot, snap, prefix=DEFAULT_PREFIX):
 
 
 def _joint_status(robot, prefix, joint, fault, current, up_to_date, strategy):
-    if robot.shared is not None and joint in robot.shared.names:    # a torso: both arms'
-        side, index = 'shared', robot.shared.names.index(joint)
-    else:
-        side, index = robot.locate_joint(joint)
+    side, index = robot.locate_played(joint)            # 'shared': a torso, both arms'
     if up_to_date and joint in current.locks:
         lock = current.locks[joint]
         source = dk.LOCK_SOURCE_REPORT if fault.angle is not None else f'{strategy} strategy'

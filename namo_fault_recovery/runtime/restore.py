@@ -11,12 +11,6 @@ from dataclasses import dataclass, field
 import math
 
 
-def within_exactly(robot, side, index, angle):
-    """Return True if ``angle`` is within the joint's limits with no tolerance."""
-    arm = robot.arms[side]
-    return float(arm.lower[index]) <= angle <= float(arm.upper[index])
-
-
 def check_result(robot, library, result, faults=None):
     """Return None if ``result`` is safe to publish, else the reason it is not."""
     if result.names != library.names:
@@ -29,10 +23,10 @@ def check_result(robot, library, result, faults=None):
     columns, held = {}, {}
     for joint, angle in result.locks.items():
         try:
-            lower, upper, _ = robot.joint_bounds(joint)
+            usable = math.isfinite(angle) and robot.joint_within_limits(joint, angle, 0.0)
         except KeyError as exc:
             return exc.args[0]
-        if not (math.isfinite(angle) and lower <= angle <= upper):
+        if not usable:
             return f'lock angle {angle!r} of {joint} is not usable'
         if joint in joint_names:
             columns[joint_names.index(joint)] = angle
@@ -55,8 +49,8 @@ def check_result(robot, library, result, faults=None):
             if len(q) != len(joint_names):
                 return f'{gesture.name}: expected {len(joint_names)} angles'
             for k, angle in enumerate(q):
-                side, index = robot.locate_joint(joint_names[k])
-                if not (math.isfinite(angle) and within_exactly(robot, side, index, angle)):
+                if not (math.isfinite(angle)
+                        and robot.joint_within_limits(joint_names[k], angle, 0.0)):
                     return (f'{gesture.name}: angle {angle!r} of {joint_names[k]} '
                             f'is not finite or outside its limits')
                 if k in columns and angle != columns[k]:
@@ -71,8 +65,7 @@ def _lean_problem(robot, gesture):
     for joint, angle in gesture.shared.items():
         if joint not in names:
             return f'{gesture.name}: leans {joint!r}, not a joint both arms hang from'
-        lower, upper, _ = robot.joint_bounds(joint)
-        if not (math.isfinite(angle) and lower <= angle <= upper):
+        if not (math.isfinite(angle) and robot.joint_within_limits(joint, angle, 0.0)):
             return f'{gesture.name}: lean {angle!r} of {joint} is not finite or outside its limits'
     return ''
 
@@ -81,11 +74,11 @@ def validate_faults(robot, faults):
     """Return why a persisted fault set cannot be used, or None."""
     for joint, fault in faults.items():
         try:
-            lower, upper, _ = robot.joint_bounds(joint)
+            robot.joint_bounds(joint)
         except KeyError as exc:
             return f'fault on {exc.args[0]}'
         for value in (fault.angle, fault.measured):
-            if value is not None and not lower - 1e-9 <= value <= upper + 1e-9:
+            if value is not None and not robot.joint_within_limits(joint, value):
                 return f'angle {value!r} of faulted joint {joint} is outside its limits'
     return None
 
