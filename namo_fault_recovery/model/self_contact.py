@@ -112,6 +112,21 @@ def arm_segments(robot, lm, side):
     return np.stack((points[..., :3, :], points[..., 1:, :]), axis=-2)
 
 
+def pair_ends(capsules, seg):
+    """
+    Return ``(p1, q1, p2, q2)``, (N, pairs, 3) each: the ends of every pair's two segments.
+
+    ``seg`` maps 'right' and 'left' to arm segments (N, 3, 2, 3) mm; the torso's are
+    its capsule's top and bottom.
+    """
+    n = seg['right'].shape[0]
+    ends = np.empty((n, 14, 3))      # every segment's two ends, then the torso's: _END_ROWS
+    ends[:, _END_ROWS['right']] = seg['right'].reshape(n, 6, 3)
+    ends[:, _END_ROWS['left']] = seg['left'].reshape(n, 6, 3)
+    ends[:, _END_ROWS['torso']] = (capsules.torso_top, capsules.torso_bottom)
+    return ends[:, _FIRST], ends[:, _FIRST + 1], ends[:, _SECOND], ends[:, _SECOND + 1]
+
+
 def closest_pairs(capsules, seg, field=True):
     """
     Return ``(d, s, t, normal)`` of every pair of PAIRS: (N, pairs) each, normal (N, pairs, 3).
@@ -128,13 +143,7 @@ def closest_pairs(capsules, seg, field=True):
     shoulder on the torso: it meets the capsule only.  ``field=False`` leaves the field
     out.
     """
-    n = seg['right'].shape[0]
-    ends = np.empty((n, 14, 3))      # every segment's two ends, then the torso's: _END_ROWS
-    ends[:, _END_ROWS['right']] = seg['right'].reshape(n, 6, 3)
-    ends[:, _END_ROWS['left']] = seg['left'].reshape(n, 6, 3)
-    ends[:, _END_ROWS['torso']] = (capsules.torso_top, capsules.torso_bottom)
-    p1, q1 = ends[:, _FIRST], ends[:, _FIRST + 1]
-    p2, q2 = ends[:, _SECOND], ends[:, _SECOND + 1]
+    p1, q1, p2, q2 = pair_ends(capsules, seg)
     d, s, t = segment_distance(p1, q1, p2, q2)
     normal = None
     shape = capsules.torso_field if field else None

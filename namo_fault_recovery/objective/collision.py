@@ -22,9 +22,9 @@ import numpy as np
 
 from ..model.capsules import CapsuleModel
 from ..model.kinematics import arm_joint_count, forward_kinematics, shoulder_position
-from ..model.self_contact import (arm_segments, closest_pairs, designed_pairs, PAIR_NAMES,
-                                  PAIRS, radius_sums, segment_distance, SEGMENTS,
-                                  TOLERANCE_MM)
+from ..model.self_contact import (arm_segments, closest_pairs, designed_pairs, pair_ends,
+                                  PAIR_NAMES, PAIRS, radius_sums, segment_distance,
+                                  SEGMENTS, TOLERANCE_MM)
 
 __all__ = ['CollisionModel', 'SEGMENTS', 'segment_distance']
 
@@ -114,46 +114,75 @@ class CollisionModel:
         Return the penalty per pose, and its gradient for arms given with a Jacobian.
 
         The closest-point parameters are stationary, so the derivative of a distance is
-        the relative velocity of the two closest points along their separation.
+        the relative velocity of the two closest points along their separation
+        (:meth:`clearance` gives those derivatives pair by pair).
         """
-        seg = {'right': self._segments(lm_right, 'right'),
-               'left': self._segments(lm_left, 'left')}
-        d, s, t, normal = closest_pairs(self.capsules, seg, self.field_penalty)
-        gap = np.maximum(self.allowed[target] - d, 0.0)
+        seg = self._segments_of(lm_right, lm_left)
+        closest = closest_pairs(self.capsules, seg, self.field_penalty)
+        gap = np.maximum(self.allowed[target] - closest[0], 0.0)
         value = self.capsules.weight * np.sum(gap ** 2, axis=1)
         grads = {}
-        if jac_right is None and jac_left is None:
-            return value, grads
+        active = np.nonzero(np.any(gap > 0, axis=0))[0]
         for side, jac in (('right', jac_right), ('left', jac_left)):
-            if jac is None:
-                continue
-            # d(endpoint)/dq for the segment ends: shoulder (fixed), elbow, wrist, tip.
-            zeros = np.zeros_like(jac.positions[:, 0])
-            ends = np.stack((zeros, jac.positions[:, 0], jac.positions[:, 1],
-                             jac.positions[:, 2]), axis=1)                  # (N, 4, 7, 3)
-            grad = np.zeros((d.shape[0], jac.axes.shape[1]))
-            active = np.nonzero(np.any(gap > 0, axis=0))[0]
-            for p in active:
-                a, i, b, k = PAIRS[p]
-                if side not in (a, b):
-                    continue
-                first = seg[a][:, i, 0] + s[:, p, None] * (seg[a][:, i, 1] - seg[a][:, i, 0])
-                if b == 'torso':
-                    second = self.torso[0] + t[:, p, None] * (self.torso[1] - self.torso[0])
-                else:
-                    second = (seg[b][:, k, 0]
-                              + t[:, p, None] * (seg[b][:, k, 1] - seg[b][:, k, 0]))
-                unit = (first - second) / np.maximum(d[:, p], 1e-9)[:, None]
-                if normal is not None:                        # the torso's shape is nearer
-                    shaped = np.any(normal[:, p] != 0.0, axis=1)
-                    unit = np.where(shaped[:, None], normal[:, p], unit)
-                if side == a:
-                    idx, frac, sign = i, s[:, p], 1.0
-                else:
-                    idx, frac, sign = k, t[:, p], -1.0
-                vel = ((1 - frac)[:, None, None] * ends[:, idx]
-                       + frac[:, None, None] * ends[:, idx + 1])            # (N, 7, 3)
-                dd = sign * np.einsum('nc,nic->ni', unit, vel)
-                grad += -2.0 * self.capsules.weight * gap[:, p, None] * dd
-            grads[side] = grad
+            if jac is not None:
+                rates = self._rates(seg, closest, side, jac, active)       # (N, A, n)
+                grads[side] = np.einsum('na,nai->ni', -2.0 * self.capsules.weight
+                                        * gap[:, active], rates)
         return value, grads
+
+    def clearance(self, lm_right, lm_left, target, jac_right=None, jac_left=None):
+        """
+        Return how far (mm) each pair is outside its allowed distance, and its derivatives.
+
+        ``margin`` (N, pairs) is the axis distance less the allowed one (negative: the
+        pair penetrates); ``rates`` maps each arm given with a Jacobian to (N, pairs, n),
+        d(margin)/dq.  The constraints of a constrained local solve
+        (:mod:`..recovery.constrained`), with the torso's shape as :meth:`penalty` has it.
+        """
+        seg = self._segments_of(lm_right, lm_left)
+        closest = closest_pairs(self.capsules, seg, self.field_penalty)
+        every = np.arange(len(PAIRS))
+        rates = {side: self._rates(seg, closest, side, jac, every)
+                 for side, jac in (('right', jac_right), ('left', jac_left)) if jac is not None}
+        return closest[0] - self.allowed[target], rates
+
+    def _segments_of(self, lm_right, lm_left):
+        return {'right': self._segments(lm_right, 'right'),
+                'left': self._segments(lm_left, 'left')}
+
+    def _rates(self, seg, closest, side, jac, pairs):
+        """
+        Return d(distance)/dq (N, len(pairs), n) of ``pairs`` for the joints of ``side``.
+
+        ``closest`` is :func:`closest_pairs`' answer for ``seg``; a pair not involving
+        ``side`` moves at rate 0.  All pairs at once: the closest points, their unit
+        separation (the torso's shape's normal where it decides), and the velocity of
+        ``side``'s closest point, interpolated between its segment's end velocities.
+        """
+        d, s, t, normal = closest
+        pairs = np.asarray(pairs, dtype=int)
+        p1, q1, p2, q2 = (e[:, pairs] for e in pair_ends(self.capsules, seg))
+        sp, tp = s[:, pairs], t[:, pairs]
+        unit = ((p1 + sp[..., None] * (q1 - p1)) - (p2 + tp[..., None] * (q2 - p2))) \
+            / np.maximum(d[:, pairs], 1e-9)[..., None]
+        if normal is not None:                            # the torso's shape is nearer
+            shaped = np.any(normal[:, pairs] != 0.0, axis=-1)
+            unit = np.where(shaped[..., None], normal[:, pairs], unit)
+        first = _FIRST_SIDE[pairs] == side
+        sign = np.where(first, 1.0, np.where(_SECOND_SIDE[pairs] == side, -1.0, 0.0))
+        idx = np.where(first, _FIRST_SEGMENT[pairs], _SECOND_SEGMENT[pairs])
+        frac = np.where(first, sp, tp)                                    # (N, A)
+        # d(endpoint)/dq for the segment ends: shoulder (fixed), elbow, wrist, tip.
+        zeros = np.zeros_like(jac.positions[:, 0])
+        ends = np.stack((zeros, jac.positions[:, 0], jac.positions[:, 1],
+                         jac.positions[:, 2]), axis=1)                    # (N, 4, n, 3)
+        vel = ((1 - frac)[..., None, None] * ends[:, idx]
+               + frac[..., None, None] * ends[:, idx + 1])              # (N, A, n, 3)
+        return sign[None, :, None] * np.einsum('nac,naic->nai', unit, vel)
+
+
+# Per pair of PAIRS: each segment's arm and index (the torso's 0, never moved by an arm).
+_FIRST_SIDE = np.array([a for a, _, _, _ in PAIRS])
+_SECOND_SIDE = np.array([b for _, _, b, _ in PAIRS])
+_FIRST_SEGMENT = np.array([i for _, i, _, _ in PAIRS])
+_SECOND_SEGMENT = np.array([k for _, _, _, k in PAIRS])

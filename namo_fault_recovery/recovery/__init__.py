@@ -19,6 +19,9 @@ From a fault set to an adapted gesture library, free of ROS.
 - :mod:`.seeding`: the keyframe search's starting sources, random draws taken a few
   damped least-squares steps towards the landmarks, and the design through each of the
   arm's flips (so the colony starts in good basins);
+- :mod:`.constrained`: one pose solved with the capsules' clearances as hard constraints
+  (SLSQP), which reaches the best clear pose where a penalty descent stays out of its
+  basin (the keyframe search's first step for a colliding pose);
 - :mod:`.least_squares`: reweighted Gauss-Newton on the score's terms: those steps, and
   the search's last local step, which ends on the score's kinks where the polish crawls;
 - :mod:`.motion`: whole-motion adaptation (the second paper: typical points and Kriging,

@@ -29,6 +29,7 @@ import numpy as np
 
 from . import pacing
 from .budget import ENGINE_RESERVE, STAGE1_SHARE
+from .constrained import constrained_pose
 from .figures import COLLIDES_WARNING, largest_jump
 from .least_squares import refine
 from .locks import clamp_lock, resolve_locks
@@ -57,6 +58,12 @@ SHARE_POLISHED = 1         # of those restarts, the best-scoring ones are polish
 RESTART_MAXITER = 20       # polish iterations of a repair's branch restarts
 REACH_MAXITER = 20         # polish iterations of a repair's searches within reach
 STIFF_PENALTY = 10.0       # a stuck repair's penalty, times the capsules' own weight
+# Colliding rows are solved with the capsules as hard constraints first (recovery.
+# constrained), when there are at most CONSTRAINED_ROWS of them (the solve takes 10-40 ms a
+# row; the penalised colony is batched); a row whose constrained pose scores within
+# CONSTRAINED_GAP of its plain optimum, which bounds it from below, is settled.
+CONSTRAINED_ROWS = 2
+CONSTRAINED_GAP = 0.01
 PUSH_MAXITER = 15          # polish iterations that push an idle arm out of the body
 PACED_NOTE = ('its keyframes were searched into branches too far apart for the joints '
               'to travel in time; repaired within the velocity limits')
@@ -178,7 +185,13 @@ class PoseProblem(Problem):
             out[side] = q
         return out['right'], out['left']
 
-    def _arms(self, x, jacobian):
+    def arms(self, x, jacobian=False):
+        """
+        Return ``({side: landmarks}, target ids)`` of x (B, N, D), one row per pose.
+
+        A moving arm with ``jacobian`` gives ``(landmarks, jacobian)``; an arm without
+        free joints gives its fixed landmarks.
+        """
         batch, n, _ = x.shape
         q = dict(zip(ARMS, self.assemble(x)))
         rows = np.repeat(np.arange(batch), n)
@@ -196,7 +209,7 @@ class PoseProblem(Problem):
         return arms, np.repeat(self.target_ids, n)
 
     def _objective(self, x):
-        arms, target = self._arms(x, jacobian=False)
+        arms, target = self.arms(x, jacobian=False)
         f = self.scorer.evaluate(arms['right'], arms['left'], target)
         if self.collision is not None:
             f = f + self.collision.penalty(arms['right'], arms['left'], target)[0]
@@ -206,8 +219,12 @@ class PoseProblem(Problem):
         return f
 
     def _value_and_grad(self, x):
+        arms, target = self.arms(x, jacobian=True)
+        return self.value_and_grad_at(x, arms, target)
+
+    def value_and_grad_at(self, x, arms, target):
+        """Return the objective and its gradient at x (B, N, D) from its :meth:`arms`."""
         batch, n, dim = x.shape
-        arms, target = self._arms(x, jacobian=True)
         f, g_right, g_left = self.scorer.value_and_grad(arms['right'], arms['left'], target,
                                                         self.smooth)
         grads = {'right': g_right, 'left': g_left}
@@ -256,8 +273,11 @@ def _solve(robot, scorer, checker, batch, algo, clock, rng, stats=None):
 
     The collision constraint is lazy: the plain score is optimised first (fast, and
     most results do not collide), the results are checked, and only the rows that
-    collide are solved again with the capsule penalty, from their collision-free
-    starting pose.  Return (best right, best left, status names).
+    collide are solved again: with the capsules as hard constraints from their
+    starting pose (:func:`_constrained_first`), and, unless that came within
+    ``CONSTRAINED_GAP`` of the plain optimum, with the capsule penalty from their
+    collision-free starting pose and from the plain optimum (:func:`_repair`).
+    Return (best right, best left, status names).
     """
     best_r, best_l, status = _solve_once(robot, scorer, None, batch, algo, clock, rng, stats)
     if checker is None:
@@ -271,15 +291,25 @@ def _solve(robot, scorer, checker, batch, algo, clock, rng, stats=None):
     # The torso's shape in the repair's penalty only where it is what the rows touch.
     if np.any(shape_hits[rows]):
         checker = checker.shaped()
+    settled, found = _constrained_first(robot, scorer, checker, batch, rows,
+                                        (best_r, best_l), algo, clock)
+    extra = []
+    if found is not None:
+        best_r[rows[settled]], best_l[rows[settled]] = found[0][settled], found[1][settled]
+        extra = [(found[0][~settled], found[1][~settled])]
+    rows = rows[~settled]
+    if rows.size == 0:
+        return best_r, best_l, status
     r2, l2, r3, l3, st2 = _repair(robot, scorer, checker, batch, rows,
                                   (best_r, best_l), _repair_algorithm(algo), clock, rng, stats)
     # Candidates per row: the plain result, the penalised ones (from the starting pose
     # and from the plain result), and the starting pose (collision-free unless the locks
     # themselves force a contact).  The best score among those that do not collide
     # wins; where all collide, the penalised ones are pushed out with a stiffer penalty
-    # (_push_clear) and join them, and if all still collide, the least penetration.
+    # (_push_clear) and join them, and if all still collide, the least penetration.  The
+    # rows' constrained poses (_constrained_first) are candidates too.
     candidates = [(best_r[rows], best_l[rows]), (r2, l2), (r3, l3),
-                  (batch.right[rows], batch.left[rows])]
+                  (batch.right[rows], batch.left[rows])] + extra
     scores, pens, hits = _judge(robot, scorer, checker, ids[rows], candidates)
     stuck = np.nonzero(hits.all(axis=0))[0]
     if stuck.size:
@@ -326,6 +356,47 @@ def _repair(robot, scorer, checker, batch, rows, plain, algo, clock, rng, stats)
                  stay_close=batch.stay_close[both], motions=batch.motions[both])
     r2, l2, st2 = _solve_once(robot, scorer, checker, sub, algo, clock, rng, stats)
     return r2[:m], l2[:m], r2[m:], l2[m:], st2[:m]
+
+
+def _constrained_first(robot, scorer, checker, batch, rows, plain, algo, clock):
+    """
+    Solve colliding ``rows`` with hard constraints first; return (settled, candidate).
+
+    ``plain`` is the (right, left) of the plain search, whose score bounds every clear
+    pose's from below: a row whose constrained pose (:func:`_constrained`) is clear and
+    within :data:`CONSTRAINED_GAP` of it is settled, and the penalised search is left
+    to the others, with the constrained poses as one more candidate.  Only with a
+    polishing algorithm (the node's preset; the paper's runs as it ran) and up to
+    :data:`CONSTRAINED_ROWS` rows (the solve is per row; the colony is batched).
+    Return a bool per row and the (right, left) of the rows, or (all False, None).
+    """
+    if not getattr(algo, 'polish', 0) or len(rows) > CONSTRAINED_ROWS:
+        return np.zeros(len(rows), dtype=bool), None
+    found = _constrained(robot, scorer, checker, batch, rows, range(len(rows)), clock)
+    scores, _, hits = _judge(robot, scorer, checker, batch.target_ids[rows],
+                             [(plain[0][rows], plain[1][rows]), found])
+    return ~hits[1] & (scores[1] <= scores[0] * (1.0 + CONSTRAINED_GAP)), found
+
+
+def _constrained(robot, scorer, checker, batch, rows, which, clock):
+    """
+    Return (right, left) of ``rows``: those at ``which`` solved with hard constraints.
+
+    The capsules' clearances as SLSQP's constraints (:mod:`.constrained`), from the
+    row's starting pose; the other rows, and a row for which no clear pose was found,
+    keep that pose.
+    """
+    right, left = batch.right[rows].copy(), batch.left[rows].copy()
+    for i in which:
+        k = rows[i]
+        if not batch.layouts[k]:
+            continue
+        problem = _rows_problem(robot, scorer, None, batch, batch.layouts[k], [k])[0]
+        x = constrained_pose(problem, checker, clock)
+        if x is not None:
+            qr, ql = problem.assemble(x[None])
+            right[i], left[i] = qr[0], ql[0]
+    return right, left
 
 
 def _judge(robot, scorer, checker, ids, candidates):
