@@ -112,7 +112,7 @@ def arm_segments(robot, lm, side):
     return np.stack((points[..., :3, :], points[..., 1:, :]), axis=-2)
 
 
-def pair_ends(capsules, seg):
+def pair_ends(capsules, seg) -> tuple:
     """
     Return ``(p1, q1, p2, q2)``, (N, pairs, 3) each: the ends of every pair's two segments.
 
@@ -138,8 +138,9 @@ def closest_pairs(capsules, seg, field=True):
     field's distance at the nearest of ``FIELD_SAMPLES`` points along the segment's
     axis, read against the torso capsule's radius (``dist + r_torso``, so that
     :func:`radius_sums` holds), ``s`` that point's parameter, and ``normal`` the
-    field's unit gradient there (zero for every other pair: their closest points give
-    the direction; None where no pair is nearer the field).  An upper arm hangs from a
+    field's gradient there, the derivative of that distance (about unit length; zero
+    for every other pair: their closest points give the direction; None where no pair
+    is nearer the field).  An upper arm hangs from a
     shoulder on the torso: it meets the capsule only.  ``field=False`` leaves the field
     out.
     """
@@ -193,7 +194,7 @@ def _field_pairs(capsules, shape, axes, d, s):
         g = grad[m, best]
         if len(rows):
             normal = np.zeros(d.shape + (3,))
-            normal[rows, pairs] = g / np.maximum(np.linalg.norm(g, axis=1), 1e-9)[:, None]
+            normal[rows, pairs] = g
     return normal
 
 

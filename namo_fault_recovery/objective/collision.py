@@ -124,13 +124,16 @@ class CollisionModel:
         grads = {}
         active = np.nonzero(np.any(gap > 0, axis=0))[0]
         for side, jac in (('right', jac_right), ('left', jac_left)):
-            if jac is not None:
+            if jac is not None and not active.size:
+                grads[side] = np.zeros((gap.shape[0], jac.axes.shape[1]))
+            elif jac is not None:
                 rates = self._rates(seg, closest, side, jac, active)       # (N, A, n)
                 grads[side] = np.einsum('na,nai->ni', -2.0 * self.capsules.weight
                                         * gap[:, active], rates)
         return value, grads
 
-    def clearance(self, lm_right, lm_left, target, jac_right=None, jac_left=None):
+    def clearance(self, lm_right, lm_left, target, jac_right=None,
+                  jac_left=None) -> tuple:
         """
         Return how far (mm) each pair is outside its allowed distance, and its derivatives.
 
@@ -165,7 +168,7 @@ class CollisionModel:
         sp, tp = s[:, pairs], t[:, pairs]
         unit = ((p1 + sp[..., None] * (q1 - p1)) - (p2 + tp[..., None] * (q2 - p2))) \
             / np.maximum(d[:, pairs], 1e-9)[..., None]
-        if normal is not None:                            # the torso's shape is nearer
+        if normal is not None:      # the torso's shape is nearer: its distance's gradient
             shaped = np.any(normal[:, pairs] != 0.0, axis=-1)
             unit = np.where(shaped[..., None], normal[:, pairs], unit)
         first = _FIRST_SIDE[pairs] == side

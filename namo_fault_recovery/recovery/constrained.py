@@ -16,14 +16,21 @@ constraints slides along the contact from the starting pose to 37.66.
 joints' bounds, and every checked pair's clearance (:meth:`~..objective.collision.
 CollisionModel.clearance`, analytic derivatives) at least 0.  It is a candidate among
 the others of the repair, which keeps the best clear one.  It stops when the clock
-runs out, with the best clear pose it has evaluated.
+runs out, with the best clear pose it has evaluated.  The keyframe search runs it first
+on a colliding pose (``keyframes._solve``); the judge keeps the best clear candidate.
 """
+
+from typing import Optional, TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import minimize
 
 from ..model.kinematics import ArmLandmarks
 from ..model.robot import ARMS
+from ..optimize.base import Clock, Problem
+
+if TYPE_CHECKING:
+    from ..objective.collision import CollisionModel
 
 MAXITER = 60            # SLSQP iterations (the Talos case above takes 35)
 FTOL = 1e-6             # SLSQP's stopping tolerance on the score
@@ -70,7 +77,8 @@ class _Evaluations:
         return float(f[0, 0]), grad[0, 0], margin[0], jacobian
 
 
-def constrained_pose(problem, checker, clock, maxiter=MAXITER):
+def constrained_pose(problem: Problem, checker: 'CollisionModel', clock: Clock,
+                     maxiter: int = MAXITER) -> Optional[np.ndarray]:
     """
     Return the best clear pose (D,) SLSQP reaches from ``problem``'s start, or None.
 

@@ -59,9 +59,10 @@ RESTART_MAXITER = 20       # polish iterations of a repair's branch restarts
 REACH_MAXITER = 20         # polish iterations of a repair's searches within reach
 STIFF_PENALTY = 10.0       # a stuck repair's penalty, times the capsules' own weight
 # Colliding rows are solved with the capsules as hard constraints first (recovery.
-# constrained), when there are at most CONSTRAINED_ROWS of them (the solve takes 10-40 ms a
+# constrained), when there are at most CONSTRAINED_ROWS of them (the solve takes 20-70 ms a
 # row; the penalised colony is batched); a row whose constrained pose scores within
-# CONSTRAINED_GAP of its plain optimum, which bounds it from below, is settled.
+# CONSTRAINED_GAP of its plain result (the search without the contacts, as low as a clear
+# pose normally gets) is settled.
 CONSTRAINED_ROWS = 2
 CONSTRAINED_GAP = 0.01
 PUSH_MAXITER = 15          # polish iterations that push an idle arm out of the body
@@ -185,7 +186,7 @@ class PoseProblem(Problem):
             out[side] = q
         return out['right'], out['left']
 
-    def arms(self, x, jacobian=False):
+    def arms(self, x: np.ndarray, jacobian: bool = False) -> tuple:
         """
         Return ``({side: landmarks}, target ids)`` of x (B, N, D), one row per pose.
 
@@ -222,7 +223,7 @@ class PoseProblem(Problem):
         arms, target = self.arms(x, jacobian=True)
         return self.value_and_grad_at(x, arms, target)
 
-    def value_and_grad_at(self, x, arms, target):
+    def value_and_grad_at(self, x: np.ndarray, arms: dict, target: np.ndarray) -> tuple:
         """Return the objective and its gradient at x (B, N, D) from its :meth:`arms`."""
         batch, n, dim = x.shape
         f, g_right, g_left = self.scorer.value_and_grad(arms['right'], arms['left'], target,
@@ -274,8 +275,8 @@ def _solve(robot, scorer, checker, batch, algo, clock, rng, stats=None):
     The collision constraint is lazy: the plain score is optimised first (fast, and
     most results do not collide), the results are checked, and only the rows that
     collide are solved again: with the capsules as hard constraints from their
-    starting pose (:func:`_constrained_first`), and, unless that came within
-    ``CONSTRAINED_GAP`` of the plain optimum, with the capsule penalty from their
+    starting pose (:func:`_settle_constrained`), and, unless that came within
+    ``CONSTRAINED_GAP`` of the plain result, with the capsule penalty from their
     collision-free starting pose and from the plain optimum (:func:`_repair`).
     Return (best right, best left, status names).
     """
@@ -291,13 +292,8 @@ def _solve(robot, scorer, checker, batch, algo, clock, rng, stats=None):
     # The torso's shape in the repair's penalty only where it is what the rows touch.
     if np.any(shape_hits[rows]):
         checker = checker.shaped()
-    settled, found = _constrained_first(robot, scorer, checker, batch, rows,
-                                        (best_r, best_l), algo, clock)
-    extra = []
-    if found is not None:
-        best_r[rows[settled]], best_l[rows[settled]] = found[0][settled], found[1][settled]
-        extra = [(found[0][~settled], found[1][~settled])]
-    rows = rows[~settled]
+    rows, extra = _settle_constrained(robot, scorer, checker, batch, rows,
+                                      (best_r, best_l, status), algo, clock)
     if rows.size == 0:
         return best_r, best_l, status
     r2, l2, r3, l3, st2 = _repair(robot, scorer, checker, batch, rows,
@@ -307,7 +303,7 @@ def _solve(robot, scorer, checker, batch, algo, clock, rng, stats=None):
     # themselves force a contact).  The best score among those that do not collide
     # wins; where all collide, the penalised ones are pushed out with a stiffer penalty
     # (_push_clear) and join them, and if all still collide, the least penetration.  The
-    # rows' constrained poses (_constrained_first) are candidates too.
+    # rows' constrained poses (_settle_constrained) are candidates too.
     candidates = [(best_r[rows], best_l[rows]), (r2, l2), (r3, l3),
                   (batch.right[rows], batch.left[rows])] + extra
     scores, pens, hits = _judge(robot, scorer, checker, ids[rows], candidates)
@@ -358,41 +354,50 @@ def _repair(robot, scorer, checker, batch, rows, plain, algo, clock, rng, stats)
     return r2[:m], l2[:m], r2[m:], l2[m:], st2[:m]
 
 
-def _constrained_first(robot, scorer, checker, batch, rows, plain, algo, clock):
+def _settle_constrained(robot, scorer, checker, batch, rows, plain, algo, clock):
     """
-    Solve colliding ``rows`` with hard constraints first; return (settled, candidate).
+    Solve colliding ``rows`` with hard constraints first; return (rows left, candidates).
 
-    ``plain`` is the (right, left) of the plain search, whose score bounds every clear
-    pose's from below: a row whose constrained pose (:func:`_constrained`) is clear and
-    within :data:`CONSTRAINED_GAP` of it is settled, and the penalised search is left
-    to the others, with the constrained poses as one more candidate.  Only with a
-    polishing algorithm (the node's preset; the paper's runs as it ran) and up to
+    ``plain`` is (right, left, status) of the plain search, updated in place: a row
+    whose constrained pose (:func:`_constrained`) is clear and within
+    :data:`CONSTRAINED_GAP` of its plain result (which searched without the contacts,
+    so a clear pose rarely scores lower) takes that pose and is settled, unless the
+    plain search was cut short.  The rows left go to the penalised search, with their
+    constrained poses as one more candidate (the list returned).  Only with a polishing
+    algorithm (the node's preset; the paper's runs as it ran) and up to
     :data:`CONSTRAINED_ROWS` rows (the solve is per row; the colony is batched).
-    Return a bool per row and the (right, left) of the rows, or (all False, None).
     """
+    best_r, best_l, status = plain
     if not getattr(algo, 'polish', 0) or len(rows) > CONSTRAINED_ROWS:
-        return np.zeros(len(rows), dtype=bool), None
-    found = _constrained(robot, scorer, checker, batch, rows, range(len(rows)), clock)
+        return rows, []
+    found = _constrained(robot, scorer, checker, batch, rows, clock)
     scores, _, hits = _judge(robot, scorer, checker, batch.target_ids[rows],
-                             [(plain[0][rows], plain[1][rows]), found])
-    return ~hits[1] & (scores[1] <= scores[0] * (1.0 + CONSTRAINED_GAP)), found
+                             [(best_r[rows], best_l[rows]), found])
+    settled = ~hits[1] & (scores[1] <= scores[0] * (1.0 + CONSTRAINED_GAP)) & np.array(
+        [status[k] not in ('deadline', 'cancelled') for k in rows], dtype=bool)
+    for i in np.nonzero(settled)[0]:
+        best_r[rows[i]], best_l[rows[i]] = found[0][i], found[1][i]
+        if clock.expired():
+            status[rows[i]] = _STATUS_NAMES[clock.reason]
+    return rows[~settled], [(found[0][~settled], found[1][~settled])]
 
 
-def _constrained(robot, scorer, checker, batch, rows, which, clock):
+def _constrained(robot, scorer, checker, batch, rows, clock):
     """
-    Return (right, left) of ``rows``: those at ``which`` solved with hard constraints.
+    Return (right, left) of ``rows``, each solved from its start with hard constraints.
 
-    The capsules' clearances as SLSQP's constraints (:mod:`.constrained`), from the
-    row's starting pose; the other rows, and a row for which no clear pose was found,
-    keep that pose.
+    The capsules' clearances, with the torso's shape (the judge's), as SLSQP's
+    constraints (:mod:`.constrained`), from the row's starting pose, each row within
+    a share of the clock that leaves the penalised search one too; a row without free
+    joints, or for which no clear pose was found, keeps its starting pose.
     """
     right, left = batch.right[rows].copy(), batch.left[rows].copy()
-    for i in which:
-        k = rows[i]
+    shaped = checker.shaped()
+    for i, k in enumerate(rows):
         if not batch.layouts[k]:
             continue
         problem = _rows_problem(robot, scorer, None, batch, batch.layouts[k], [k])[0]
-        x = constrained_pose(problem, checker, clock)
+        x = constrained_pose(problem, shaped, clock.child(share=1.0 / (len(rows) - i + 1)))
         if x is not None:
             qr, ql = problem.assemble(x[None])
             right[i], left[i] = qr[0], ql[0]
