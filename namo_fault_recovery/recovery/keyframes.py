@@ -386,18 +386,19 @@ def _constrained(robot, scorer, checker, batch, rows, clock):
     """
     Return (right, left) of ``rows``, each solved from its start with hard constraints.
 
-    The capsules' clearances, with the torso's shape (the judge's), as SLSQP's
-    constraints (:mod:`.constrained`), from the row's starting pose, each row within
-    a share of the clock that leaves the penalised search one too; a row without free
-    joints, or for which no clear pose was found, keeps its starting pose.
+    The capsules' clearances as SLSQP's constraints (:mod:`.constrained`), with the
+    torso's shape where ``checker`` has it (as the penalised repair: only where the
+    rows touch it; it costs a third more per evaluation, and the judge checks it
+    anyway), from the row's starting pose, each row within a share of the clock that
+    leaves the penalised search one too; a row without free joints, or for which no
+    clear pose was found, keeps its starting pose.
     """
     right, left = batch.right[rows].copy(), batch.left[rows].copy()
-    shaped = checker.shaped()
     for i, k in enumerate(rows):
         if not batch.layouts[k]:
             continue
         problem = _rows_problem(robot, scorer, None, batch, batch.layouts[k], [k])[0]
-        x = constrained_pose(problem, shaped, clock.child(share=1.0 / (len(rows) - i + 1)))
+        x = constrained_pose(problem, checker, clock.child(share=1.0 / (len(rows) - i + 1)))
         if x is not None:
             qr, ql = problem.assemble(x[None])
             right[i], left[i] = qr[0], ql[0]
