@@ -127,24 +127,24 @@ def pair_ends(capsules, seg) -> tuple:
     return ends[:, _FIRST], ends[:, _FIRST + 1], ends[:, _SECOND], ends[:, _SECOND + 1]
 
 
-def closest_pairs(capsules, seg, field=True):
+def closest_pairs(capsules, ends, field=True):
     """
     Return ``(d, s, t, normal)`` of every pair of PAIRS: (N, pairs) each, normal (N, pairs, 3).
 
-    ``seg`` maps 'right' and 'left' to arm segments (N, 3, 2, 3) mm.  ``d`` is the
-    axis distance, ``s`` and ``t`` the closest points' parameters on the first and
-    second segment.  With a ``capsules.torso_field``, a forearm or hand must clear the
-    torso's own shape as well as its capsule: where the field is nearer, ``d`` is the
+    ``ends`` is :func:`pair_ends`' answer for the arms' segments (the caller keeps it
+    for the distances' derivatives, ``CollisionModel``).  ``d`` is the axis distance,
+    ``s`` and ``t`` the closest points' parameters on the first and second segment.
+    With a ``capsules.torso_field``, a forearm or hand must clear the torso's own shape
+    as well as its capsule: where the field is nearer, ``d`` is the
     field's distance at the nearest of ``FIELD_SAMPLES`` points along the segment's
     axis, read against the torso capsule's radius (``dist + r_torso``, so that
     :func:`radius_sums` holds), ``s`` that point's parameter, and ``normal`` the
     field's gradient there, the derivative of that distance (about unit length; zero
     for every other pair: their closest points give the direction; None where no pair
-    is nearer the field).  An upper arm hangs from a
-    shoulder on the torso: it meets the capsule only.  ``field=False`` leaves the field
-    out.
+    is nearer the field).  An upper arm hangs from a shoulder on the torso: it meets the
+    capsule only.  ``field=False`` leaves the field out.
     """
-    p1, q1, p2, q2 = pair_ends(capsules, seg)
+    p1, q1, p2, q2 = ends
     d, s, t = segment_distance(p1, q1, p2, q2)
     normal = None
     shape = capsules.torso_field if field else None
@@ -202,7 +202,7 @@ def pair_distances(robot, lm_right, lm_left):
     """Return the axis distance (mm) of every pair, (N, pairs), and the closest points' s, t."""
     seg = {'right': arm_segments(robot, lm_right, 'right'),
            'left': arm_segments(robot, lm_left, 'left')}
-    return closest_pairs(robot.capsules, seg)[:3]
+    return closest_pairs(robot.capsules, pair_ends(robot.capsules, seg))[:3]
 
 
 def penetrations(robot, q14):

@@ -64,9 +64,7 @@ class CollisionModel:
 
     def closest(self, lm_right, lm_left, field=True):
         """Return ``(d, s, t, normal)`` (:func:`~..model.self_contact.closest_pairs`)."""
-        seg = {'right': self._segments(lm_right, 'right'),
-               'left': self._segments(lm_left, 'left')}
-        return closest_pairs(self.capsules, seg, field)
+        return closest_pairs(self.capsules, self._ends(lm_right, lm_left), field)
 
     def shaped(self):
         """
@@ -117,8 +115,8 @@ class CollisionModel:
         the relative velocity of the two closest points along their separation
         (:meth:`clearance` gives those derivatives pair by pair).
         """
-        seg = self._segments_of(lm_right, lm_left)
-        closest = closest_pairs(self.capsules, seg, self.field_penalty)
+        ends = self._ends(lm_right, lm_left)
+        closest = closest_pairs(self.capsules, ends, self.field_penalty)
         gap = np.maximum(self.allowed[target] - closest[0], 0.0)
         value = self.capsules.weight * np.sum(gap ** 2, axis=1)
         grads = {}
@@ -127,7 +125,7 @@ class CollisionModel:
             if jac is not None and not active.size:
                 grads[side] = np.zeros((gap.shape[0], jac.axes.shape[1]))
             elif jac is not None:
-                rates = self._rates(seg, closest, side, jac, active)       # (N, A, n)
+                rates = self._rates(ends, closest, side, jac, active)      # (N, A, n)
                 grads[side] = np.einsum('na,nai->ni', -2.0 * self.capsules.weight
                                         * gap[:, active], rates)
         return value, grads
@@ -142,29 +140,30 @@ class CollisionModel:
         d(margin)/dq.  The constraints of a constrained local solve
         (:mod:`..recovery.constrained`), with the torso's shape as :meth:`penalty` has it.
         """
-        seg = self._segments_of(lm_right, lm_left)
-        closest = closest_pairs(self.capsules, seg, self.field_penalty)
+        ends = self._ends(lm_right, lm_left)
+        closest = closest_pairs(self.capsules, ends, self.field_penalty)
         every = np.arange(len(PAIRS))
-        rates = {side: self._rates(seg, closest, side, jac, every)
+        rates = {side: self._rates(ends, closest, side, jac, every)
                  for side, jac in (('right', jac_right), ('left', jac_left)) if jac is not None}
         return closest[0] - self.allowed[target], rates
 
-    def _segments_of(self, lm_right, lm_left):
-        return {'right': self._segments(lm_right, 'right'),
-                'left': self._segments(lm_left, 'left')}
+    def _ends(self, lm_right, lm_left):
+        """Return every pair's segment ends (:func:`~..model.self_contact.pair_ends`)."""
+        return pair_ends(self.capsules, {'right': self._segments(lm_right, 'right'),
+                                         'left': self._segments(lm_left, 'left')})
 
-    def _rates(self, seg, closest, side, jac, pairs):
+    def _rates(self, ends, closest, side, jac, pairs):
         """
         Return d(distance)/dq (N, len(pairs), n) of ``pairs`` for the joints of ``side``.
 
-        ``closest`` is :func:`closest_pairs`' answer for ``seg``; a pair not involving
+        ``closest`` is :func:`closest_pairs`' answer for ``ends``; a pair not involving
         ``side`` moves at rate 0.  All pairs at once: the closest points, their unit
         separation (the torso's shape's normal where it decides), and the velocity of
         ``side``'s closest point, interpolated between its segment's end velocities.
         """
         d, s, t, normal = closest
         pairs = np.asarray(pairs, dtype=int)
-        p1, q1, p2, q2 = (e[:, pairs] for e in pair_ends(self.capsules, seg))
+        p1, q1, p2, q2 = (e[:, pairs] for e in ends)
         sp, tp = s[:, pairs], t[:, pairs]
         unit = ((p1 + sp[..., None] * (q1 - p1)) - (p2 + tp[..., None] * (q2 - p2))) \
             / np.maximum(d[:, pairs], 1e-9)[..., None]

@@ -14,8 +14,7 @@ constraints slides along the contact from the starting pose to 37.66.
 :func:`constrained_pose` runs that SLSQP solve (scipy's) on one row of a
 :class:`~.keyframes.PoseProblem` without a penalty: its score and gradient, the
 joints' bounds, and every checked pair's clearance (:meth:`~..objective.collision.
-CollisionModel.clearance`, analytic derivatives) at least 0.  It is a candidate among
-the others of the repair, which keeps the best clear one.  It stops when the clock
+CollisionModel.clearance`, analytic derivatives) at least 0.  It stops when the clock
 runs out, with the best clear pose it has evaluated.  The keyframe search runs it first
 on a colliding pose (``keyframes._solve``); the judge keeps the best clear candidate.
 """
@@ -25,8 +24,6 @@ from typing import Optional, TYPE_CHECKING
 import numpy as np
 from scipy.optimize import minimize
 
-from ..model.kinematics import ArmLandmarks
-from ..model.robot import ARMS
 from ..optimize.base import Clock, Problem
 
 if TYPE_CHECKING:
@@ -64,10 +61,7 @@ class _Evaluations:
         problem = self.problem
         arms, target = problem.arms(x[None, None], jacobian=True)
         f, grad = problem.value_and_grad_at(x[None, None], arms, target)
-        lm, jac = {}, {}
-        for side in ARMS:
-            fixed = isinstance(arms[side], ArmLandmarks)
-            lm[side], jac[side] = (arms[side], None) if fixed else arms[side]
+        lm, jac = problem.split_jacobians(arms)
         margin, rates = self.checker.clearance(lm['right'], lm['left'], target,
                                                jac['right'], jac['left'])
         jacobian = np.zeros((margin.shape[1], len(x)))

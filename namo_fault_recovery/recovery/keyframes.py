@@ -223,6 +223,13 @@ class PoseProblem(Problem):
         arms, target = self.arms(x, jacobian=True)
         return self.value_and_grad_at(x, arms, target)
 
+    @staticmethod
+    def split_jacobians(arms: dict) -> tuple[dict, dict]:
+        """Return ``({side: landmarks}, {side: jacobian or None})`` of :meth:`arms` with them."""
+        moving = {s: not isinstance(a, ArmLandmarks) for s, a in arms.items()}
+        return ({s: a[0] if moving[s] else a for s, a in arms.items()},
+                {s: a[1] if moving[s] else None for s, a in arms.items()})
+
     def value_and_grad_at(self, x: np.ndarray, arms: dict, target: np.ndarray) -> tuple:
         """Return the objective and its gradient at x (B, N, D) from its :meth:`arms`."""
         batch, n, dim = x.shape
@@ -230,9 +237,7 @@ class PoseProblem(Problem):
                                                         self.smooth)
         grads = {'right': g_right, 'left': g_left}
         if self.collision is not None:
-            moving = {s: not isinstance(a, ArmLandmarks) for s, a in arms.items()}
-            lm = {s: a[0] if moving[s] else a for s, a in arms.items()}
-            jac = {s: a[1] if moving[s] else None for s, a in arms.items()}
+            lm, jac = self.split_jacobians(arms)
             pen, pen_grad = self.collision.penalty(lm['right'], lm['left'], target,
                                                    jac['right'], jac['left'])
             f = f + pen

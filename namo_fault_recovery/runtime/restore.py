@@ -74,7 +74,7 @@ def validate_faults(robot, faults):
     """Return why a persisted fault set cannot be used, or None."""
     for joint, fault in faults.items():
         try:
-            robot.joint_bounds(joint)
+            robot.locate_played(joint)
         except KeyError as exc:
             return f'fault on {exc.args[0]}'
         for value in (fault.angle, fault.measured):
