@@ -27,6 +27,7 @@ from .common import BenchError
 from ..errors import EXIT_USAGE
 from ..runtime import diagnostic_keys as keys
 from ..runtime.private_node import NodeTarget
+from ..runtime.realtime import set_fifo_priority
 
 
 def percentiles(values):
@@ -180,7 +181,8 @@ def _checked_joints(joints, known):
 
 
 def run_latency(out, count=50, joints=None, timeout=30.0, namespace='/',
-                target=NodeTarget(), joint_states_hz=0.0, verbose=False, settle=0.0):
+                target=NodeTarget(), joint_states_hz=0.0, verbose=False, settle=0.0,
+                client_priority=0):
     """
     Measure fault-publish -> full-library-received latency against a node.
 
@@ -189,7 +191,10 @@ def run_latency(out, count=50, joints=None, timeout=30.0, namespace='/',
 
     ``target`` (:class:`~..runtime.private_node.NodeTarget`) is the node: with
     ``start_node`` a private one is started (its ``robot_file``, ``gesture_file`` and
-    ``node_params``) in ``domain_id`` (default a private one).  Returns
+    ``node_params``) in ``domain_id`` (default a private one).  ``client_priority`` > 0
+    runs the client (not the node or the stream, started before it) under
+    ``SCHED_FIFO`` at that priority (:func:`~..runtime.realtime.set_fifo_priority`;
+    BenchError if refused).  Returns
     ``(report, failures)``: the report dict (raises BenchError when no measurement
     succeeded) and the list of failed rounds.
     """
@@ -201,6 +206,10 @@ def run_latency(out, count=50, joints=None, timeout=30.0, namespace='/',
         if joint_states_hz > 0:
             from ..ros.joint_state_stream import StreamProcess
             stream = StreamProcess(joint_states_hz, domain_id)
+        # The client's middleware and executor threads inherit the policy.
+        refused = set_fifo_priority(client_priority)
+        if refused:
+            raise BenchError(f'--client-priority: {refused}')
         with RecoveryClient(namespace, domain_id) as client:
             _measure(client, samples, count, joints, timeout, out, verbose, settle)
     finally:

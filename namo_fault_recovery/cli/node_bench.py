@@ -17,6 +17,7 @@ import sys
 from .ros_common import (add_connection_arguments, CommandError, EXIT_FAILURE, EXIT_USAGE,
                          namespace, wrap)
 from ..runtime.private_node import NodeTarget, private_domain
+from ..runtime.realtime import MAX_PRIORITY
 
 
 def _rates(text):
@@ -34,10 +35,13 @@ def cmd_latency(args, out):
     from ..benchmarks import latency
     if not args.settle >= 0:
         raise CommandError('--settle: expected a number of seconds >= 0', EXIT_USAGE)
+    if not 0 <= args.client_priority <= MAX_PRIORITY:
+        raise CommandError(f'--client-priority: expected 0 .. {MAX_PRIORITY}, got '
+                           f'{args.client_priority}', EXIT_USAGE)
     report, failures = latency.run_latency(
         out, args.count, args.joints, args.timeout, namespace(args),
         NodeTarget.from_args(args), joint_states_hz=args.joint_states_hz, verbose=args.verbose,
-        settle=args.settle)
+        settle=args.settle, client_priority=args.client_priority)
     if args.json:
         out.write(json.dumps(report, indent=2) + '\n')
     else:
@@ -159,6 +163,10 @@ def _add_latency(bench_subparsers):
     p.add_argument('--settle', type=float, default=0.0, metavar='SEC',
                    help='wait this long after each clear before the next fault (default 0: '
                         'at once)')
+    p.add_argument('--client-priority', type=int, default=0, metavar='N',
+                   help='run the measuring client under SCHED_FIFO at priority N, as a '
+                        "robot's real-time consumer of the library runs (default 0: the "
+                        'normal scheduler); see the node parameter thread_priority')
     add_private_node_arguments(p)
     p.add_argument('--json', action='store_true', help='print one JSON document')
     p.add_argument('-v', '--verbose', action='store_true', help='print every sample')

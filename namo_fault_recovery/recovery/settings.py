@@ -246,12 +246,26 @@ def _rows(engine_rows, weight_rows):
                 '/structure_correction each becomes a library version (library_origin: '
                 "explored) and the arm's corrected model for later faults; empty = off",
                 read_only=True),
+        *_process_rows(),
+    )
+
+
+def _process_rows():
+    """Return the settings of the node's process: its diagnostics, engine start, priority."""
+    return (
         Setting('diagnostics_period_sec', float, 1.0, 'period of /diagnostics (also '
                 'published on every change)', unit='s', limits=(0.1, 60.0), read_only=True),
         Setting('engine_start_timeout_sec', float, 60.0, 'the engine process must be '
                 'loaded and warmed up within this long, at start and after a restart, or the '
                 'node refuses to start (the run fails)', unit='s', limits=(1.0, 600.0),
                 read_only=True),
+        Setting('thread_priority', int, 0, "SCHED_FIFO real-time priority of the node's own "
+                'threads (executor, /joint_states listener, fault intake, middleware), set '
+                "once the node is ready, as ros2_control's controller manager sets its "
+                "loop's; the engine and table processes stay under the normal scheduler; "
+                'needs the rtprio limit (/etc/security/limits.conf): if refused, the node '
+                'logs why and runs under the normal scheduler; 0 = off',
+                limits=(0, 99), read_only=True),
     )
 
 

@@ -12,6 +12,8 @@ the node's runtime, ``runtime/``):
 - :mod:`.description_wait`: the URDF from the ``robot_description`` topic, waited for
   (and said on ``/diagnostics``) when the robot's profile names none;
 - :mod:`.input_monitor`: the latest joint state, measured angles and rejected inputs;
+- :mod:`.state_listener`: ``/joint_states`` taken on a helper node and executor of their
+  own, so that a 500 Hz stream does not wake the node's executor;
 - :mod:`.diagnostics`: ``/diagnostics`` built from a snapshot;
 - :mod:`.messages`: results to and from ROS messages, and the RViz markers.
 
@@ -24,7 +26,8 @@ Clients of a running node (the benchmarks themselves are in ``benchmarks/``):
 - :mod:`.joint_state_stream`: a ``/joint_states`` stream as a robot's drivers publish
   it, in a thread or a child process;
 - :mod:`.spun_node`: an rclpy node in a context of its own, spun by a background thread
-  (the clients and the tests each use one), and ``wait_until`` for what it records.
+  (the clients and the tests each use one), ``lean_node`` (a node without parameter
+  services), and ``wait_until`` for what it records.
 
 The gesture player and the simulated robot:
 

@@ -40,6 +40,7 @@ from .explored_intake import ExploredIntake
 from .input_monitor import InputMonitor
 from .parameters import (check_parameter, declare_parameters, DEFAULT_STATE_DIR, MARKER_PARAMS,
                          node_config, one_line, parameter_specs, RERUN_PARAMS, StartupError)
+from .state_listener import StateListener
 from ..errors import ConfigError, shorten
 from ..recovery.result import reference_result, summary
 from ..runtime import diagnostic_keys as dk
@@ -52,10 +53,13 @@ from ..runtime.fault_intake import After, Clear, FaultIntake, Report
 from ..runtime.inputs import BadInput, parse_fault
 from ..runtime.latest_worker import LatestWorker
 from ..runtime.persistence import Persistence
+from ..runtime.realtime import set_fifo_priority
 from ..runtime.robot_source import load_models, robot_source
 from ..runtime.run_book import Outcome, RunBook
 
 NODE_NAME = 'recovery_node'
+# The node's parts with threads or files, stopped in this order (after the engine).
+PARTS = ('_states', '_table', '_explored', '_state', '_answers', '_markers')
 FAULT_QUEUE_DEPTH = 10_000        # reports the subscription holds while the intake catches up
 STATES_PARSE_PERIOD = 0.1         # s: the latest raw joint state is parsed at most this often
 MARKER_DELAY = 0.05               # s: markers are drawn this long after a publication
@@ -179,6 +183,7 @@ class RecoveryNode(Node):
         if self._config.contingency_table:
             self._table.configure(self._config.settings,
                                   active={j: f.angle for j, f in self._book.faults.items()})
+        use_priority(self.get_logger(), values['thread_priority'])
         self._ready = True
         where = self._source.describe() if self._source.profile else self._robot.source
         self.get_logger().info(
@@ -211,9 +216,8 @@ class RecoveryNode(Node):
         self.create_subscription(JointState, 'actuator_fault', self._on_fault,
                                  QoSProfile(depth=FAULT_QUEUE_DEPTH, **RELIABLE),
                                  callback_group=MutuallyExclusiveCallbackGroup())
-        self.create_subscription(JointState, 'joint_states', self._inputs.joint_state,
-                                 QoSProfile(depth=1, **LATEST),
-                                 callback_group=MutuallyExclusiveCallbackGroup(), raw=True)
+        self._states = StateListener(self, JointState, 'joint_states', self._inputs.joint_state,
+                                     QoSProfile(depth=1, **LATEST), raw=True)
         services = ReentrantCallbackGroup()
         service_qos = QoSProfile(depth=1000, **RELIABLE)
         self.create_service(Trigger, 'reconfigure_gestures', self._on_reconfigure,
@@ -424,10 +428,19 @@ class RecoveryNode(Node):
         self._intake.stop()
         self._dispatcher.join()
         self._engine.stop()
-        for name in ('_table', '_explored', '_state', '_answers', '_markers'):   # built so far
+        for name in PARTS:   # those built so far
             part = getattr(self, name, None)
             if part is not None:
                 part.stop()
+
+
+def use_priority(logger, priority):
+    """Run the node's threads (not its child processes) real-time, if asked and allowed."""
+    refused = set_fifo_priority(priority)
+    if refused:
+        logger.warning(refused)
+    elif priority:
+        logger.info(f'threads under SCHED_FIFO, priority {priority}')
 
 
 def restore(node, plan):

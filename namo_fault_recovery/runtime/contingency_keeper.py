@@ -33,6 +33,7 @@ import threading
 import time
 
 from .engine_process import die_with_parent
+from .realtime import leave_fifo
 from .restore import check_result
 from ..recovery.contingency import (ContingencyTable, entry_key, fault_sets, measure_entry,
                                     table_fingerprint, table_locks)
@@ -46,6 +47,7 @@ HOLD_POLL = 0.05          # s: a new plan waits this long, then while hold() is 
 def _build(conn, robot, library, settings, plan, seeds, parent_pid=None):
     """Child: build each fault set of ``plan`` at the lowest priority; send each entry."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)     # Ctrl-C is the node's to handle
+    leave_fifo()             # a real-time node's child computes under the normal scheduler
     die_with_parent(parent_pid)
     conn.send(('armed', None, None, 0.0))            # from now on it may be stopped
     try:

@@ -16,6 +16,8 @@ import signal
 import time
 import traceback
 
+from .realtime import leave_fifo
+
 _STOP = None
 _REFINE = 'refine'
 _PR_SET_PDEATHSIG = 1
@@ -63,6 +65,7 @@ def _load_models(conn):
 def _serve(conn, current, parent_pid=None):
     """Child main loop: import, load the models, warm up, then answer until told to stop."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)     # Ctrl-C is the parent's to handle
+    leave_fifo()             # a real-time node's child computes under the normal scheduler
     die_with_parent(parent_pid)
     from ..optimize.base import Clock
     from ..recovery.engine import recover, RecoverySettings

@@ -1,0 +1,118 @@
+"""
+``thread_priority``: the node's own threads under SCHED_FIFO, its child processes not.
+
+``runtime.realtime`` is exercised in a child interpreter (the test process keeps its
+own scheduling), then on the real node: its threads run real-time, its engine process
+under the normal scheduler; where the machine refuses real-time priority, the node says
+why and runs on.
+"""
+
+import os
+from pathlib import Path
+import subprocess
+import sys
+
+from namo_fault_recovery.runtime import realtime
+from node_harness import NodeProcess, session_domain
+import pytest
+
+DOMAIN = session_domain(1)       # the lifecycle tests': never at the same time
+
+PROBE = r"""
+import json, multiprocessing, os, threading
+from namo_fault_recovery.runtime.realtime import leave_fifo, set_fifo_priority
+
+def child(queue):
+    leave_fifo()
+    queue.put(os.sched_getscheduler(0))
+
+if __name__ == '__main__':
+    stop = threading.Event()
+    before = threading.Thread(target=stop.wait)
+    before.start()
+    refused = set_fifo_priority(3)
+    seen = {}
+    after = threading.Thread(target=lambda: seen.update(after=os.sched_getscheduler(0)))
+    after.start()
+    after.join()
+    ctx = multiprocessing.get_context('spawn')
+    queue = ctx.Queue()
+    proc = ctx.Process(target=child, args=(queue,))
+    proc.start()
+    seen['child'] = queue.get(timeout=60)
+    proc.join()
+    seen['threads'] = [os.sched_getscheduler(int(t)) for t in os.listdir('/proc/self/task')]
+    stop.set()
+    before.join()
+    print(json.dumps({'refused': refused, **seen}))
+"""
+
+
+def test_zero_changes_nothing_and_out_of_range_is_refused():
+    policy = os.sched_getscheduler(0)
+    assert realtime.set_fifo_priority(0) is None
+    assert os.sched_getscheduler(0) == policy
+    with pytest.raises(ValueError, match='thread_priority: expected 0 .. 99, got 100'):
+        realtime.set_fifo_priority(100)
+
+
+def test_every_thread_then_new_threads_real_time_children_normal(tmp_path):
+    import json
+    probe = tmp_path / 'probe.py'          # a file: a spawned child imports its main
+    probe.write_text(PROBE)
+    out = subprocess.run([sys.executable, str(probe)], capture_output=True, text=True,
+                         timeout=120, check=True).stdout
+    seen = json.loads(out.strip().splitlines()[-1])
+    assert seen['child'] == os.SCHED_OTHER           # leave_fifo in every child process
+    if seen['refused'] is not None:                  # a machine without rtprio: said why
+        assert 'RLIMIT_RTPRIO' in seen['refused'] or 'no real-time' in seen['refused']
+        assert set(seen['threads']) == {os.SCHED_OTHER} and seen['after'] == os.SCHED_OTHER
+        return
+    assert set(seen['threads']) == {os.SCHED_FIFO}, seen   # those that existed, the new
+    assert seen['after'] == os.SCHED_FIFO
+
+
+def test_a_refusal_puts_the_changed_threads_back(monkeypatch):
+    calls = []
+
+    def setscheduler(tid, policy, param):
+        calls.append((tid, policy))
+        if policy == os.SCHED_FIFO and len(calls) > 1:
+            raise PermissionError(1, 'Operation not permitted')
+    monkeypatch.setattr(realtime, '_thread_ids', lambda: [11, 12, 13])
+    monkeypatch.setattr(realtime.os, 'sched_setscheduler', setscheduler)
+    reason = realtime.set_fifo_priority(40)
+    assert reason.startswith('thread_priority: cannot use SCHED_FIFO priority 40 '
+                             '(Operation not permitted)'), reason
+    assert 'RLIMIT_RTPRIO' in reason and '\n' not in reason
+    assert calls == [(11, os.SCHED_FIFO), (12, os.SCHED_FIFO), (11, os.SCHED_OTHER)]
+
+
+def _policies(pid):
+    """Return {thread id: policy} of process ``pid``."""
+    tasks = Path(f'/proc/{pid}/task')
+    return {int(t.name): os.sched_getscheduler(int(t.name)) for t in tasks.iterdir()}
+
+
+@pytest.mark.slow
+def test_node_threads_real_time_engine_process_normal(tmp_path):
+    node = NodeProcess(DOMAIN, state_dir=tmp_path / 'state',
+                       args=['-p', 'thread_priority:=7', '-p', 'contingency_table:=false'])
+    try:
+        node.wait_output('engine process started', timeout=120)
+        text = node.stdout + node.stderr
+        children = [int(p) for p in Path(f'/proc/{node.proc.pid}/task/{node.proc.pid}/'
+                                         'children').read_text().split()]
+        assert children, 'the engine process is a child of the node'
+        assert all(os.sched_getscheduler(c) == os.SCHED_OTHER for c in children)
+        if 'cannot use SCHED_FIFO priority 7' in text:     # refused: said, and runs on
+            assert set(_policies(node.proc.pid).values()) == {os.SCHED_OTHER}
+            return
+        assert 'threads under SCHED_FIFO, priority 7' in text, node.describe()
+        policies = _policies(node.proc.pid)
+        assert policies[node.proc.pid] == os.SCHED_FIFO
+        assert os.sched_getparam(node.proc.pid).sched_priority == 7
+        fifo = sum(p == os.SCHED_FIFO for p in policies.values())
+        assert fifo >= len(policies) - 2, policies     # the middleware's, Python's
+    finally:
+        assert node.stop() == 0, node.describe()
