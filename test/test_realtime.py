@@ -11,6 +11,7 @@ import os
 from pathlib import Path
 import subprocess
 import sys
+import time
 
 from namo_fault_recovery.runtime import realtime
 from node_harness import NodeProcess, session_domain
@@ -116,3 +117,19 @@ def test_node_threads_real_time_engine_process_normal(tmp_path):
         assert fifo >= len(policies) - 2, policies     # the middleware's, Python's
     finally:
         assert node.stop() == 0, node.describe()
+
+
+@pytest.mark.slow
+def test_player_takes_the_same_parameter(tmp_path):
+    from namo_fault_recovery.runtime.private_node import player_command
+    player = NodeProcess(DOMAIN, args=['-p', 'thread_priority:=6'], command=player_command())
+    try:
+        said = ('threads under SCHED_FIFO, priority 6', 'cannot use SCHED_FIFO priority 6')
+        end = time.monotonic() + 120
+        while not any(s in player.stdout + player.stderr for s in said):
+            assert player.alive() and time.monotonic() < end, player.describe()
+            time.sleep(0.1)
+        fifo = os.sched_getscheduler(player.proc.pid) == os.SCHED_FIFO
+        assert fifo == (said[0] in player.stdout + player.stderr), player.describe()
+    finally:
+        assert player.stop() == 0, player.describe()

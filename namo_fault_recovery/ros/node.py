@@ -53,7 +53,6 @@ from ..runtime.fault_intake import After, Clear, FaultIntake, Report
 from ..runtime.inputs import BadInput, parse_fault
 from ..runtime.latest_worker import LatestWorker
 from ..runtime.persistence import Persistence
-from ..runtime.realtime import set_fifo_priority
 from ..runtime.robot_source import load_models, robot_source
 from ..runtime.run_book import Outcome, RunBook
 
@@ -183,7 +182,6 @@ class RecoveryNode(Node):
         if self._config.contingency_table:
             self._table.configure(self._config.settings,
                                   active={j: f.angle for j, f in self._book.faults.items()})
-        use_priority(self.get_logger(), values['thread_priority'])
         self._ready = True
         where = self._source.describe() if self._source.profile else self._robot.source
         self.get_logger().info(
@@ -432,15 +430,6 @@ class RecoveryNode(Node):
             part = getattr(self, name, None)
             if part is not None:
                 part.stop()
-
-
-def use_priority(logger, priority):
-    """Run the node's threads (not its child processes) real-time, if asked and allowed."""
-    refused = set_fifo_priority(priority)
-    if refused:
-        logger.warning(refused)
-    elif priority:
-        logger.info(f'threads under SCHED_FIFO, priority {priority}')
 
 
 def restore(node, plan):

@@ -37,7 +37,7 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.duration import Duration
 from rclpy.exceptions import ParameterException
@@ -61,6 +61,7 @@ from ..playback.carry import CarryOn
 from ..playback.clearance import PathClearance
 from ..playback.monitor import MonitorThresholds, Outcome
 from ..playback.timing import plan_motion, PlayTiming
+from ..runtime.realtime import MAX_PRIORITY
 from ..runtime.robot_source import robot_source
 
 NODE_NAME = 'gesture_player'
@@ -154,6 +155,11 @@ def _declare(node):
                  description='bend a path that presses the body deeper than its keyframes '
                              'do (capsule model; needs both arms played)',
                  read_only=True)).value}
+    node.declare_parameter('thread_priority', 0, ParameterDescriptor(
+        description="SCHED_FIFO priority of the player's threads once it is built (the "
+                    "library's real-time consumer, as recovery_node's); 0 = off",
+        integer_range=[IntegerRange(from_value=0, to_value=MAX_PRIORITY, step=1)],
+        read_only=True))
     if not waits['carry_on'] >= 0:
         raise ValueError(f'carry_on_wait_sec must be >= 0, got {waits["carry_on"]}')
     if not waits['acceleration'] > 0:

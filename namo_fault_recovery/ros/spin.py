@@ -3,7 +3,9 @@ The nodes' ``main()``: start ROS, build the node, spin until shutdown, shut down
 
 :func:`run_node` is the one body of ``recovery_node``, ``gesture_player`` and
 ``namo_sim``: exit code 0 on SIGINT or SIGTERM (at any moment), 1 with one line on
-stderr for a bad configuration, and every thread, executor and context shut down.
+stderr for a bad configuration, and every thread, executor and context shut down.  A
+node that declares ``thread_priority`` has its threads put under ``SCHED_FIFO`` once
+it is built (:func:`use_priority`).
 
 It spins an executor until ROS is shut down, even when the shutdown's wake-up is lost.
 
@@ -32,6 +34,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException, ShutdownException, SingleThreadedExecutor
 
 from ..errors import EXIT_CONFIG
+from ..runtime.realtime import set_fifo_priority
 
 WATCH_PERIOD = 0.25       # s: the longest a lost shutdown wake-up can delay the exit
 
@@ -76,6 +79,25 @@ def spin_until_shutdown(executor, context, period=WATCH_PERIOD):
     raise ExternalShutdownException()
 
 
+def use_priority(node):
+    """
+    Run ``node``'s process threads real-time if its ``thread_priority`` parameter asks.
+
+    Called once the node is built, before it spins: its own threads and the
+    middleware's exist by then (and the ones started later inherit the policy), while
+    its loading and start-up ran under the normal scheduler.  A refusal (no ``rtprio``
+    allowance) is logged and the node runs on under the normal scheduler.
+    """
+    if not node.has_parameter('thread_priority'):
+        return
+    priority = node.get_parameter('thread_priority').value
+    refused = set_fifo_priority(priority)
+    if refused:
+        node.get_logger().warning(refused)
+    elif priority:
+        node.get_logger().info(f'threads under SCHED_FIFO, priority {priority}')
+
+
 def _config_error(name, exc):
     """Write a bad configuration's one line, ``NAME: error: what``, to stderr."""
     text = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
@@ -116,6 +138,7 @@ def run_node(name, build, args=None, config_errors=(), interrupted=lambda: False
             _config_error(name, exc)
             return EXIT_CONFIG
         executor.add_node(node)
+        use_priority(node)
         if not interrupted():
             spin_until_shutdown(executor, node.context)
     except (KeyboardInterrupt, ExternalShutdownException):
