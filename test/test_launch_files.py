@@ -95,7 +95,8 @@ def test_launch_arguments_are_declared_and_files_installed():
     used = {n.args[0].value for n in ast.walk(tree) if isinstance(n, ast.Call)
             and getattr(n.func, 'id', '') == 'LaunchConfiguration'}
     assert used <= declared and {'player', 'sim', 'robot_state_publisher', 'rviz',
-                                 'robot_profile', 'gesture_file', 'urdf'} == declared
+                                 'robot_profile', 'gesture_file', 'urdf',
+                                 'thread_priority'} == declared
     # The packaged files it opens exist, and setup.py installs them (and the launch file).
     for name in ('namo.urdf', 'namo.rviz', 'recovery_node.yaml'):
         assert f"'{name}'" in text and (ROOT / 'config' / name).is_file()

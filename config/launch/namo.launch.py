@@ -13,6 +13,13 @@ Arguments (all 'true' or 'false'):
 - ``robot_state_publisher``: TF of the URDF from /joint_states (default: as ``sim``).
 - ``rviz``: RViz with the packaged view (robot model, /gesture_markers, TF).
 
+``thread_priority`` (an integer, default 50; 0: the normal scheduler) is the
+``SCHED_FIFO`` priority of ``recovery_node``'s and ``gesture_player``'s own threads, as
+ros2_control's controller manager runs its loop: on a busy robot a table hit then
+reaches the player within about 5 ms (README, "The served problem").  A user without
+an ``rtprio`` allowance (``/etc/security/limits.conf``) gets one warning per node, which
+then runs under the normal scheduler.
+
 Another robot (strings; empty: Namo):
 
 - ``robot_profile``: its recovery profile YAML, for ``recovery_node``,
@@ -54,6 +61,9 @@ def generate_launch_description():
                                              value_type=str),
              'gesture_file': ParameterValue(LaunchConfiguration('gesture_file'), value_type=str)}
 
+    priority = {'thread_priority': ParameterValue(LaunchConfiguration('thread_priority'),
+                                                  value_type=int)}
+
     arguments = [
         DeclareLaunchArgument('player', default_value='false',
                               description='start gesture_player'),
@@ -67,15 +77,18 @@ def generate_launch_description():
                               description="another robot's recovery profile (empty: Namo)"),
         DeclareLaunchArgument('gesture_file', default_value='',
                               description="that robot's gesture library (empty: Namo's)"),
+        DeclareLaunchArgument('thread_priority', default_value='50',
+                              description="SCHED_FIFO priority of recovery_node's and "
+                                          "gesture_player's threads (0: normal scheduler)"),
         DeclareLaunchArgument('urdf', default_value=os.path.join(config, 'namo.urdf'),
                               description='URDF for robot_state_publisher and RViz'),
     ]
     nodes = [
         Node(package=PACKAGE, executable='recovery_node', name='recovery_node',
              output='screen',
-             parameters=[os.path.join(config, 'recovery_node.yaml'), robot]),
+             parameters=[os.path.join(config, 'recovery_node.yaml'), robot, priority]),
         Node(package=PACKAGE, executable='gesture_player', name='gesture_player',
-             output='screen', parameters=[robot],
+             output='screen', parameters=[robot, priority],
              condition=IfCondition(LaunchConfiguration('player'))),
         Node(package=PACKAGE, executable='namo_sim', name='namo_sim', output='screen',
              parameters=[robot], condition=IfCondition(LaunchConfiguration('sim'))),
