@@ -22,18 +22,20 @@ import threading
 import time
 
 
-def lean_node(name, context, namespace=None, rosout=True):
+def lean_node(name, context, namespace=None, rosout=True, global_arguments=True):
     """
     Create an rclpy node without parameter or type-description services.
 
     For nodes that have no parameters to offer (clients, probes, a helper that only
     subscribes): their executor then waits on their own entities alone.
+    ``global_arguments=False`` leaves out the process's ``--ros-args`` (a helper node
+    inside another node's process: a launch file's ``__node:=`` rename is not its).
     """
     import rclpy
     from rclpy.parameter import Parameter
     return rclpy.create_node(
         name, namespace=namespace, context=context, start_parameter_services=False,
-        enable_rosout=rosout,
+        enable_rosout=rosout, use_global_arguments=global_arguments,
         parameter_overrides=[Parameter('start_type_description_service', value=False)])
 
 

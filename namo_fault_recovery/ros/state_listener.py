@@ -26,10 +26,17 @@ class StateListener:
 
     def __init__(self, parent: Node, msg_type, topic: str, callback: Callable,
                  qos: QoSProfile, raw: bool = False):
-        """Subscribe ``callback`` to ``topic`` (resolved in ``parent``'s namespace)."""
+        """
+        Subscribe ``callback`` to ``topic`` as ``parent`` resolves it (its remappings).
+
+        The helper ignores the process's own arguments: a launch file's ``__node:=``
+        rename would otherwise name it as ``parent``, and the topic comes resolved.
+        """
+        self.topic = parent.resolve_topic_name(topic)
         self.node = lean_node(f'{parent.get_name()}_{topic.strip("/").replace("/", "_")}',
-                              parent.context, parent.get_namespace(), rosout=False)
-        self.node.create_subscription(msg_type, topic, callback, qos, raw=raw)
+                              parent.context, parent.get_namespace(), rosout=False,
+                              global_arguments=False)
+        self.node.create_subscription(msg_type, self.topic, callback, qos, raw=raw)
         self._executor = SingleThreadedExecutor(context=parent.context)
         self._executor.add_node(self.node)
         self._stop = threading.Event()

@@ -1,0 +1,40 @@
+"""
+``/joint_states`` on the node's helper node: named after the node, remapped as the node.
+
+The helper ignores the process's ``--ros-args`` (a launch file's ``__node:=`` rename
+would name it as the node itself) and subscribes to the topic as the node resolves it,
+so a remapping meant for the node (``recovery_node:joint_states:=...``) holds.
+"""
+
+import time
+
+from namo_fault_recovery.ros.spun_node import SpunNode
+from node_harness import NodeProcess, session_domain
+import pytest
+
+pytestmark = pytest.mark.slow
+
+DOMAIN = session_domain(1)       # the lifecycle tests': never at the same time
+
+
+def test_helper_named_after_the_renamed_node_and_remapped_with_it(tmp_path):
+    node = NodeProcess(DOMAIN, state_dir=tmp_path / 'state', args=[
+        '-r', '__node:=my_recovery', '-r', '__ns:=/robot1',
+        '-r', 'my_recovery:joint_states:=/measured', '-p', 'contingency_table:=false'])
+    probe = SpunNode('namo_test_probe', DOMAIN)
+    try:
+        node.wait_output('engine process started', timeout=120)
+        end = time.monotonic() + 30
+        while True:
+            names = set(probe.node.get_node_names_and_namespaces())
+            subs = [i.node_name for i in probe.node.get_subscriptions_info_by_topic(
+                '/measured')]
+            if subs or time.monotonic() > end:
+                break
+            time.sleep(0.2)
+        assert {('my_recovery', '/robot1'), ('my_recovery_joint_states', '/robot1')} <= names
+        assert subs == ['my_recovery_joint_states'], (subs, names)
+        assert not probe.node.get_subscriptions_info_by_topic('/robot1/joint_states')
+    finally:
+        probe.close()
+        assert node.stop() == 0, node.describe()
