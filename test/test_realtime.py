@@ -89,6 +89,17 @@ def test_a_refusal_puts_the_changed_threads_back(monkeypatch):
     assert calls == [(11, os.SCHED_FIFO), (12, os.SCHED_FIFO), (11, os.SCHED_OTHER)]
 
 
+def _said(process, lines, timeout=120.0):
+    """Wait until ``process`` wrote one of ``lines`` (once built, before it spins)."""
+    end = time.monotonic() + timeout
+    while True:
+        text = process.stdout + process.stderr
+        if any(line in text for line in lines):
+            return text
+        assert process.alive() and time.monotonic() < end, process.describe()
+        time.sleep(0.1)
+
+
 def _policies(pid):
     """Return {thread id: policy} of process ``pid``."""
     tasks = Path(f'/proc/{pid}/task')
@@ -100,8 +111,8 @@ def test_node_threads_real_time_engine_process_normal(tmp_path):
     node = NodeProcess(DOMAIN, state_dir=tmp_path / 'state',
                        args=['-p', 'thread_priority:=7', '-p', 'contingency_table:=false'])
     try:
-        node.wait_output('engine process started', timeout=120)
-        text = node.stdout + node.stderr
+        text = _said(node, ('threads under SCHED_FIFO, priority 7',
+                            'cannot use SCHED_FIFO priority 7'))
         children = [int(p) for p in Path(f'/proc/{node.proc.pid}/task/{node.proc.pid}/'
                                          'children').read_text().split()]
         assert children, 'the engine process is a child of the node'
@@ -125,10 +136,7 @@ def test_player_takes_the_same_parameter(tmp_path):
     player = NodeProcess(DOMAIN, args=['-p', 'thread_priority:=6'], command=player_command())
     try:
         said = ('threads under SCHED_FIFO, priority 6', 'cannot use SCHED_FIFO priority 6')
-        end = time.monotonic() + 120
-        while not any(s in player.stdout + player.stderr for s in said):
-            assert player.alive() and time.monotonic() < end, player.describe()
-            time.sleep(0.1)
+        _said(player, said)
         fifo = os.sched_getscheduler(player.proc.pid) == os.SCHED_FIFO
         assert fifo == (said[0] in player.stdout + player.stderr), player.describe()
     finally:
