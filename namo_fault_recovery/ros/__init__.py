@@ -27,7 +27,7 @@ Clients of a running node (the benchmarks themselves are in ``benchmarks/``):
   it, in a thread or a child process;
 - :mod:`.spun_node`: an rclpy node in a context of its own, spun by a background thread
   (the clients and the tests each use one), ``lean_node`` (a node without parameter
-  services), and ``wait_until`` for what it records.
+  services, for the node's helper), and ``wait_until`` for what it records.
 
 The gesture player and the simulated robot:
 
