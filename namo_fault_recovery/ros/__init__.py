@@ -26,8 +26,7 @@ Clients of a running node (the benchmarks themselves are in ``benchmarks/``):
 - :mod:`.joint_state_stream`: a ``/joint_states`` stream as a robot's drivers publish
   it, in a thread or a child process;
 - :mod:`.spun_node`: an rclpy node in a context of its own, spun by a background thread
-  (the clients and the tests each use one), ``lean_node`` (a node without parameter
-  services, for the node's helper), and ``wait_until`` for what it records.
+  (the clients and the tests each use one), and ``wait_until`` for what it records.
 
 The gesture player and the simulated robot:
 

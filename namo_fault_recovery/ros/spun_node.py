@@ -13,32 +13,14 @@ One definition here, instead of one per caller::
     ...
     spun.close()
 
-:func:`lean_node` makes a node without parameter or type-description services, for a
-helper inside another node's process (:mod:`.state_listener`).  The clients keep
-rclpy's full node: made lean, the player-on-simulator test's carry-on failed 4 times in
-25 runs (the reconfigured library came 0.95 s late, and the blend then met the torso),
-against 0 in 28 with full nodes; the cause was not found.
+The node is rclpy's full node, parameter services included.  Made lean (as the
+helper of :mod:`.state_listener` is), the player-on-simulator test's carry-on failed 4
+times in 25 runs (the reconfigured library came 0.95 s late, and the blend then met the
+torso), against 0 in 28 with full nodes; the cause was not found.
 """
 
 import threading
 import time
-
-
-def lean_node(name, context, namespace=None, rosout=True, global_arguments=True):
-    """
-    Create an rclpy node without parameter or type-description services.
-
-    For nodes that have no parameters to offer (clients, probes, a helper that only
-    subscribes): their executor then waits on their own entities alone.
-    ``global_arguments=False`` leaves out the process's ``--ros-args`` (a helper node
-    inside another node's process: a launch file's ``__node:=`` rename is not its).
-    """
-    import rclpy
-    from rclpy.parameter import Parameter
-    return rclpy.create_node(
-        name, namespace=namespace, context=context, start_parameter_services=False,
-        enable_rosout=rosout, use_global_arguments=global_arguments,
-        parameter_overrides=[Parameter('start_type_description_service', value=False)])
 
 
 class SpunNode:

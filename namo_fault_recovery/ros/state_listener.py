@@ -14,11 +14,26 @@ nothing else (no parameter services, no ``/rosout``), spun by its own executor, 
 import threading
 from typing import Callable
 
+import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 
-from .spun_node import lean_node
+
+def _helper_node(parent: Node, topic: str) -> Node:
+    """
+    Create the helper node of ``parent`` for ``topic``: one subscription and nothing else.
+
+    No parameter, type-description or ``/rosout`` entities (its executor waits on its
+    subscription alone), and none of the process's ``--ros-args``: a launch file's
+    ``__node:=`` rename is ``parent``'s, and would name the helper as ``parent``.
+    """
+    return rclpy.create_node(
+        f'{parent.get_name()}_{topic.strip("/").replace("/", "_")}',
+        namespace=parent.get_namespace(), context=parent.context,
+        start_parameter_services=False, enable_rosout=False, use_global_arguments=False,
+        parameter_overrides=[Parameter('start_type_description_service', value=False)])
 
 
 class StateListener:
@@ -33,9 +48,7 @@ class StateListener:
         rename would otherwise name it as ``parent``, and the topic comes resolved.
         """
         self.topic = parent.resolve_topic_name(topic)
-        self.node = lean_node(f'{parent.get_name()}_{topic.strip("/").replace("/", "_")}',
-                              parent.context, parent.get_namespace(), rosout=False,
-                              global_arguments=False)
+        self.node = _helper_node(parent, topic)
         self.node.create_subscription(msg_type, self.topic, callback, qos, raw=raw)
         self._executor = SingleThreadedExecutor(context=parent.context)
         self._executor.add_node(self.node)
