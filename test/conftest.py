@@ -10,11 +10,9 @@ import pytest
 CONFIG_DIR = Path(__file__).resolve().parent.parent / 'config'
 
 # Every participant of a test session discovers over localhost only, as the node
-# processes it talks to do (node_harness.ros_env), from the first test on.  RosClient
-# sets this when it is built; a bare SpunNode built before any RosClient of its worker
-# kept the default range: under pytest-xdist, test_state_listener's probe then saw no
-# node for 30 s in 2 of 3 fresh-clone CI runs (never in one process, where an earlier
-# module had always built a RosClient).
+# processes it talks to do (node_harness.ros_env), from the first test on.  RosClient sets
+# this when it is built, so before, whether a bare SpunNode had it depended on which
+# tests its worker had run.
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
 
