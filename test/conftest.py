@@ -1,6 +1,5 @@
 """Shared fixtures: the packaged robot and library, loaded once per session."""
 
-import os
 from pathlib import Path
 
 from namo_fault_recovery import load_library, load_robot
@@ -8,12 +7,6 @@ from namo_fault_recovery.resources import DEMO_MOTION_FILE
 import pytest
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / 'config'
-
-# Every participant of a test session discovers over localhost only, as the node
-# processes it talks to do (node_harness.ros_env), from the first test on.  RosClient sets
-# this when it is built, so before, whether a bare SpunNode had it depended on which
-# tests its worker had run.
-os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
 
 @pytest.fixture(scope='session')
