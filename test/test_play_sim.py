@@ -50,6 +50,7 @@ class SimRecorder(Recorder):
 
     def setup(self):
         self.contacts = []
+        self.recovery = None    # the recovery_node process, for the failure messages
         self.node.create_subscription(DiagnosticArray, '/namo_sim/contacts',
                                       self._on_contacts, 10)
         self.stick_pub = self.node.create_publisher(JointState, '/namo_sim/stick', 10)
@@ -111,6 +112,7 @@ def loop(tmp_path_factory):
     recovery = NodeProcess(DOMAIN, state_dir=tmp_path_factory.mktemp('state'))
     player = NodeProcess(DOMAIN, command=player_command(), env=env)
     arms = SimRecorder(DOMAIN)
+    arms.recovery = recovery        # its log says when each library was ready, and why
     try:
         arms.wait(lambda: (arms.newest_library() or {}).get('wai') is not None, TIMEOUT,
                   'the reference library')
@@ -131,11 +133,17 @@ def _score(q):
     return float(WAI(q[:7], q[7:])[0])
 
 
+def _log_tail(proc, lines=12):
+    """Return the last ``lines`` lines of a node's output (its reconfigurations, timed)."""
+    return '\n'.join((proc.stdout + proc.stderr).splitlines()[-lines:])
+
+
 def _carried_on(arms, response, joint, before, faults, angle=None):
     """Check a play that carried on through ``joint``; return its fault report."""
     assert response.success and 'carried on' in response.message, (
         f'{response.message} | the simulator: '
-        f'{arms.contacts[-1] if arms.contacts else None}')
+        f'{arms.contacts[-1] if arms.contacts else None} | recovery_node said:\n'
+        + _log_tail(arms.recovery))
     report = arms.wait(lambda: arms.faults[faults:], 5.0, '/actuator_fault')[-1]
     assert list(report.name) == [joint]
     if angle is not None:
