@@ -157,6 +157,10 @@ class NodeProcess:
         """Return everything the node wrote on stderr so far."""
         return self._read(1)
 
+    def tail(self, lines):
+        """Return the last ``lines`` lines of the node's output (stdout, then stderr)."""
+        return (self.stdout + self.stderr).splitlines()[-lines:]
+
     def alive(self):
         """Return True while the process runs."""
         return self.proc.poll() is None

@@ -88,7 +88,7 @@ class Running:
         self.client.close()
         stop_cleanly(self.node)
         if exc_type is not None:   # shown by pytest with the failure
-            lines = (self.node.stdout + self.node.stderr).splitlines()[-30:]
+            lines = self.node.tail(30)
             print('--- node output (last lines, cut at 300 characters)\n'
                   + '\n'.join(line[:300] for line in lines))
         return False

@@ -133,17 +133,12 @@ def _score(q):
     return float(WAI(q[:7], q[7:])[0])
 
 
-def _log_tail(proc, lines=12):
-    """Return the last ``lines`` lines of a node's output (its reconfigurations, timed)."""
-    return '\n'.join((proc.stdout + proc.stderr).splitlines()[-lines:])
-
-
 def _carried_on(arms, response, joint, before, faults, angle=None):
     """Check a play that carried on through ``joint``; return its fault report."""
     assert response.success and 'carried on' in response.message, (
         f'{response.message} | the simulator: '
         f'{arms.contacts[-1] if arms.contacts else None} | recovery_node said:\n'
-        + _log_tail(arms.recovery))
+        + '\n'.join(arms.recovery.tail(12)))
     report = arms.wait(lambda: arms.faults[faults:], 5.0, '/actuator_fault')[-1]
     assert list(report.name) == [joint]
     if angle is not None:

@@ -6,9 +6,7 @@ would name it as the node itself) and subscribes to the topic as the node resolv
 so a remapping meant for the node (``recovery_node:joint_states:=...``) holds.
 """
 
-import time
-
-from namo_fault_recovery.ros.spun_node import SpunNode
+from namo_fault_recovery.ros.spun_node import SpunNode, wait_until
 from node_harness import NodeProcess, session_domain
 import pytest
 
@@ -28,15 +26,16 @@ def test_helper_named_after_the_renamed_node_and_remapped_with_it(tmp_path):
         # before the node names (ROS's own discovery topic), which name it when they do:
         # wait for the whole expected picture.
         expected = {('my_recovery', '/robot1'), ('my_recovery_joint_states', '/robot1')}
-        end = time.monotonic() + 30
-        while True:
-            names = set(probe.node.get_node_names_and_namespaces())
-            subs = [i.node_name for i in probe.node.get_subscriptions_info_by_topic(
+        seen = {}
+
+        def whole_graph():
+            seen['names'] = set(probe.node.get_node_names_and_namespaces())
+            seen['subs'] = [i.node_name for i in probe.node.get_subscriptions_info_by_topic(
                 '/measured')]
-            if (expected <= names and subs == ['my_recovery_joint_states']
-                    or time.monotonic() > end):
-                break
-            time.sleep(0.2)
+            return expected <= seen['names'] and seen['subs'] == ['my_recovery_joint_states']
+
+        wait_until(whole_graph, 30.0, period=0.2)
+        names, subs = seen['names'], seen['subs']
         assert expected <= names, (subs, names)
         assert subs == ['my_recovery_joint_states'], (subs, names)
         assert not probe.node.get_subscriptions_info_by_topic('/robot1/joint_states')
