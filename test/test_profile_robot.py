@@ -355,6 +355,33 @@ def test_each_robots_roll_pitch_roll_flips_are_found_and_move_no_landmark(namo, 
     assert np.max(np.abs(batch_forward(tiago, q, 'right').tip - moved.tip)) > 100.0
 
 
+def test_each_robots_twins_are_found_and_move_no_landmark(namo, others):
+    """Both kinds of twin triple (mirror 0 and pi), on each robot's own kinematics."""
+    from namo_fault_recovery.model.kinematics import batch_forward, equivalent_twins
+    pi = np.pi
+    expected = {'namo': ((0, 1, 2, pi), (2, 3, 4, 0.0), (4, 5, 6, pi)),
+                'tiago_dual': ((4, 5, 6, 0.0),), 'talos': ((4, 5, 6, pi),)}
+    robots = {'namo': namo[0], **others}
+    q = np.random.default_rng(5).uniform(-2.0, 2.0, size=(6, 7))
+    for name, robot in robots.items():
+        for side in ('right', 'left'):
+            twins = equivalent_twins(robot, side)
+            assert twins == expected[name], (name, side)
+            for i, j, k, mirror in twins:
+                twin = q.copy()
+                twin[:, i] += pi
+                twin[:, j] = mirror - twin[:, j]
+                twin[:, k] -= pi
+                for a, b in zip(batch_forward(robot, q, side), batch_forward(robot, twin, side)):
+                    np.testing.assert_allclose(a, b, atol=1e-9)
+                wrong = q.copy()          # the other mirror moves the hand
+                wrong[:, j] = (pi - mirror) - wrong[:, j]
+                wrong[:, i] += pi
+                wrong[:, k] -= pi
+                assert np.max(np.abs(batch_forward(robot, q, side).tip
+                                     - batch_forward(robot, wrong, side).tip)) > 10.0
+
+
 @pytest.mark.parametrize('joint, gesture, gap_before', [
     ('arm_right_6_joint', 'salute', 5.19),        # a locked middle joint: 27.43 against 4.43
     ('arm_right_4_joint', 'side_invite', 0.0155),  # joint 7 at its limit in the design

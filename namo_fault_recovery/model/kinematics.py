@@ -253,29 +253,31 @@ def batch_forward_jacobian(robot, q, arm):
     return lm, ArmJacobian(jac, axes)
 
 
-# Roll-pitch-roll flips: see equivalent_flips.  Keyed by the arm's landmarks at the probe
+# Twin joint triples: see equivalent_twins.  Keyed by the arm's landmarks at the probe
 # configurations (what the answer depends on), so that the robot made anew for each run
 # finds it again; at most FLIP_CACHE entries.
 _FLIPS = {}
 FLIP_CACHE = 64
 FLIP_TOLERANCE = 1e-6    # mm and rotation-matrix entries: "the same landmarks"
 FLIP_PROBES = 8          # random configurations on which a flip must hold
+TWIN_MIRRORS = (0.0, np.pi)   # the middle joint's reading in a twin: mirror - b
 
 
-def equivalent_flips(robot, side: str) -> tuple:
+def equivalent_twins(robot, side: str) -> tuple:
     """
-    Return the joint triples ``(i, i+1, i+2)`` of one arm that flip without moving a landmark.
+    Return the joint triples ``(i, i+1, i+2, mirror)`` of one arm that twin every landmark.
 
-    In a roll-pitch-roll group (a spherical wrist, Namo's upper arm, elbow and forearm)
-    turning the outer joints by half a turn and negating the middle one gives the same
-    hand: ``Rz(a) Ry(b) Rz(c) = Rz(a + pi) Ry(-b) Rz(c + pi)``.  The two readings differ
-    in their joint limits, and a locked middle joint reads as ``-b`` through the flipped
-    outer joints (TIAGo++'s salute with right joint 6 locked at +20 deg where the design
-    has -22 deg: 4.4 through the flip, 27.4 without it): the keyframe search starts from
-    both (:func:`~..recovery.seeding.flip_starts`).  The triples are found numerically,
-    on this robot's own forward kinematics (every landmark, the palm's orientation
-    included, within ``FLIP_TOLERANCE`` at random configurations), so any chain is
-    covered, whatever its convention: Namo (2, 3, 4), TIAGo++ (4, 5, 6), Talos none.
+    Three joints whose axes meet in one point, the middle one square to the outer two,
+    reach every orientation twice: turning the outer joints by half a turn and reading
+    the middle one as ``mirror - b`` gives the same hand and the same links beyond.
+    ``mirror`` is 0 where the outer axes are parallel (roll-pitch-roll, ``Rz(a) Ry(b)
+    Rz(c) = Rz(a + pi) Ry(-b) Rz(c + pi)``: a spherical wrist, Namo's upper arm, elbow
+    and forearm) and pi where they are square (roll-pitch-yaw, ``Rz(a) Ry(b) Rx(c) =
+    Rz(a + pi) Ry(pi - b) Rx(c + pi)``: Namo's shoulder and wrist, Talos's wrist).  The
+    triples are found numerically, on this robot's own forward kinematics (every
+    landmark, the palm's orientation included, within ``FLIP_TOLERANCE`` at random
+    configurations), so any chain is covered, whatever its convention: Namo (0, 1, 2,
+    pi), (2, 3, 4, 0) and (4, 5, 6, pi); TIAGo++ (4, 5, 6, 0); Talos (4, 5, 6, pi).
     Cached by the arm's landmarks at the probes (one forward kinematics call per lookup).
     """
     n = arm_joint_count(robot, side)
@@ -287,14 +289,29 @@ def equivalent_flips(robot, side: str) -> tuple:
         return hit
     found = []
     for i in range(n - 2):
-        flipped = q.copy()
-        flipped[:, i] += np.pi
-        flipped[:, i + 1] *= -1.0
-        flipped[:, i + 2] += np.pi
-        moved = batch_forward(robot, flipped, side)
-        if all(np.max(np.abs(a - b)) <= FLIP_TOLERANCE for a, b in zip(base, moved)):
-            found.append((i, i + 1, i + 2))
+        for mirror in TWIN_MIRRORS:
+            twin = q.copy()
+            twin[:, i] += np.pi
+            twin[:, i + 1] = mirror - twin[:, i + 1]
+            twin[:, i + 2] += np.pi
+            moved = batch_forward(robot, twin, side)
+            if all(np.max(np.abs(a - b)) <= FLIP_TOLERANCE for a, b in zip(base, moved)):
+                found.append((i, i + 1, i + 2, mirror))
     if len(_FLIPS) >= FLIP_CACHE:
         _FLIPS.pop(next(iter(_FLIPS)))
     _FLIPS[key] = tuple(found)
     return tuple(found)
+
+
+def equivalent_flips(robot, side: str) -> tuple:
+    """
+    Return the roll-pitch-roll triples ``(i, i+1, i+2)`` of one arm (twins of mirror 0).
+
+    The two readings of such a group differ in their joint limits, and a locked middle
+    joint reads as ``-b`` through the flipped outer joints (TIAGo++'s salute with right
+    joint 6 locked at +20 deg where the design has -22 deg: 4.4 through the flip, 27.4
+    without it): the keyframe search starts from both
+    (:func:`~..recovery.seeding.flip_starts`).  Namo (2, 3, 4), TIAGo++ (4, 5, 6), Talos
+    none (see :func:`equivalent_twins`).
+    """
+    return tuple(t[:3] for t in equivalent_twins(robot, side) if t[3] == 0.0)

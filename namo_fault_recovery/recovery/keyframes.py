@@ -17,7 +17,10 @@ top of the paper's method:
   a final check reported per gesture;
 - the keyframes of one motion share their branches: each is polished again from its
   neighbours' solutions (:func:`_share_branches`), so that a motion's keyframes do not
-  end in different basins of the arm's redundancy by the luck of the colony.
+  end in different basins of the arm's redundancy by the luck of the colony;
+- each gesture's keyframes then take the kinematic twins nearest its design
+  (:mod:`.twins`: the same score, but the far twin swings the arm half a turn to reach
+  the pose, maybe through the body).
 """
 
 import copy
@@ -35,6 +38,7 @@ from .least_squares import refine
 from .locks import clamp_lock, resolve_locks
 from .result import GestureResult, LibraryResult
 from .seeding import kinematic_starts
+from .twins import nearest_twins
 from ..model.kinematics import (angle_bytes, arm_columns, arm_joint_count, ArmLandmarks,
                                 batch_forward, batch_forward_jacobian, split_arms,
                                 take_landmarks)
@@ -864,6 +868,7 @@ def _run(setup, lock_sets, rng, clock, stats):
     stage1 = rows.after.copy()
     if rows.two_stage:
         _stage2(setup, rows, clock, rng)
+    _take_nearest_twins(setup, rows)
     cleared = _clear_idle_arms(setup, rows, clock, rng)
     _pace(setup, rows, clock, rng)
     best_r, best_l, after = rows.right, rows.left, rows.after
@@ -876,6 +881,25 @@ def _run(setup, lock_sets, rng, clock, stats):
             'stage': rows.stage, 'expansion': rows.expansion, 'status': rows.status,
             'layouts': rows.layouts, 'base_right': rows.base_r, 'base_left': rows.base_l,
             'paced': rows.paced, 'cleared': cleared}
+
+
+def _take_nearest_twins(setup, rows):
+    """
+    Put each gesture's solved keyframes on their kinematic twins nearest the design.
+
+    The same landmarks and score either way (:mod:`.twins`), but the far twin swings the
+    arm half a turn, maybe through the body, to reach the pose (in place).
+    """
+    robot = setup.robot
+    q = np.concatenate((rows.right, rows.left), axis=1)
+    design = np.concatenate((rows.base_r, rows.base_l), axis=1)
+    q, changed = nearest_twins(
+        robot, q, design, rows.layouts, rows.owners,
+        lambda poses, ks: pose_values(robot, setup.scorer, setup.checker, poses, rows.ids[ks]),
+        joint_bounds(robot))
+    if changed:
+        rows.right, rows.left = split_arms(robot, q)
+        rows.after = setup.scorer.evaluate(rows.right, rows.left, rows.ids)
 
 
 def pose_values(robot, scorer, checker, q, ids):

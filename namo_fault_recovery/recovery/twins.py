@@ -1,0 +1,124 @@
+"""
+Of a solved pose and its kinematic twins, the one nearest the design (the same score).
+
+Three joints of an arm whose axes meet reach every orientation twice
+(:func:`~..model.kinematics.equivalent_twins`): the outer joints turned by half a turn,
+the middle one mirrored.  Every landmark is the same in both, and so is the score, so
+the keyframe search ends on either by the luck of its draws.  The arm, though, plays
+the gesture from where it is, and the twin far from the design swings half a turn to
+get there.  Namo's wai with the right elbow stuck at 45 deg ended, in 4 of 30 seeds,
+with the shoulder at (-131, 158, 139) deg instead of its twin (49, 22, -41): the same
+score, but the path from rest went 122 mm through the torso, and on the simulator the
+arm pressed the torso until a healthy joint read as stuck.
+
+:func:`nearest_twins` gives each gesture the combination of twins nearest its design in
+joint space (one combination for all its keyframes, so that a motion stays on one
+branch), within the joint limits, where no keyframe's value (score plus the capsule
+penalty) gets worse.  It runs after the search, before the pacing, and costs one
+batched evaluation.
+"""
+
+from itertools import combinations
+from typing import Callable
+
+import numpy as np
+
+from ..model.kinematics import arm_columns, equivalent_twins
+from ..model.robot import ARMS
+
+TWIN_TOLERANCE = 1e-6     # a twin's value may differ from its pose's by rounding only
+_TURNS = np.array([0.0, 2 * np.pi, -2 * np.pi])
+
+
+def twin_angles(q, triple, mirror, design, lower, upper):
+    """
+    Return ``q`` (rows, J) with one twin ``triple`` (3 columns) taken, or None.
+
+    Each of the three joints reads its twin angle (outer: plus half a turn; middle:
+    ``mirror`` minus it) by whichever full turn lies within its limits, nearest
+    ``design`` (rows, J); None where some row has no such reading.
+    """
+    out = np.array(q, dtype=float)
+    outer, middle, other = triple
+    for column, angle in ((outer, out[:, outer] + np.pi), (middle, mirror - out[:, middle]),
+                          (other, out[:, other] + np.pi)):
+        readings = angle[:, None] + _TURNS
+        inside = (readings >= lower[column]) & (readings <= upper[column])
+        if not np.all(inside.any(axis=1)):
+            return None
+        gap = np.where(inside, np.abs(readings - design[:, column, None]), np.inf)
+        out[:, column] = readings[np.arange(len(out)), np.argmin(gap, axis=1)]
+    return out
+
+
+def side_twins(robot, side, free):
+    """Return ``(columns (3,), mirror)`` of the arm's twin triples whose joints all move."""
+    first = arm_columns(robot)[side].start
+    return [(np.array([first + i, first + j, first + k]), mirror)
+            for i, j, k, mirror in equivalent_twins(robot, side)
+            if {(side, i), (side, j), (side, k)} <= free]
+
+
+def nearest_on_side(q, twins, design, lower, upper):
+    """
+    Return the rows ``q`` (rows, J) through the combination of ``twins`` nearest ``design``.
+
+    Every combination (each twin taken once, in order) is tried on all rows at once;
+    the one whose joints are nearest the design in the sum of squares wins, ``q``
+    itself where none is nearer.
+    """
+    best, best_gap = q, float(np.sum((q - design) ** 2))
+    for n in range(1, len(twins) + 1):
+        for chosen in combinations(twins, n):
+            trial = q
+            for columns, mirror in chosen:
+                trial = twin_angles(trial, columns, mirror, design, lower, upper)
+                if trial is None:
+                    break
+            if trial is None:
+                continue
+            gap = float(np.sum((trial - design) ** 2))
+            if gap < best_gap - 1e-12:
+                best, best_gap = trial, gap
+    return best
+
+
+def nearest_twins(robot, q: np.ndarray, design: np.ndarray, layouts: list, owners: list,
+                  value: Callable, bounds: tuple) -> tuple:
+    """
+    Return ``(q, rows)``: each gesture's keyframes on their twins nearest the design.
+
+    ``q`` and ``design`` are (rows, J) angles of both arms (right first); ``layouts``
+    the rows' free ``(side, joint)`` pairs; ``owners`` the gesture of each row (one
+    combination of twins per gesture); ``value(q, rows)`` the search's value of poses
+    ``q`` at those rows; ``bounds`` the (lower, upper) limits (J,).  A gesture changes
+    only where the twins are nearer its design and none of its rows' values is worse
+    (beyond :data:`TWIN_TOLERANCE`, relative).  ``rows`` lists the rows changed.
+    """
+    lower, upper = bounds
+    out = np.array(q, dtype=float)
+    owners = np.asarray(owners)
+    moved = []
+    for owner in np.unique(owners):
+        ks = np.nonzero(owners == owner)[0]
+        free = set.intersection(*(set(layouts[k]) for k in ks))
+        trial = out[ks]
+        for side in ARMS:
+            twins = side_twins(robot, side, free)
+            if twins:
+                trial = nearest_on_side(trial, twins, design[ks], lower, upper)
+        if not np.array_equal(trial, out[ks]):
+            moved.append((ks, trial))
+    if not moved:
+        return out, []
+    rows = np.concatenate([ks for ks, _ in moved])
+    old = value(out[rows], rows)
+    new = value(np.concatenate([t for _, t in moved]), rows)
+    worse = new > old + TWIN_TOLERANCE * (1.0 + np.abs(old))
+    changed, at = [], 0
+    for ks, trial in moved:
+        if not np.any(worse[at:at + len(ks)]):
+            out[ks] = trial
+            changed.extend(int(k) for k in ks)
+        at += len(ks)
+    return out, changed
