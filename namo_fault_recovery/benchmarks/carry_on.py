@@ -67,7 +67,17 @@ class Reconfigurer:
         self({robot.joint_names[0]: None})
 
     def __call__(self, faults):
-        """Return (result, wall time s) of reconfiguring for ``faults`` {joint: angle}."""
+        """
+        Return (result, wall time s) of reconfiguring for ``faults`` {joint: angle}.
+
+        The angles are read as the node reads a fault report (:func:`..runtime.inputs.
+        parse_fault`): one measured a little past its stop (the physics overshoots it)
+        is clamped onto the limit, one further off is refused (BadInput).
+        """
+        from ..runtime.inputs import parse_fault
+        names = list(faults)
+        if all(faults[j] is not None for j in names):
+            faults = parse_fault(self.robot, names, [faults[j] for j in names])
         began = time.monotonic()
         result = self._recover(self.robot, self.library, faults, self.settings,
                                seed=self.seed, quantisations=self.quantisations)
