@@ -347,6 +347,27 @@ def test_playability_counts_straight_paths_that_touch_and_the_played_ones_bent_c
     assert 'played paths touch beyond their design' in out.getvalue()
 
 
+def test_playability_locks_a_joint_across_the_range_the_library_moves_it():
+    """``--lock-angles``: right joint 3 at -15 and 15 deg (15: where far twins came up)."""
+    from namo_fault_recovery.benchmarks.playability import run_playability, stuck_angles
+    from namo_fault_recovery.cli.main import main as cli_main
+    from namo_fault_recovery.model.gestures import load_library
+    from namo_fault_recovery.model.robot import load_robot
+    robot = load_robot()
+    library = load_library(robot)
+    angles = np.degrees(stuck_angles(robot, library, 'right_arm_joint3', 2))
+    np.testing.assert_allclose(angles, [-15.0, 15.0], atol=1e-9)   # keyframes -45..45 deg
+    summary = run_playability(io.StringIO(), seeds=0, deadline_seeds=1,
+                              joints=['right_arm_joint3'], jobs=1, progress=False,
+                              lock_angles=2)
+    part = summary['parts']['deadline']
+    assert part['runs'] == 2 and part['gestures'] == 8
+    assert summary['lock_angles_deg']['right_arm_joint3'] == pytest.approx([-15.0, 15.0])
+    assert part['path_contacts'] == 0 and part['unplayable'] == 0
+    argv = ['bench', 'playability', '--seeds', '1', '--lock-angles', '-1']
+    assert cli_main(argv, out=io.StringIO()) == 2
+
+
 def test_playability_runs_on_a_profile_robot_and_its_bent_paths_are_clear():
     """Talos, left joint 1 locked: Wai's straight approach presses 62 mm, the played 0."""
     from namo_fault_recovery.benchmarks.playability import run_playability

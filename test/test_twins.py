@@ -118,3 +118,26 @@ def test_wai_with_the_elbow_stuck_stays_on_the_designs_shoulder_branch(seed):
     assert pose[ELBOW] == pytest.approx(STUCK)
     shoulder = np.degrees(np.abs(pose[:3] - design[:3]))
     assert np.all(shoulder < 45.0), (seed, np.degrees(pose[:7]).round(1))
+
+
+@pytest.mark.parametrize('seed', [3, 4, 5, 6])
+def test_twins_that_share_the_locked_joint_are_taken_together(seed):
+    """
+    Namo's wai with right joint 3 stuck at 15 deg: the far branch is three twins at once.
+
+    Joint 3 belongs to the shoulder's and the elbow's twins, so neither alone may be taken;
+    the shoulder, elbow and wrist twins together turn it by a whole turn, which leaves it
+    where it is.  Seeds 3-6 ended there (shoulder (-58, 145) deg, elbow +90) with the path
+    from rest 143 mm through the torso; the combination puts the shoulder back at (122,
+    35) with the elbow at -90, and the path is clear (the player's own plan, judged as
+    ``bench playability`` judges it).
+    """
+    from namo_fault_recovery.benchmarks.playability import play_figures
+    result = recover(ROBOT, LIBRARY, {'right_arm_joint3': math.radians(15.0)},
+                     RecoverySettings(deadline_sec=1.0), seed=seed)
+    wai = result['wai']
+    pose = np.degrees(np.asarray(wai.positions[-1], dtype=float))
+    assert pose[2] == pytest.approx(15.0)
+    assert pose[0] > 90.0 and pose[1] < 90.0, pose[:7].round(1)
+    _, _, depth, _ = play_figures(ROBOT, wai, result.locks, reference=LIBRARY['wai'])
+    assert depth <= 1.0, (depth, pose[:7].round(1))

@@ -16,6 +16,13 @@ rest pose, as the player's first play after a fault; the approach is the player'
 - ``deadline``: ``deadline_seeds`` seeds at the node's 1 s deadline (run it alone on the
   machine: how far a search gets depends on the load).
 
+A fault is locked where the lock strategy puts it (``average``: one angle per joint), or,
+with ``lock_angles`` N, at N angles across the range the library moves that joint
+through (:func:`stuck_angles`): where a joint that sticks mid-gesture is held, and where
+the search's far kinematic twins came up (Namo's wai with the right elbow stuck at 44.8
+deg: the shoulder half a turn over, the path from rest through the torso, which the
+average lock never showed; :mod:`..recovery.twins`).  Each seed then runs at each angle.
+
 Per part: gestures planned, unplayable ones, the largest stretch, the largest peak
 speed over the limit of the player's unstretched plan, and the largest ``speed_ratio``
 the engine reported (its bound on that peak), with the runs the engine had to repair.
@@ -96,6 +103,23 @@ def play_figures(robot, gesture, locks, timing=PlayTiming(), reference=None):
     return float(played.stretch), peak, *depths
 
 
+def stuck_angles(robot, library, joint, n):
+    """
+    Return ``n`` lock angles (rad) of ``joint`` evenly inside the range the library uses.
+
+    The range spans the rest pose (0, where every play starts) and every keyframe's
+    angle of the joint, clipped to its limits; the angles exclude its ends (a joint that
+    sticks mid-gesture).  A joint the library never moves gets its rest angle.
+    """
+    lower, upper, _ = robot.joint_bounds(joint)
+    column = list(robot.joint_names).index(joint)
+    angles = [0.0] + [kf.positions()[column] for g in library for kf in g.keyframes]
+    low, high = max(min(angles), lower), min(max(angles), upper)
+    if high - low <= 1e-9:
+        return [float(np.clip(0.0, lower, upper))] * n
+    return [float(a) for a in np.linspace(low, high, n + 2)[1:-1]]
+
+
 def _init_worker(which, robot_name='namo'):
     robot, lib = playability_models(which, robot_name)
     settings = node_settings()
@@ -104,11 +128,11 @@ def _init_worker(which, robot_name='namo'):
 
 
 def _run_one(task):
-    joint, seed, deadline = task
+    joint, seed, deadline, angle = task
     robot, lib, settings = _WORKER['robot'], _WORKER['lib'], _WORKER['settings']
     clock = Clock(deadline)
     overrides = None if deadline is not None else BUDGET_OVERRIDES
-    res = recover(robot, lib, {joint: None}, settings, seed=seed, clock=clock,
+    res = recover(robot, lib, {joint: angle}, settings, seed=seed, clock=clock,
                   quantisations=_WORKER['quant'], optimizer_overrides=overrides)
     gestures = []
     for g in res.gestures:
@@ -118,7 +142,8 @@ def _run_one(task):
                          'speed_ratio': g.speed_ratio, 'path_depth_mm': depth,
                          'straight_depth_mm': straight,
                          'keyframes_collide': bool(g.collides)})
-    return {'fault': joint, 'seed': seed, 'gestures': gestures,
+    return {'fault': joint if angle is None else f'{joint} at {np.degrees(angle):.1f} deg',
+            'seed': seed, 'gestures': gestures,
             'repaired': sum(PACED_NOTE in n for n in res.notes),
             'deadline_met': res.deadline_met}
 
@@ -173,26 +198,33 @@ def _part(out, models, tasks, jobs, label, progress):
 
 
 def run_playability(out, which='product', seeds=2000, deadline_seeds=0, joints=None,
-                    jobs=2, seed_base=0, progress=True, robot_name='namo'):
+                    jobs=2, seed_base=0, progress=True, robot_name='namo', lock_angles=0):
     """
     Run the parts (see the module docstring); print the figures, return the summary.
 
     ``seeds`` runs per single fault at the fixed budget (0: skip), ``deadline_seeds``
     at the node's deadline (0: skip; run it with ``jobs=1`` on a quiet machine).
     ``robot_name``: ``namo``, or one of the shipped profile robots
-    (:data:`.robots.ROBOTS`) with its retargeted library.
+    (:data:`.robots.ROBOTS`) with its retargeted library.  ``lock_angles`` > 0 locks
+    each joint at that many angles of :func:`stuck_angles` (each seed at each) instead
+    of the lock strategy's.
     """
-    robot, _ = playability_models(which, robot_name)
+    robot, library = playability_models(which, robot_name)
     joints = list(joints or robot.joint_names)
+    locks = {j: (stuck_angles(robot, library, j, lock_angles) if lock_angles > 0 else [None])
+             for j in joints}
     deadline = node_settings().deadline_sec
     summary = {'library': which if robot_name == 'namo' else f'{robot_name} product',
                'robot': robot_name, 'joints': joints, 'budget_overrides': BUDGET_OVERRIDES,
+               'lock_angles_deg': {j: [None if a is None else float(np.degrees(a))
+                                       for a in angles] for j, angles in locks.items()},
                'machine': common.machine_info(), 'parts': {}}
     plan = [('budget', seeds, None, jobs), ('deadline', deadline_seeds, deadline, 1)]
     for name, n, limit, n_jobs in plan:
         if n <= 0:
             continue
-        tasks = [(j, seed_base + s, limit) for j in joints for s in range(n)]
+        tasks = [(j, seed_base + s, limit, a) for j in joints for a in locks[j]
+                 for s in range(n)]
         summary['parts'][name] = _part(out, (which, robot_name), tasks, n_jobs,
                                        f'playability {name}', progress)
     print_playability(out, summary, deadline)

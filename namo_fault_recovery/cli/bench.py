@@ -150,6 +150,7 @@ def cmd_bench_playability(args, out):
     _positive_int('--seeds', args.seeds, 0)
     _positive_int('--deadline-seeds', args.deadline_seeds, 0)
     _positive_int('--jobs', args.jobs)
+    _positive_int('--lock-angles', args.lock_angles, 0)
     try:
         robot = playability.playability_models(args.library, args.robot)[0]
     except ValueError as exc:
@@ -161,7 +162,7 @@ def cmd_bench_playability(args, out):
     summary = playability.run_playability(
         out, args.library, seeds=args.seeds, deadline_seeds=args.deadline_seeds,
         joints=args.joints, jobs=args.jobs, seed_base=args.seed_base,
-        progress=not args.quiet, robot_name=args.robot)
+        progress=not args.quiet, robot_name=args.robot, lock_angles=args.lock_angles)
     path = out_dir_of(args, 'playability') / 'summary.json'
     common.write_json(path, summary)
     out.write(f'written: {path}\n')
@@ -384,6 +385,10 @@ def _add_playability(bench_sub):
     p.add_argument('--jobs', type=int, default=2,
                    help='worker processes of the fixed-budget part (default 2)')
     p.add_argument('--seed-base', type=int, default=0, help='seed of repetition 0')
+    p.add_argument('--lock-angles', type=int, default=0, metavar='N',
+                   help='lock each joint at N angles across the range the library moves it '
+                        'through (a joint stuck mid-gesture), each seed at each, instead of '
+                        "the lock strategy's (default 0: the strategy's)")
     _add_common(p)
     p.set_defaults(func=cmd_bench_playability)
 

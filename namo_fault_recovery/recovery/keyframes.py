@@ -60,6 +60,7 @@ SHARE_SWEEPS = 3           # restart sweeps at most (each spreads a branch a lit
 IDLE_STAY_CLOSE = 0.01      # per deg^2: an idle faulted arm moved clear stays near its pose
 SHARE_POLISHED = 1         # of those restarts, the best-scoring ones are polished
 RESTART_MAXITER = 20       # polish iterations of a repair's branch restarts
+TWIN_PATH_SAMPLES = 8      # poses per leg of a twin's path from rest, judged
 REACH_MAXITER = 20         # polish iterations of a repair's searches within reach
 STIFF_PENALTY = 10.0       # a stuck repair's penalty, times the capsules' own weight
 # Colliding rows are solved with the capsules as hard constraints first (recovery.
@@ -885,10 +886,12 @@ def _run(setup, lock_sets, rng, clock, stats):
 
 def _take_nearest_twins(setup, rows):
     """
-    Put each gesture's solved keyframes on their kinematic twins nearest the design.
+    Put each gesture's solved keyframes on their best kinematic twins (:mod:`.twins`).
 
-    The same landmarks and score either way (:mod:`.twins`), but the far twin swings the
-    arm half a turn, maybe through the body, to reach the pose (in place).
+    The same landmarks and score either way, but the far twin swings the arm half a turn,
+    maybe through the body, to reach the pose: of the twins, the one whose path from
+    rest (the locked joints at their locks) presses the body least, then the one nearest
+    the design (in place).
     """
     robot = setup.robot
     q = np.concatenate((rows.right, rows.left), axis=1)
@@ -896,10 +899,41 @@ def _take_nearest_twins(setup, rows):
     q, changed = nearest_twins(
         robot, q, design, rows.layouts, rows.owners,
         lambda poses, ks: pose_values(robot, setup.scorer, setup.checker, poses, rows.ids[ks]),
-        joint_bounds(robot))
+        joint_bounds(robot), _path_penalty(setup, rows))
     if changed:
         rows.right, rows.left = split_arms(robot, q)
         rows.after = setup.scorer.evaluate(rows.right, rows.left, rows.ids)
+
+
+def _path_penalty(setup, rows):
+    """
+    Return ``cost(poses (m, K, J), ks)``: the capsule penalty along the paths from rest.
+
+    Each candidate's path runs straight in joint space from the rest pose (every joint
+    at 0, the locked ones at their locks) through its K keyframes (rows ``ks``), sampled
+    :data:`TWIN_PATH_SAMPLES` times a leg and judged with each leg's end row's
+    allowances; the mean penalty per sample.  None without a collision model.
+    """
+    robot, checker = setup.robot, setup.checker
+    if checker is None:
+        return None
+    first = {side: cols.start for side, cols in arm_columns(robot).items()}
+    locked = [first[side] + j for side in ARMS for j in setup.locked[side]]
+    steps = np.arange(1, TWIN_PATH_SAMPLES + 1) / TWIN_PATH_SAMPLES
+
+    def cost(poses, ks):
+        m, k, n = poses.shape
+        start = np.zeros((m, 1, n))
+        start[:, 0, locked] = poses[:, 0, locked]
+        legs = np.concatenate((start, poses), axis=1)
+        path = (legs[:, :-1, None, :]
+                + steps[:, None] * (legs[:, 1:] - legs[:, :-1])[:, :, None, :])
+        ids = np.broadcast_to(rows.ids[ks][None, :, None], path.shape[:3]).reshape(-1)
+        q_r, q_l = split_arms(robot, path.reshape(-1, n))
+        value = checker.penalty(batch_forward(robot, q_r, 'right'),
+                                batch_forward(robot, q_l, 'left'), ids)[0]
+        return value.reshape(m, -1).mean(axis=1)
+    return cost
 
 
 def pose_values(robot, scorer, checker, q, ids):

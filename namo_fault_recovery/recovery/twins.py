@@ -53,24 +53,24 @@ def twin_angles(q: np.ndarray, triple: tuple, mirror: float, design: np.ndarray,
     return out
 
 
-def side_twins(robot, side: str, free: set) -> list:
-    """Return ``(columns (3,), mirror)`` of the arm's twin triples whose joints all move."""
+def side_twins(robot, side: str) -> list:
+    """Return ``(columns (3,), mirror)`` of the arm's twin triples, in whole-robot columns."""
     first = arm_columns(robot)[side].start
     return [(np.array([first + i, first + j, first + k]), mirror)
-            for i, j, k, mirror in equivalent_twins(robot, side)
-            if {(side, i), (side, j), (side, k)} <= free]
+            for i, j, k, mirror in equivalent_twins(robot, side)]
 
 
-def nearest_on_side(q: np.ndarray, twins: list, design: np.ndarray, lower: np.ndarray,
-                    upper: np.ndarray) -> np.ndarray:
+def side_candidates(q: np.ndarray, twins: list, design: np.ndarray, lower: np.ndarray,
+                    upper: np.ndarray, fixed: np.ndarray) -> list:
     """
-    Return the rows ``q`` (rows, J) through the combination of ``twins`` nearest ``design``.
+    Return the rows ``q`` (rows, J) through every combination of ``twins``: ``q`` first.
 
-    Every combination (each twin taken once, in order) is tried on all rows at once;
-    the one whose joints are nearest the design in the sum of squares wins, ``q``
-    itself where none is nearer.
+    Each twin of a combination is taken once, in order.  A combination counts only where
+    the ``fixed`` columns (a locked joint, one the search did not move) end where they
+    were: two twins that share a locked joint turn it by a whole turn (Namo's shoulder,
+    elbow and wrist twins together leave joint 3 where it is), one alone never does.
     """
-    best, best_gap = q, float(np.sum((q - design) ** 2))
+    found = [q]
     for n in range(1, len(twins) + 1):
         for chosen in combinations(twins, n):
             trial = q
@@ -78,38 +78,64 @@ def nearest_on_side(q: np.ndarray, twins: list, design: np.ndarray, lower: np.nd
                 trial = twin_angles(trial, columns, mirror, design, lower, upper)
                 if trial is None:
                     break
-            if trial is None:
+            if trial is None or not np.allclose(trial[:, fixed], q[:, fixed], atol=1e-9):
                 continue
-            gap = float(np.sum((trial - design) ** 2))
-            if gap < best_gap - 1e-12:
-                best, best_gap = trial, gap
-    return best
+            trial = trial.copy()
+            trial[:, fixed] = q[:, fixed]
+            if not any(np.allclose(trial, other, atol=1e-9) for other in found):
+                found.append(trial)
+    return found
+
+
+def choose(candidates: list, design: np.ndarray, path_cost: Optional[Callable]) -> np.ndarray:
+    """
+    Return the candidate whose path from rest presses the body least, then nearest the design.
+
+    ``path_cost(poses (m, K, J))`` returns the body's penetration along each candidate's
+    path (m,); without it, the joints' distance from the design alone decides.
+    """
+    gaps = np.array([np.sum((c - design) ** 2) for c in candidates])
+    if path_cost is None or len(candidates) == 1:
+        return candidates[int(np.argmin(gaps))]
+    cost = np.asarray(path_cost(np.stack(candidates)), dtype=float)
+    least = cost <= cost.min() + TWIN_TOLERANCE * (1.0 + abs(cost.min()))
+    return candidates[int(np.argmin(np.where(least, gaps, np.inf)))]
 
 
 def nearest_twins(robot, q: np.ndarray, design: np.ndarray, layouts: list, owners: list,
-                  value: Callable, bounds: tuple) -> tuple:
+                  value: Callable, bounds: tuple, path_cost: Optional[Callable] = None) -> tuple:
     """
-    Return ``(q, rows)``: each gesture's keyframes on their twins nearest the design.
+    Return ``(q, rows)``: each gesture's keyframes on their best kinematic twins.
 
     ``q`` and ``design`` are (rows, J) angles of both arms (right first); ``layouts``
     the rows' free ``(side, joint)`` pairs; ``owners`` the gesture of each row (one
-    combination of twins per gesture); ``value(q, rows)`` the search's value of poses
-    ``q`` at those rows; ``bounds`` the (lower, upper) limits (J,).  A gesture changes
-    only where the twins are nearer its design and none of its rows' values is worse
+    combination of twins per gesture, its rows in keyframe order); ``value(q, rows)``
+    the search's value of poses ``q`` at those rows; ``bounds`` the (lower, upper)
+    limits (J,); ``path_cost(poses (m, K, J), rows)`` the body's penetration along the
+    path from rest through each candidate's keyframes (None: not judged).  Of the
+    twins, the one whose path presses least, then the one nearest the design
+    (:func:`choose`).  A gesture changes only where none of its rows' values is worse
     (beyond :data:`TWIN_TOLERANCE`, relative).  ``rows`` lists the rows changed.
     """
     lower, upper = bounds
     out = np.array(q, dtype=float)
     owners = np.asarray(owners)
+    columns = arm_columns(robot)
     moved = []
     for owner in np.unique(owners):
         ks = np.nonzero(owners == owner)[0]
         free = set.intersection(*(set(layouts[k]) for k in ks))
         trial = out[ks]
         for side in ARMS:
-            twins = side_twins(robot, side, free)
-            if twins:
-                trial = nearest_on_side(trial, twins, design[ks], lower, upper)
+            twins = side_twins(robot, side)
+            if not twins or not any(s == side for s, _ in free):
+                continue
+            first = columns[side].start
+            fixed = np.array([c for c in range(columns[side].start, columns[side].stop)
+                              if (side, c - first) not in free], dtype=int)
+            found = side_candidates(trial, twins, design[ks], lower, upper, fixed)
+            cost = None if path_cost is None else (lambda poses, ks=ks: path_cost(poses, ks))
+            trial = choose(found, design[ks], cost)
         if not np.array_equal(trial, out[ks]):
             moved.append((ks, trial))
     if not moved:
