@@ -19,9 +19,9 @@ From a fault set to an adapted gesture library, free of ROS.
 - :mod:`.seeding`: the keyframe search's starting sources, random draws taken a few
   damped least-squares steps towards the landmarks, and the design through each of the
   arm's flips (so the colony starts in good basins);
-- :mod:`.twins`: each gesture's solved keyframes on the kinematic twins nearest its
-  design (the same landmarks and score; the far twin swings the arm half a turn, maybe
-  through the body);
+- :mod:`.twins`: each gesture's solved keyframes on the kinematic twins whose path from
+  rest presses the body least, then nearest its design (the same landmarks and score;
+  the far twin swings the arm half a turn, maybe through the body);
 - :mod:`.constrained`: one pose solved with the capsules' clearances as hard constraints
   (SLSQP), which reaches the best clear pose where a penalty descent stays out of its
   basin (the keyframe search's first step for a colliding pose);

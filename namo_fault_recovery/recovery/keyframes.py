@@ -18,9 +18,9 @@ top of the paper's method:
 - the keyframes of one motion share their branches: each is polished again from its
   neighbours' solutions (:func:`_share_branches`), so that a motion's keyframes do not
   end in different basins of the arm's redundancy by the luck of the colony;
-- each gesture's keyframes then take the kinematic twins nearest its design
-  (:mod:`.twins`: the same score, but the far twin swings the arm half a turn to reach
-  the pose, maybe through the body).
+- each gesture's keyframes then take the kinematic twins whose path from rest presses
+  the body least, then those nearest its design (:mod:`.twins`: the same score, but the
+  far twin swings the arm half a turn to reach the pose, maybe through the body).
 """
 
 import copy
