@@ -6,7 +6,7 @@ from namo_fault_recovery import load_library, load_robot
 from namo_fault_recovery.model.kinematics import batch_forward, equivalent_twins, split_arms
 from namo_fault_recovery.recovery.engine import recover, RecoverySettings
 from namo_fault_recovery.recovery.keyframes import joint_bounds
-from namo_fault_recovery.recovery.twins import nearest_twins, twin_angles
+from namo_fault_recovery.recovery.twins import best_twins, twin_angles
 import numpy as np
 import pytest
 
@@ -52,13 +52,13 @@ def test_a_far_twin_is_taken_back_to_the_one_nearest_the_design():
     assert np.max(np.abs(far - near)) > math.radians(90.0)
     for a, b in zip(_landmarks(near)[0], _landmarks(far)[0]):
         np.testing.assert_allclose(a, b, atol=1e-9)          # twins: every landmark
-    q, changed = nearest_twins(ROBOT, far[None], design[None], [RIGHT], [0],
-                               lambda poses, rows: _tip_distance(poses), BOUNDS)
+    q, changed = best_twins(ROBOT, far[None], design[None], [RIGHT], [0],
+                            lambda poses, rows: _tip_distance(poses), BOUNDS)
     assert changed == [0]
     np.testing.assert_allclose(q[0], near, atol=1e-9)
     # the near one stays as it is
-    q, changed = nearest_twins(ROBOT, near[None], design[None], [RIGHT], [0],
-                               lambda poses, rows: _tip_distance(poses), BOUNDS)
+    q, changed = best_twins(ROBOT, near[None], design[None], [RIGHT], [0],
+                            lambda poses, rows: _tip_distance(poses), BOUNDS)
     assert changed == [] and np.array_equal(q[0], near)
 
 
@@ -69,13 +69,13 @@ def test_one_combination_per_gesture_and_never_a_worse_value():
     poses = np.stack([far, far, near])
     designs = np.stack([design] * 3)
     owners = [0, 0, 1]
-    q, changed = nearest_twins(ROBOT, poses, designs, [RIGHT] * 3, owners,
-                               lambda p, rows: _tip_distance(p), BOUNDS)
+    q, changed = best_twins(ROBOT, poses, designs, [RIGHT] * 3, owners,
+                            lambda p, rows: _tip_distance(p), BOUNDS)
     assert changed == [0, 1]
     np.testing.assert_allclose(q[:2], np.stack([near, near]), atol=1e-9)
     # a value that the twin makes worse (a capsule it would press, say): left alone
-    q, changed = nearest_twins(ROBOT, poses, designs, [RIGHT] * 3, owners,
-                               lambda p, rows: np.abs(p[:, 0] - far[0]), BOUNDS)
+    q, changed = best_twins(ROBOT, poses, designs, [RIGHT] * 3, owners,
+                            lambda p, rows: np.abs(p[:, 0] - far[0]), BOUNDS)
     assert changed == [] and np.array_equal(q, poses)
 
 
@@ -83,8 +83,8 @@ def test_a_locked_or_idle_joint_is_never_turned():
     design = _wai_design()
     far = _shoulder_twin(design, design)
     for layout in ([p for p in RIGHT if p != ('right', 1)], []):
-        q, changed = nearest_twins(ROBOT, far[None], design[None], [tuple(layout)], [0],
-                                   lambda p, rows: _tip_distance(p), BOUNDS)
+        q, changed = best_twins(ROBOT, far[None], design[None], [tuple(layout)], [0],
+                                lambda p, rows: _tip_distance(p), BOUNDS)
         assert changed == [] and np.array_equal(q[0], far)
 
 
@@ -94,8 +94,8 @@ def test_a_twin_beyond_the_joint_limits_is_not_taken():
     far = _shoulder_twin(design, design)
     upper[1] = design[1] + 0.1          # the near reading of joint 2 is now out of reach
     lower[1] = far[1] - 0.1
-    q, changed = nearest_twins(ROBOT, far[None], design[None], [RIGHT], [0],
-                               lambda p, rows: _tip_distance(p), (lower, upper))
+    q, changed = best_twins(ROBOT, far[None], design[None], [RIGHT], [0],
+                            lambda p, rows: _tip_distance(p), (lower, upper))
     assert changed == [] and np.array_equal(q[0], far)
 
 

@@ -72,12 +72,12 @@ class Reconfigurer:
 
         The angles are read as the node reads a fault report (:func:`..runtime.inputs.
         parse_fault`): one measured a little past its stop (the physics overshoots it)
-        is clamped onto the limit, one further off is refused (BadInput).
+        is clamped onto the limit, one further off is refused (BadInput); None (NaN in a
+        report) leaves the angle to the lock strategy.
         """
         from ..runtime.inputs import parse_fault
-        names = list(faults)
-        if all(faults[j] is not None for j in names):
-            faults = parse_fault(self.robot, names, [faults[j] for j in names])
+        faults = parse_fault(self.robot, list(faults),
+                             [math.nan if a is None else a for a in faults.values()])
         began = time.monotonic()
         result = self._recover(self.robot, self.library, faults, self.settings,
                                seed=self.seed, quantisations=self.quantisations)

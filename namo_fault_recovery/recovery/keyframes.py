@@ -38,7 +38,7 @@ from .least_squares import refine
 from .locks import clamp_lock, resolve_locks
 from .result import GestureResult, LibraryResult
 from .seeding import kinematic_starts
-from .twins import nearest_twins
+from .twins import best_twins
 from ..model.kinematics import (angle_bytes, arm_columns, arm_joint_count, ArmLandmarks,
                                 batch_forward, batch_forward_jacobian, split_arms,
                                 take_landmarks)
@@ -869,7 +869,7 @@ def _run(setup, lock_sets, rng, clock, stats):
     stage1 = rows.after.copy()
     if rows.two_stage:
         _stage2(setup, rows, clock, rng)
-    _take_nearest_twins(setup, rows)
+    _take_best_twins(setup, rows)
     cleared = _clear_idle_arms(setup, rows, clock, rng)
     _pace(setup, rows, clock, rng)
     best_r, best_l, after = rows.right, rows.left, rows.after
@@ -884,7 +884,7 @@ def _run(setup, lock_sets, rng, clock, stats):
             'paced': rows.paced, 'cleared': cleared}
 
 
-def _take_nearest_twins(setup, rows):
+def _take_best_twins(setup, rows):
     """
     Put each gesture's solved keyframes on their best kinematic twins (:mod:`.twins`).
 
@@ -896,7 +896,7 @@ def _take_nearest_twins(setup, rows):
     robot = setup.robot
     q = np.concatenate((rows.right, rows.left), axis=1)
     design = np.concatenate((rows.base_r, rows.base_l), axis=1)
-    q, changed = nearest_twins(
+    q, changed = best_twins(
         robot, q, design, rows.layouts, rows.owners,
         lambda poses, ks: pose_values(robot, setup.scorer, setup.checker, poses, rows.ids[ks]),
         joint_bounds(robot), _path_penalty(setup, rows))
@@ -917,8 +917,7 @@ def _path_penalty(setup, rows):
     robot, checker = setup.robot, setup.checker
     if checker is None:
         return None
-    first = {side: cols.start for side, cols in arm_columns(robot).items()}
-    locked = [first[side] + j for side in ARMS for j in setup.locked[side]]
+    locked = layout_columns(robot, [(side, j) for side in ARMS for j in setup.locked[side]])
     steps = np.arange(1, TWIN_PATH_SAMPLES + 1) / TWIN_PATH_SAMPLES
 
     def cost(poses, ks):

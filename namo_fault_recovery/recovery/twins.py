@@ -12,7 +12,7 @@ score, but the path from rest went 122 mm through the torso, and on the simulato
 arm pressed the torso until a healthy joint read as stuck (``bench carry-on`` over 30
 seeds: 59 self-contact events and 7 failed plays before, none after).
 
-:func:`nearest_twins` gives each gesture one combination of twins for all its keyframes
+:func:`best_twins` gives each gesture one combination of twins for all its keyframes
 (so that a motion stays on one branch), within the joint limits, where no keyframe's
 value (score plus the capsule penalty) gets worse: of the combinations, the one whose
 path from rest presses the body least (``path_cost``: the caller's capsule model along
@@ -22,8 +22,7 @@ turn it by a whole turn: Namo's wai with right joint 3 stuck at 15 deg ended, at
 seeds of 8, across the shoulder's and the elbow's twins at once (and the wrist's at 3 of
 them; the path from rest 143 mm through the torso), and that branch is the nearer to
 the design in joint space (the elbow at +90 as designed), so the path decides, not the
-distance.  It runs after the
-search, before the pacing: about 2 % of a run.
+distance.  It runs after the search, before the pacing: about 2 % of a run.
 """
 
 from itertools import combinations
@@ -109,8 +108,8 @@ def choose(candidates: list, design: np.ndarray, path_cost: Optional[Callable]) 
     return candidates[int(np.argmin(np.where(least, gaps, np.inf)))]
 
 
-def nearest_twins(robot, q: np.ndarray, design: np.ndarray, layouts: list, owners: list,
-                  value: Callable, bounds: tuple, path_cost: Optional[Callable] = None) -> tuple:
+def best_twins(robot, q: np.ndarray, design: np.ndarray, layouts: list, owners: list,
+               value: Callable, bounds: tuple, path_cost: Optional[Callable] = None) -> tuple:
     """
     Return ``(q, rows)``: each gesture's keyframes on their best kinematic twins.
 
@@ -128,17 +127,18 @@ def nearest_twins(robot, q: np.ndarray, design: np.ndarray, layouts: list, owner
     out = np.array(q, dtype=float)
     owners = np.asarray(owners)
     columns = arm_columns(robot)
+    twins_of = {side: side_twins(robot, side) for side in ARMS}    # one lookup per run
     moved = []
     for owner in np.unique(owners):
         ks = np.nonzero(owners == owner)[0]
         free = set.intersection(*(set(layouts[k]) for k in ks))
         trial = out[ks]
         for side in ARMS:
-            twins = side_twins(robot, side)
+            twins = twins_of[side]
             if not twins or not any(s == side for s, _ in free):
                 continue
             first = columns[side].start
-            fixed = np.array([c for c in range(columns[side].start, columns[side].stop)
+            fixed = np.array([c for c in range(first, columns[side].stop)
                               if (side, c - first) not in free], dtype=int)
             found = side_candidates(trial, twins, design[ks], lower, upper, fixed)
             cost = None if path_cost is None else (lambda poses, ks=ks: path_cost(poses, ks))
