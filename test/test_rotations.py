@@ -2,7 +2,8 @@
 
 import math
 
-from namo_fault_recovery.model.rotations import rot_axis, rot_x, rot_z, rotation_vectors
+from namo_fault_recovery.model.rotations import (cos_sin, rot_axis, rot_x, rot_z,
+                                                 rotation_vectors)
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -26,3 +27,15 @@ def test_rot_axis_is_the_elementary_rotation_about_x_and_z():
     turned = rot_axis(axis, 1.1)
     assert np.allclose(turned @ axis, axis)      # the axis stays
     assert np.allclose(turned @ turned.T, np.eye(3)) and np.linalg.det(turned) > 0.0
+
+
+def test_cos_sin_from_the_half_angle_matches_numpy_also_at_its_pole():
+    rng = np.random.default_rng(5)
+    poles = math.pi * np.arange(-6, 7)                # tan(theta / 2) at its largest
+    theta = np.concatenate([rng.uniform(-12.0, 12.0, 200_000), poles, poles / 2,
+                            np.nextafter(poles, 0.0), [0.0, -0.0, 1e-300]])
+    c, s = cos_sin(theta)
+    assert np.all(np.isfinite(c)) and np.all(np.isfinite(s))
+    assert np.abs(c - np.cos(theta)).max() < 1e-15
+    assert np.abs(s - np.sin(theta)).max() < 1e-15
+    assert np.isnan(cos_sin(np.array([np.nan]))[0]).all()

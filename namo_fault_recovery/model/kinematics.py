@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .robot import ARMS, N_JOINTS, RobotModel
+from .rotations import cos_sin
 
 
 # DH table bytes -> link constants.  Keyed by the table, not the robot object: the engine
@@ -113,8 +114,7 @@ def _chain(robot, q, axes=None, origins=None, tool=0.0):
     x_col, y_col, z_col = eye
     pos = np.zeros((n, 3))
     theta = (q + robot.theta_offset).T
-    cos_t = np.cos(theta)[:, :, None]
-    sin_t = np.sin(theta)[:, :, None]
+    cos_t, sin_t = (a[:, :, None] for a in cos_sin(theta))
     elbow = wrist = None
     for i, (a, d, ca, sa) in enumerate(_link_plan(robot)):
         # R_new = R . RotX(alpha) . RotZ(theta); p_new = p + R . (a, -sa d, ca d).

@@ -5,12 +5,29 @@ Users: the URDF writer and the chain compiler build the same fixed transforms
 (``RotX(alpha) RotZ(theta)``) from a URDF or a DH table; the compiler turns a URDF joint
 axis onto z; the simulator's structure changes turn a bent link about an axis; the
 exploration's corrections turn rotation vectors into matrices in batches.  One
-definition keeps their conventions from drifting apart.
+definition keeps their conventions from drifting apart.  :func:`cos_sin` gives both
+forward kinematics (the DH table's and the URDF chains') the joint turns' cosines and sines.
 """
 
 import math
 
 import numpy as np
+
+
+def cos_sin(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Return ``(cos(theta), sin(theta))`` elementwise, from one tangent of the half angle.
+
+    ``t = tan(theta / 2)`` gives ``cos = (1 - t^2) / (1 + t^2)`` and ``sin = 2 t / (1 +
+    t^2)``: one transcendental function instead of two, which halves the time the
+    batched FK spends on them (numpy's float64 ``tan`` is vectorised where ``cos`` and
+    ``sin`` are not).  Within 2.3e-16 of ``np.cos`` / ``np.sin`` (test_rotations), also
+    at the half angle's pole, where ``t`` is large but finite.
+    """
+    t = np.tan(0.5 * theta)
+    t2 = t * t
+    inv = 1.0 / (1.0 + t2)
+    return (1.0 - t2) * inv, (t + t) * inv
 
 
 def rot_x_cs(c: float, s: float) -> np.ndarray:
