@@ -12,7 +12,7 @@ from namo_fault_recovery.cli.main import main
 from namo_fault_recovery.optimize.base import Clock
 from namo_fault_recovery.recovery.engine import RecoverySettings
 from namo_fault_recovery.recovery.motion import adapt_library
-from node_harness import NodeProcess, RosClient, session_domain
+from node_harness import NodeProcess, RosClient, session_domain, statuses_values
 import pytest
 
 pytestmark = pytest.mark.slow
@@ -121,6 +121,22 @@ def test_bench_latency_reports_percentiles(node):
     # the middleware had the last gesture before the client's executor handed it over
     assert report['fault_to_delivery']['n'] == 3
     assert report['fault_to_delivery']['p50_ms'] <= report['fault_to_library']['max_ms']
+
+
+def test_bench_latency_streams_the_nodes_own_joints(node, robot):
+    """--joint-states-hz: the stream carries the joints of the library the node serves."""
+    code, text = run('bench', 'latency', '-n', '1', '--joint-states-hz', '100', '--json')
+    assert code == 0, text
+    assert json.loads(text)['fault_to_library']['n'] == 1
+    client = RosClient(DOMAIN)
+    try:
+        statuses = client.wait_diag(
+            lambda s: 'inputs' in s and int(statuses_values(s['inputs'])[
+                'joint_states_received']) > 0, what=f'the stream on the node ({text})')
+    finally:
+        client.close()
+    measured = statuses_values(statuses['inputs'])['measured_joints'].split()
+    assert measured == sorted(robot.joint_names)
 
 
 def test_demo_runs_end_to_end(tmp_path, robot, product_library):

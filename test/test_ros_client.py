@@ -24,6 +24,7 @@ from namo_fault_recovery.ros.client import (BadNamespace, Inbox, node_diagnostic
                                             normalise_namespace, rebuild_library,
                                             TriggerAnswer)
 from namo_fault_recovery.ros.diagnostics import Snapshot, statuses
+from namo_fault_recovery.ros.joint_state_stream import library_pose
 from namo_fault_recovery.ros.messages import library_to_msgs, PreparedMessages
 from namo_fault_recovery.runtime import diagnostic_keys as keys
 from namo_fault_recovery.runtime.state_store import Fault
@@ -285,3 +286,12 @@ def test_a_torso_leaned_by_the_node_comes_back_as_the_gestures_lean():
     assert back.joint_names == robot.joint_names
     for sent, got in zip(result.gestures, back.result.gestures):
         assert got.positions == sent.positions and got.shared == sent.shared, sent.name
+    # A /joint_states stream for this robot (bench latency, bench stream): its own
+    # joints at the first gesture's start, the torso too where that gesture leans it.
+    names, positions = library_pose(back)
+    assert names == list(robot.joint_names) and positions == list(back.result['wai'].positions[0])
+    salute = back.result['salute']
+    leaned = replace(back, result=replace(back.result, gestures=(salute,)))
+    names, positions = library_pose(leaned)
+    assert names == list(robot.joint_names) + list(salute.shared)
+    assert positions == list(salute.positions[0]) + list(salute.shared.values())

@@ -180,6 +180,24 @@ def _checked_joints(joints, known):
     return list(joints)
 
 
+def _start_stream(client, rate, timeout):
+    """
+    Start ``/joint_states`` at ``rate`` Hz: the node's own joints, at its first gesture's start.
+
+    The joints come from the library the node publishes, so that a stream for any robot
+    carries that robot's names, as its drivers would (the node parses and keeps them).
+    Returns once the stream publishes to a matched subscriber (the node): its process
+    start-up is over and its readings reach the node.
+    """
+    from ..ros.joint_state_stream import library_pose, StreamProcess
+    current = client.current_library(timeout, diagnostics_timeout=0.0)
+    stream = StreamProcess(rate, client.domain_id, pose=library_pose(current))
+    if not stream.wait_streaming(timeout):
+        stream.close()
+        raise BenchError(f'--joint-states-hz: the stream did not start within {timeout:g} s')
+    return stream
+
+
 def run_latency(out, count=50, joints=None, timeout=30.0, namespace='/',
                 target=NodeTarget(), joint_states_hz=0.0, verbose=False, settle=0.0,
                 client_priority=0):
@@ -203,14 +221,13 @@ def run_latency(out, count=50, joints=None, timeout=30.0, namespace='/',
     node, domain_id = target.start(namespace, out)
     samples = _Samples()
     try:
-        if joint_states_hz > 0:
-            from ..ros.joint_state_stream import StreamProcess
-            stream = StreamProcess(joint_states_hz, domain_id)
         # The client's middleware and executor threads inherit the policy.
         refused = set_fifo_priority(client_priority)
         if refused:
             raise BenchError(f'--client-priority: {refused}')
         with RecoveryClient(namespace, domain_id) as client:
+            if joint_states_hz > 0:
+                stream = _start_stream(client, joint_states_hz, timeout)
             _measure(client, samples, count, joints, timeout, out, verbose, settle)
     finally:
         if stream is not None:

@@ -207,9 +207,13 @@ def _table(name, summary, deadline, out):
 
 def _run_condition(client, condition, faults, reps, timeout, last, out, verbose=False):
     """Run every fault ``reps`` times under one condition; return (runs, CPU, stream, last)."""
-    from ..ros.joint_state_stream import StreamProcess
+    from ..ros.joint_state_stream import library_pose, StreamProcess
     name, rate, burning = condition
-    stream = StreamProcess(rate, client.domain_id) if rate > 0 else None
+    stream = None
+    if rate > 0:        # the node's own joints (any robot), at its first gesture's start
+        pose = library_pose(client.current_library(timeout, diagnostics_timeout=0.0))
+        stream = StreamProcess(rate, client.domain_id, pose=pose)
+        stream.wait_streaming(timeout)
     runs = []
     try:
         with (CpuBurner() if burning else contextlib.nullcontext()) as ctx:

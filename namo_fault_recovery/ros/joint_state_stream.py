@@ -12,6 +12,7 @@ detection-suite``).
 import argparse
 import json
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -19,6 +20,10 @@ import threading
 import time
 
 from .spun_node import SpunNode, wait_until
+from ..runtime.realtime import leave_fifo
+
+READY = 'streaming'     # the child's first stdout line: published, and a subscriber matched
+MATCH_TIMEOUT = 30.0    # s: READY at the latest then, matched or not
 
 
 def reference_pose(robot=None, library=None):
@@ -34,6 +39,21 @@ def reference_pose(robot=None, library=None):
     library = library or load_library(robot)
     names = list(robot.joint_names)
     positions = [float(a) for a in library.gestures[0].keyframes[0].positions()]
+    return names, positions
+
+
+def library_pose(library):
+    """
+    Return ``(names, positions)`` of a node's published library: its first gesture's start.
+
+    ``library`` is a :class:`~.client.PublishedLibrary`.  Every joint the node plays (the
+    arms', then a torso's where the gesture leans it), so that a stream for any robot
+    carries that robot's joints, as its drivers would.
+    """
+    first = library.result.gestures[0]
+    names = list(library.joint_names) + list(first.shared)
+    positions = [float(a) for a in first.positions[0]] + [float(a) for a in
+                                                          first.shared.values()]
     return names, positions
 
 
@@ -122,13 +142,26 @@ def stream_main(argv=None):
     parser = argparse.ArgumentParser(prog='namo_fault_recovery.ros.joint_state_stream')
     parser.add_argument('--rate', type=float, required=True)
     parser.add_argument('--domain-id', type=int, default=None)
+    parser.add_argument('--pose', default=None, metavar='JSON',
+                        help='{"names": [...], "positions": [...]} (default: Namo at the '
+                             'start of its first gesture)')
     args = parser.parse_args(argv)
+    leave_fifo()             # a driver of its own: not the real-time client that started it
+    if args.pose:
+        pose = json.loads(args.pose)
+        names, positions = pose['names'], pose['positions']
+    else:
+        names, positions = reference_pose()
     spun = SpunNode(f'namo_joint_state_stream_{os.getpid()}', args.domain_id)
     done = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: done.set())
     signal.signal(signal.SIGINT, lambda *_: done.set())
-    names, positions = reference_pose()
     with JointStateStream(spun.node, args.rate, names, positions) as stream:
+        # Ready once a subscriber (the node) is matched: sent before that, readings are lost.
+        wait_until(lambda: (stream.sent > 0 and stream.publisher.get_subscription_count() > 0)
+                   or done.is_set(), MATCH_TIMEOUT, 0.01)
+        sys.stdout.write(READY + '\n')
+        sys.stdout.flush()
         done.wait()
     sys.stdout.write(json.dumps({'sent': stream.sent,
                                  'rate_hz': round(stream.achieved_rate, 1)}) + '\n')
@@ -139,16 +172,40 @@ def stream_main(argv=None):
 class StreamProcess:
     """The stream publisher as a child process (a robot's drivers are other processes)."""
 
-    def __init__(self, rate, domain_id):
-        """Start publishing at ``rate`` Hz in ``domain_id`` (None: ``$ROS_DOMAIN_ID``)."""
+    def __init__(self, rate, domain_id, pose=None):
+        """
+        Start publishing at ``rate`` Hz in ``domain_id`` (None: ``$ROS_DOMAIN_ID``).
+
+        ``pose`` is ``(names, positions)`` (None: :func:`reference_pose`, Namo's).
+        """
         self.rate = rate
         cmd = [sys.executable, '-m', 'namo_fault_recovery.ros.joint_state_stream',
                '--rate', str(rate)]
         if domain_id is not None:
             cmd += ['--domain-id', str(domain_id)]
+        if pose is not None:
+            names, positions = pose
+            cmd += ['--pose', json.dumps({'names': list(names),
+                                          'positions': [float(a) for a in positions]})]
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                                      env=dict(os.environ, PYTHONUNBUFFERED='1'))
         self.report = {}
+
+    def wait_streaming(self, timeout=30.0):
+        """
+        Return True once the child publishes to a matched subscriber, False at timeout.
+
+        Its start-up (an interpreter importing rclpy) is over then, and the readings reach
+        the node.
+        """
+        end = time.monotonic() + timeout
+        while self.proc.poll() is None:
+            left = end - time.monotonic()
+            if left <= 0 or not select.select([self.proc.stdout], [], [], left)[0]:
+                return False
+            if self.proc.stdout.readline().decode().strip() == READY:
+                return True
+        return False
 
     def close(self):
         """Stop the stream; return its report (``sent``, ``rate_hz``), {} if it gave none."""
