@@ -391,12 +391,19 @@ def test_the_table_serves_its_entries_when_the_log_says_they_are_loaded(tmp_path
     keeper = ContingencyKeeper(ROBOT, LIBRARY, tmp_path / 'state', log,
                                offline_file=str(path), prepare=lambda result: time.sleep(0.01))
     try:
+        assert keeper.status() == ('loading', 0, 0)
         keeper.configure(SETTINGS)
+        assert keeper.status()[0] == 'loading'          # until the entries are checked
         wait_for_entries(keeper, len(table))
         for _ in range(100):
-            if any('entries loaded from' in text for text, _ in seen):
+            if any('entries loaded from' in text for text, _ in seen) and \
+                    keeper.status()[0] != 'loading':
                 break
             time.sleep(0.05)
+        # Every single fault came from the file: nothing is left to build.
+        assert keeper.status() == ('complete', len(table), 0)
+        keeper.configure(replace(SETTINGS, continuity_weight=0.02))   # a new fingerprint
+        assert keeper.status()[0] == 'loading'
     finally:
         keeper.stop()
     loaded = [entries for text, entries in seen if 'entries loaded from' in text]

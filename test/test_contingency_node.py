@@ -68,6 +68,11 @@ def test_table_hit_then_restart_reuses_then_a_setting_invalidates(tmp_path, clie
     try:
         client.wait_library(what='the reference library')
         wait_table(node, state, SINGLE_FAULTS)
+        # /diagnostics says so: every single fault is served at once.
+        client.wait_diag(lambda s: 'contingency_table' in s and statuses_values(
+            s['contingency_table']) == {'table_state': 'complete',
+                                        'table_entries': str(SINGLE_FAULTS),
+                                        'table_missing': '0'}, what='the table complete')
         values = version_after_fault(client, ['right_arm_joint2'])
         assert values['library_origin'] == 'table', values
         assert 'from the contingency table' in client.trigger('/reconfigure_gestures').message

@@ -15,7 +15,7 @@ import math
 from pathlib import Path
 
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from namo_fault_recovery.cli.main import build_parser, main
 from namo_fault_recovery.model.gestures import load_library
 from namo_fault_recovery.model.profile_robot import robot_from_profile
@@ -116,9 +116,30 @@ def test_every_name_and_key_the_writer_uses_is_shared(robot, result):
     defined = _defined_keys(result.names)
     names = {s.name[len(ROBOT1):] for s in written}
     assert names == ({keys.FAULTS, keys.RECONFIGURATION, keys.INPUTS, keys.STATE,
-                      keys.arm_status('right')} | {keys.joint_status(j) for j in right})
+                      keys.CONTINGENCY_TABLE, keys.arm_status('right')}
+                     | {keys.joint_status(j) for j in right})
     unknown = sorted({kv.key for s in written for kv in s.values} - defined)
     assert not unknown, f'keys written but not in diagnostic_keys: {unknown}'
+
+
+@pytest.mark.parametrize('table, message', [
+    (('off', 0, 0), 'off (contingency_table is false): every fault is searched live'),
+    (('loading', 0, 0), 'loading: a fault meanwhile is searched live'),
+    (('building', 12, 16), '12 fault sets served at once; 16 more being built in the '
+                           'background'),
+    (('complete', 28, 0), '28 fault sets served at once; every planned one is built'),
+])
+def test_the_contingency_table_says_how_many_faults_are_served_at_once(robot, result, table,
+                                                                       message):
+    snap = Snapshot(faults={}, fault_version=0, current=result, version=1, stamp_ns=STAMP,
+                    pending=False, running=False, failed=None, settings=RecoverySettings(),
+                    table=table)
+    found = {s.name[len(ROOT):]: s for s in statuses(robot, snap, ROOT)}
+    got = found[keys.CONTINGENCY_TABLE]
+    assert got.message == message and got.level == DiagnosticStatus.OK
+    values = {kv.key: kv.value for kv in got.values}
+    assert values == {keys.TABLE_STATE: table[0], keys.TABLE_ENTRIES: str(table[1]),
+                      keys.TABLE_MISSING: str(table[2])}
 
 
 def test_diagnostics_of_another_node_or_version_are_not_used(robot, result):

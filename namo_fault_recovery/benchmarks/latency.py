@@ -11,8 +11,11 @@ the node and DDS add, with the node's own figures of each library: ``publish_pat
 (result in hand -> last gesture published), ``fault_to_request_sec``, ``fault_sync_sec``
 and ``fault_to_publish_sec`` (fault received -> last gesture published: the node's whole
 share; the rest is DDS and the client), and the libraries' origins (``table`` for a
-contingency-table hit). ``--settle`` waits between a clear and the next fault.
-``--joint-states-hz`` streams ``/joint_states`` from another process meanwhile;
+contingency-table hit). The first fault waits until the node's contingency table is
+loaded (its ``contingency_table`` status on ``/diagnostics``), as on a robot in
+service. ``--settle`` waits between a clear and the next fault.
+``--joint-states-hz`` streams ``/joint_states`` (the node's own joints) from another
+process meanwhile;
 ``--node-param`` sets a parameter of the private node (e.g. ``contingency_table:=false``
 to time the engine path only). Everything goes through
 :class:`~namo_fault_recovery.ros.client.RecoveryClient`; ROS is imported only when the
@@ -47,6 +50,7 @@ class _Samples:
         self.figures = {key: [] for key, _ in NODE_FIGURES}
         self.failures = []
         self.origins = {}                  # library_origin -> count ('' if not described)
+        self.table = None                  # the contingency table at the first fault
 
     def add_library(self, client, library, t0, t0_ns=None):
         """Add the latency of a fault's ``library`` (published at ``t0``) and its split."""
@@ -67,6 +71,8 @@ class _Samples:
         report = {'faults': count, 'fault_to_library': percentiles(self.latencies),
                   'reconfigure_service': percentiles(self.round_trips),
                   'origins': dict(self.origins), 'failures': self.failures}
+        if self.table is not None:
+            report['table_at_start'] = {'state': self.table[0], 'entries': self.table[1]}
         if self.delivered:
             report['fault_to_delivery'] = percentiles(self.delivered)
         if self.engine:
@@ -141,10 +147,30 @@ def fault_library(client, joints, angles, timeout, diagnostics_timeout=3.0):
         stamp = library.stamp
 
 
+def wait_table(client, timeout):
+    """
+    Return the node's contingency table status once it is not loading any more, or None.
+
+    A fault while the node still loads its table (just after its start) is searched
+    live: the first fault of a run would time the start-up, not what a robot in service
+    does.  ``(state, entries)`` from /diagnostics; None when the node does not say
+    (a node without that status) within ``timeout`` s.
+    """
+    def ready(diag):
+        return diag.get(keys.CONTINGENCY_TABLE, keys.TABLE_STATE) not in (
+            None, keys.TABLE_LOADING)
+    found = client.latest_diagnostics(ready, timeout=timeout)
+    if found is None:
+        return None
+    return (found.get(keys.CONTINGENCY_TABLE, keys.TABLE_STATE),
+            int(found.get(keys.CONTINGENCY_TABLE, keys.TABLE_ENTRIES, 0)))
+
+
 def _measure(client, samples, count, joints, timeout, out, verbose=False, settle=0.0):
     """Run ``count`` clear -> fault -> reconfigure rounds; add them to ``samples``."""
     current = client.current_library(timeout, diagnostics_timeout=0.0)
     joints = _checked_joints(joints, current.joint_names)
+    samples.table = wait_table(client, timeout)
     stamp = current.stamp
     for i in range(count):
         joint = joints[i % len(joints)]
@@ -249,6 +275,10 @@ def write_latency(out, report, failures):
             s = report[key]
             out.write(f"{label:<42} n={s['n']:<3} p50 {s['p50_ms']:7.1f} ms  "
                       f"p95 {s['p95_ms']:7.1f} ms  max {s['max_ms']:7.1f} ms\n")
+    table = report.get('table_at_start')
+    if table:
+        out.write(f"contingency table at the first fault: {table['state']}, "
+                  f"{table['entries']} entries\n")
     origins = report.get('origins') or {}
     if origins:
         out.write('libraries by origin: ' + ', '.join(

@@ -57,10 +57,17 @@ class Snapshot:
     fault_to_request: float = None
     fault_sync: float = None
     fault_to_publish: float = None
+    table: tuple = (dk.TABLE_OFF, 0, 0)   # the contingency table: (state, entries, missing)
 
 
-def snapshot(book, inputs, settings, state_problem, state_file, engine_restarts):
-    """Return a :class:`Snapshot` of a RunBook, an InputMonitor and the node's state."""
+def snapshot(book, inputs, settings, state_problem, state_file, engine_restarts,
+             table=(dk.TABLE_OFF, 0, 0)):
+    """
+    Return a :class:`Snapshot` of a RunBook, an InputMonitor and the node's state.
+
+    ``table`` is the contingency table's ``(state, entries, missing)``
+    (:meth:`~..runtime.contingency_keeper.ContingencyKeeper.status`).
+    """
     b = book.snapshot()
     return Snapshot(
         faults=b['faults'], fault_version=b['fault_version'], current=b['current'],
@@ -73,7 +80,7 @@ def snapshot(book, inputs, settings, state_problem, state_file, engine_restarts)
         engine_restarts=engine_restarts, waiting_callers=b['waiting_callers'],
         request_to_publish=b['request_to_publish'], publish_path=b['publish_path'],
         fault_to_request=b['fault_to_request'], fault_sync=b['fault_sync'],
-        fault_to_publish=b['fault_to_publish'])
+        fault_to_publish=b['fault_to_publish'], table=tuple(table))
 
 
 def statuses(robot, snap, prefix=DEFAULT_PREFIX):
@@ -104,7 +111,27 @@ def statuses(robot, snap, prefix=DEFAULT_PREFIX):
                       [(dk.STATE_FILE, snap.state_file),
                        (dk.ENGINE_RESTARTS, snap.engine_restarts),
                        (dk.WAITING_CALLERS, snap.waiting_callers)]))
+    out.append(_table_status(snap.table, hw, prefix))
     return out
+
+
+def table_state(enabled, keeper):
+    """Return the contingency table's (state, entries, missing): ``keeper``'s, or 'off'."""
+    return keeper.status() if enabled else (dk.TABLE_OFF, 0, 0)
+
+
+def _table_status(table, hw, prefix):
+    """Return the ``contingency_table`` status: how many faults are served at once."""
+    state, entries, missing = table
+    message = {dk.TABLE_OFF: 'off (contingency_table is false): every fault is searched live',
+               dk.TABLE_LOADING: 'loading: a fault meanwhile is searched live',
+               'building': f'{entries} fault sets served at once; {missing} more being built '
+                           f'in the background',
+               'complete': f'{entries} fault sets served at once; every planned one is '
+                           f'built'}.get(state, state)
+    return status(prefix, dk.CONTINGENCY_TABLE, 'OK', message, hw,
+                  [(dk.TABLE_STATE, state), (dk.TABLE_ENTRIES, entries),
+                   (dk.TABLE_MISSING, missing)])
 
 
 def _joint_status(robot, prefix, joint, fault, current, up_to_date, strategy):

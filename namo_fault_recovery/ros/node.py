@@ -401,7 +401,8 @@ class RecoveryNode(Node):
         """Publish /diagnostics from a snapshot of the state (the heartbeat, and changes)."""
         snap = diagnostics.snapshot(self._book, self._inputs, self._config.settings,
                                     self._state.problem, self._state.store.path,
-                                    self._engine.restarts)
+                                    self._engine.restarts, diagnostics.table_state(
+                                        self._config.contingency_table, self._table))
         try:
             msg = DiagnosticArray()
             msg.header.stamp = self.get_clock().now().to_msg()

@@ -62,6 +62,30 @@ def _build(conn, robot, library, settings, plan, seeds, parent_pid=None):
     conn.send(('done', None, None, time.process_time()))   # the whole process's CPU
 
 
+def load_tables(path, offline_file, fingerprint, admit, log):
+    """
+    Return (the table for ``fingerprint``: ``path``'s, then ``offline_file``'s; lines to log).
+
+    An entry is kept if ``admit(locks, result)`` (checked, then prepared); a file made
+    for another fingerprint adds nothing (``offline_file``'s reason is logged at once).
+    """
+    table, reason = ContingencyTable.load(path, fingerprint)
+    said = [] if reason else [f'contingency table: {len(table)} entries reused from {path}']
+    if offline_file:
+        offline, why = ContingencyTable.load(offline_file, fingerprint)
+        if why is None:
+            for key, (locks, result) in offline.entries.items():
+                table.entries.setdefault(key, (locks, result))
+            said.append(f'contingency table: {len(offline)} entries loaded from '
+                        f'{offline_file}')
+        else:
+            log('warning', why)
+    for key, (locks, result) in list(table.entries.items()):
+        if not admit(locks, result):
+            del table.entries[key]
+    return table, said
+
+
 class ContingencyKeeper:
     """The table of one node: lookup, background build, persistence."""
 
@@ -84,6 +108,8 @@ class ContingencyKeeper:
         self._thread = None
         self._stopping = False
         self._plan_keys = ()
+        self._loading = True                  # the table for the wanted settings not in use yet
+        self._applied = None                  # the settings of the table in use
         self._proc = None
         self._conn = None
         self._reader = None
@@ -126,6 +152,16 @@ class ContingencyKeeper:
         with self._lock:
             return 0 if self._table is None else len(self._table)
 
+    def status(self) -> tuple:
+        """Return (``loading``, ``building`` or ``complete``; entries; missing) of the table."""
+        with self._lock:
+            table = self._table
+            if table is None or self._loading:
+                return 'loading', 0 if table is None else len(table), 0
+            missing = sum(key not in table.entries for key in self._plan_keys)
+            return ('building' if self.building and missing else 'complete'), len(table), \
+                missing
+
     # --- configuration and build ----------------------------------------------------
 
     def configure(self, settings, active=None):
@@ -137,6 +173,9 @@ class ContingencyKeeper:
         yet in the table.
         """
         with self._wanted_cond:
+            with self._lock:
+                if settings != self._applied:
+                    self._loading = True         # status(): until _apply has loaded it
             self._wanted = (settings, dict(active or {}))
             self._wanted_cond.notify()
             if self._thread is None:
@@ -169,11 +208,16 @@ class ContingencyKeeper:
         with self._lock:
             table = self._table
         if table is None or table.fingerprint != fingerprint:
-            table, said = self._load(fingerprint)    # checked and prepared, off the lock
+            table, said = load_tables(self._path, self._offline, fingerprint, self._admit,
+                                      self._log)         # checked and prepared, off the lock
             with self._lock:
                 self._table, self._plan_keys = table, ()
             for text in said:                        # in use from now on: say so
                 self._log('info', text)
+        with self._wanted_cond, self._lock:      # the order configure() takes them in
+            pending = self._wanted
+            self._applied = settings
+            self._loading = pending is not None and pending[0] != settings
         try:
             plan = fault_sets(self._robot, self._library, settings, active=active)
         except ValueError as exc:
@@ -197,27 +241,6 @@ class ContingencyKeeper:
         fingerprint = table_fingerprint(self._robot, self._library, settings)
         self._fp_cache = (settings, fingerprint)
         return fingerprint
-
-    def _load(self, fingerprint):
-        """Return (the table for ``fingerprint``, checked and prepared; lines to log once used)."""
-        table, reason = ContingencyTable.load(self._path, fingerprint)
-        kept = len(table) if reason is None else None
-        said = []
-        if self._offline:
-            offline, why = ContingencyTable.load(self._offline, fingerprint)
-            if why is None:
-                for key, (locks, result) in offline.entries.items():
-                    table.entries.setdefault(key, (locks, result))
-                said.append(f'contingency table: {len(offline)} entries loaded from '
-                            f'{self._offline}')
-            else:
-                self._log('warning', why)
-        for key, (locks, result) in list(table.entries.items()):
-            if not self._admit(locks, result):
-                del table.entries[key]
-        if kept is not None:
-            said.insert(0, f'contingency table: {kept} entries reused from {self._path}')
-        return table, said
 
     def _admit(self, locks, result):
         """Return True if an entry may be served (checked, then prepared); log why not."""

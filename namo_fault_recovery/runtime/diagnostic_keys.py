@@ -24,6 +24,7 @@ ARM_STATUS = 'arm '                 # + side: one status per frozen arm
 RECONFIGURATION = 'reconfiguration'
 INPUTS = 'inputs'
 STATE = 'state'
+CONTINGENCY_TABLE = 'contingency_table'
 
 # --- keys of 'faults' ----------------------------------------------------------------
 
@@ -104,6 +105,14 @@ LAST_REJECTED_REASON = 'last_rejected_reason'
 STATE_FILE = 'state_file'
 ENGINE_RESTARTS = 'engine_restarts'
 WAITING_CALLERS = 'waiting_callers'
+
+# --- keys of 'contingency_table' -------------------------------------------------------
+
+TABLE_STATE = 'table_state'         # off, loading, building, complete
+TABLE_ENTRIES = 'table_entries'     # fault sets in the table, served at once
+TABLE_MISSING = 'table_missing'     # fault sets of the plan still being built
+TABLE_OFF = 'off'
+TABLE_LOADING = 'loading'
 
 TRUE = 'true'
 FALSE = 'false'
