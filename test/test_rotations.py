@@ -2,8 +2,8 @@
 
 import math
 
-from namo_fault_recovery.model.rotations import (cos_sin, rot_axis, rot_x, rot_z,
-                                                 rotation_vectors)
+from namo_fault_recovery.model.rotations import (cos_sin, HALF_ANGLE_FROM, rot_axis, rot_x,
+                                                 rot_z, rotation_vectors)
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -35,6 +35,9 @@ def test_cos_sin_from_the_half_angle_matches_numpy_also_at_its_pole():
     theta = np.concatenate([rng.uniform(-12.0, 12.0, 200_000), poles, poles / 2,
                             np.nextafter(poles, 0.0), [0.0, -0.0, 1e-300]])
     c, s = cos_sin(theta)
+    small_c, small_s = cos_sin(theta[:HALF_ANGLE_FROM - 1])      # np.cos and np.sin
+    assert np.array_equal(small_c, np.cos(theta[:HALF_ANGLE_FROM - 1]))
+    assert np.array_equal(small_s, np.sin(theta[:HALF_ANGLE_FROM - 1]))
     assert np.all(np.isfinite(c)) and np.all(np.isfinite(s))
     assert np.abs(c - np.cos(theta)).max() < 1e-15
     assert np.abs(s - np.sin(theta)).max() < 1e-15
