@@ -158,9 +158,9 @@ class ContingencyKeeper:
             table = self._table
             if table is None or self._loading:
                 return 'loading', 0 if table is None else len(table), 0
+            # Entries of the plan not in yet: being built (or about to be, between plans).
             missing = sum(key not in table.entries for key in self._plan_keys)
-            return ('building' if self.building and missing else 'complete'), len(table), \
-                missing
+            return ('building' if missing else 'complete'), len(table), missing
 
     # --- configuration and build ----------------------------------------------------
 
