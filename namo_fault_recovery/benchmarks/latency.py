@@ -215,10 +215,9 @@ def _start_stream(client, rate, timeout):
     Returns once the stream publishes to a matched subscriber (the node): its process
     start-up is over and its readings reach the node.
     """
-    from ..ros.joint_state_stream import library_pose, StreamProcess
-    current = client.current_library(timeout, diagnostics_timeout=0.0)
-    stream = StreamProcess(rate, client.domain_id, pose=library_pose(current))
-    if not stream.wait_streaming(timeout):
+    from ..ros.joint_state_stream import library_stream
+    stream, started = library_stream(client, rate, timeout)
+    if not started:
         stream.close()
         raise BenchError(f'--joint-states-hz: the stream did not start within {timeout:g} s')
     return stream

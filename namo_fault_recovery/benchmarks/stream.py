@@ -207,13 +207,10 @@ def _table(name, summary, deadline, out):
 
 def _run_condition(client, condition, faults, reps, timeout, last, out, verbose=False):
     """Run every fault ``reps`` times under one condition; return (runs, CPU, stream, last)."""
-    from ..ros.joint_state_stream import library_pose, StreamProcess
+    from ..ros.joint_state_stream import library_stream
     name, rate, burning = condition
-    stream = None
-    if rate > 0:        # the node's own joints (any robot), at its first gesture's start
-        pose = library_pose(client.current_library(timeout, diagnostics_timeout=0.0))
-        stream = StreamProcess(rate, client.domain_id, pose=pose)
-        stream.wait_streaming(timeout)
+    # The node's own joints (any robot), at its first gesture's start.
+    stream = library_stream(client, rate, timeout)[0] if rate > 0 else None
     runs = []
     try:
         with (CpuBurner() if burning else contextlib.nullcontext()) as ctx:

@@ -304,9 +304,8 @@ class KinematicChain:
         Return, per state 0..n, ``(origin, x, y, z)``: arrays of shape (N, 3) or (3,).
 
         With ``keep`` (a set of state indices), the other states are None: a batch then
-        holds only the frames it reads, not all n + 1 of them, which keeps the working
-        set small (on Namo's arms, a tenth of the FK time when other work runs between
-        calls).
+        holds only the frames it reads, not all n + 1 of them (a smaller working set; a
+        few per cent of Namo's FK time at most, within the noise of ``bench fk``).
         """
         theta = q * self._signs + self._offsets if self._signs is not None else \
             q + self._offsets

@@ -125,10 +125,10 @@ def _table_status(table, hw, prefix):
     state, entries, missing = table
     message = {dk.TABLE_OFF: 'off (contingency_table is false): every fault is searched live',
                dk.TABLE_LOADING: 'loading: a fault meanwhile is searched live',
-               'building': f'{entries} fault sets served at once; {missing} more being built '
-                           f'in the background',
-               'complete': f'{entries} fault sets served at once; every planned one is '
-                           f'built'}.get(state, state)
+               dk.TABLE_BUILDING: f'{entries} fault sets served at once; {missing} more '
+                                  f'being built in the background',
+               dk.TABLE_COMPLETE: f'{entries} fault sets served at once; every planned one '
+                                  f'is built'}.get(state, state)
     return status(prefix, dk.CONTINGENCY_TABLE, 'OK', message, hw,
                   [(dk.TABLE_STATE, state), (dk.TABLE_ENTRIES, entries),
                    (dk.TABLE_MISSING, missing)])

@@ -57,6 +57,20 @@ def library_pose(library):
     return names, positions
 
 
+def library_stream(client, rate, timeout):
+    """
+    Start a :class:`StreamProcess` of the node's own joints; return ``(stream, started)``.
+
+    ``client`` (a :class:`~.client.RecoveryClient`) reads the library the node serves
+    (:func:`library_pose`), so that a stream for any robot carries that robot's names,
+    as its drivers would.  ``started`` is :meth:`StreamProcess.wait_streaming`'s answer
+    within ``timeout`` s: the stream publishes to a matched subscriber (the node).
+    """
+    pose = library_pose(client.current_library(timeout, diagnostics_timeout=0.0))
+    stream = StreamProcess(rate, client.domain_id, pose=pose)
+    return stream, stream.wait_streaming(timeout)
+
+
 class JointStateStream:
     """
     Publish ``sensor_msgs/JointState`` on ``/joint_states`` at ``rate`` Hz in a thread.

@@ -32,6 +32,7 @@ import signal
 import threading
 import time
 
+from . import diagnostic_keys as dk
 from .engine_process import die_with_parent
 from .realtime import leave_fifo
 from .restore import check_result
@@ -108,8 +109,8 @@ class ContingencyKeeper:
         self._thread = None
         self._stopping = False
         self._plan_keys = ()
-        self._loading = True                  # the table for the wanted settings not in use yet
-        self._applied = None                  # the settings of the table in use
+        self._asked = None                    # the settings of the newest configure()
+        self._applied = None                  # the settings whose table is in use
         self._proc = None
         self._conn = None
         self._reader = None
@@ -156,11 +157,12 @@ class ContingencyKeeper:
         """Return (``loading``, ``building`` or ``complete``; entries; missing) of the table."""
         with self._lock:
             table = self._table
-            if table is None or self._loading:
-                return 'loading', 0 if table is None else len(table), 0
+            if table is None or self._applied != self._asked:
+                return dk.TABLE_LOADING, 0 if table is None else len(table), 0
             # Entries of the plan not in yet: being built (or about to be, between plans).
             missing = sum(key not in table.entries for key in self._plan_keys)
-            return ('building' if missing else 'complete'), len(table), missing
+            return (dk.TABLE_BUILDING if missing else dk.TABLE_COMPLETE), len(table), \
+                missing
 
     # --- configuration and build ----------------------------------------------------
 
@@ -172,10 +174,9 @@ class ContingencyKeeper:
         when the fingerprint changed, then (re)starts the builder on the fault sets not
         yet in the table.
         """
+        with self._lock:
+            self._asked = settings               # status(): loading until _apply has it
         with self._wanted_cond:
-            with self._lock:
-                if settings != self._applied:
-                    self._loading = True         # status(): until _apply has loaded it
             self._wanted = (settings, dict(active or {}))
             self._wanted_cond.notify()
             if self._thread is None:
@@ -214,10 +215,8 @@ class ContingencyKeeper:
                 self._table, self._plan_keys = table, ()
             for text in said:                        # in use from now on: say so
                 self._log('info', text)
-        with self._wanted_cond, self._lock:      # the order configure() takes them in
-            pending = self._wanted
+        with self._lock:
             self._applied = settings
-            self._loading = pending is not None and pending[0] != settings
         try:
             plan = fault_sets(self._robot, self._library, settings, active=active)
         except ValueError as exc:

@@ -113,6 +113,8 @@ TABLE_ENTRIES = 'table_entries'     # fault sets in the table, served at once
 TABLE_MISSING = 'table_missing'     # fault sets of the plan still being built
 TABLE_OFF = 'off'
 TABLE_LOADING = 'loading'
+TABLE_BUILDING = 'building'
+TABLE_COMPLETE = 'complete'
 
 TRUE = 'true'
 FALSE = 'false'
