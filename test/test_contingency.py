@@ -408,3 +408,35 @@ def test_the_table_serves_its_entries_when_the_log_says_they_are_loaded(tmp_path
         keeper.stop()
     loaded = [entries for text, entries in seen if 'entries loaded from' in text]
     assert loaded == [len(table)], seen
+
+
+def test_a_partial_table_never_reads_complete_while_its_plan_is_made(tmp_path, monkeypatch):
+    """From the configure() to the builder's start: loading, then building, never complete."""
+    from namo_fault_recovery.runtime import contingency_keeper
+    from namo_fault_recovery.runtime.contingency_keeper import ContingencyKeeper
+
+    def slow_plan(*args, **kwargs):              # widens the window between the two steps
+        time.sleep(0.3)
+        return ct.fault_sets(*args, **kwargs)
+    monkeypatch.setattr(contingency_keeper, 'fault_sets', slow_plan)
+    table = ct.ContingencyTable(ct.table_fingerprint(ROBOT, LIBRARY, SETTINGS))
+    plan = ct.fault_sets(ROBOT, LIBRARY, SETTINGS)
+    for faults in plan[:3]:
+        table.add(servable_result(ct.table_locks(ROBOT, LIBRARY, faults, SETTINGS),
+                                  faults=dict(faults)))
+    path = tmp_path / 'offline.json'
+    table.save(path)
+    keeper = ContingencyKeeper(ROBOT, LIBRARY, tmp_path / 'state', lambda *a: None,
+                               offline_file=str(path))
+    seen = []
+    try:
+        keeper.configure(SETTINGS)
+        end = time.monotonic() + 20.0
+        while time.monotonic() < end and (not seen or seen[-1][0] != 'building'):
+            seen.append(keeper.status())
+    finally:
+        keeper.stop()
+    states = [s for s, _, _ in seen]
+    assert states[-1] == 'building', states[-5:]
+    assert 'complete' not in states, [s for s in seen if s[0] != 'loading'][:3]
+    assert seen[-1][2] == len(plan) - 3, seen[-1]

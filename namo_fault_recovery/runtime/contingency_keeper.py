@@ -215,8 +215,6 @@ class ContingencyKeeper:
                 self._table, self._plan_keys = table, ()
             for text in said:                        # in use from now on: say so
                 self._log('info', text)
-        with self._lock:
-            self._applied = settings
         try:
             plan = fault_sets(self._robot, self._library, settings, active=active)
         except ValueError as exc:
@@ -226,6 +224,9 @@ class ContingencyKeeper:
         missing = [(k, f) for k, f in zip(keys, plan) if k not in table.entries]
         keys = tuple(k for k, _ in missing)
         with self._lock:
+            # The table and its plan's missing entries in one step: status() never
+            # reads the new settings with the previous plan (a 'complete' in between).
+            self._applied = settings
             if keys == self._plan_keys and (self.building or not keys):
                 return
             self._plan_keys = keys
