@@ -9,7 +9,8 @@ import pytest
 
 DISTRIBUTION = 'example-robot-data'
 URDFS = {'talos': 'talos_data/robots/talos_reduced.urdf',
-         'tiago_dual': 'tiago_description/robots/tiago_dual.urdf'}
+         'tiago_dual': 'tiago_description/robots/tiago_dual.urdf',
+         'baxter': 'baxter_description/urdf/baxter.urdf'}
 TALOS_URDF = URDFS['talos']
 TIAGO_URDF = URDFS['tiago_dual']
 

@@ -14,7 +14,7 @@ from namo_fault_recovery.model.robot_profile import load_profile
 from namo_fault_recovery.model.urdf_tree import load_urdf_tree
 from namo_fault_recovery.resources import distribution_file
 import pytest
-from robot_urdfs import TALOS_URDF, TIAGO_URDF
+from robot_urdfs import installed_urdf, TALOS_URDF, TIAGO_URDF
 import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -195,3 +195,18 @@ def test_the_template_says_when_it_finds_no_arm_and_that_profile_is_refused(tmp_
     path.write_text(template.text)
     with pytest.raises(ConfigError, match="key 'arms': expected one or two of right, left"):
         load_profile(path)
+
+
+def test_the_template_finds_arms_that_hang_from_their_branch_by_a_fixed_mount(tmp_path):
+    """Baxter's arms start below a fixed mount joint (right_torso_arm_mount, then right_s0)."""
+    urdf = installed_urdf('baxter')
+    template = guess_profile(load_urdf_tree(urdf), str(urdf))
+    doc = yaml.safe_load(template.text)
+    for side in ('right', 'left'):
+        assert doc['arms'][side]['joints'] == [f'{side}_{j}' for j in (
+            's0', 's1', 'e0', 'e1', 'w0', 'w1', 'w2')], doc['arms'][side]
+        assert doc['arms'][side]['base'] == 'torso'
+    path = tmp_path / 'baxter.yaml'
+    path.write_text(template.text)
+    profile = load_profile(path)
+    assert profile.arms['left'].chain.n_joints == 7

@@ -112,6 +112,22 @@ def _walk(t, first):
         link = joint.child
 
 
+def _first_moving(t, joint):
+    """
+    Return the first joint at or below ``joint`` that is not fixed, through fixed ones.
+
+    An arm may hang from its branch by a fixed mount (Baxter's ``right_torso_arm_mount``
+    before ``right_s0``).  None if the fixed joints branch again before one moves (that
+    link is a branch of its own, and is searched as one).
+    """
+    while joint.kind == 'fixed':
+        kids = t.moving_kids(joint.child)
+        if len(kids) != 1:
+            return None
+        joint = kids[0]
+    return joint
+
+
 def find_arms(t):
     """Return [(branch link, [arm joints])] of every serial run that looks like an arm."""
     arms = []
@@ -120,7 +136,9 @@ def find_arms(t):
         if len(kids) < 2 and link != t.tree.root:
             continue
         for first in kids:
-            if not _active(first) or first.kind not in ('revolute', 'continuous'):
+            first = _first_moving(t, first)
+            if first is None or not _active(first) or \
+                    first.kind not in ('revolute', 'continuous'):
                 continue
             run, _ = _walk(t, first)
             names = [j.name for j in run] + [j.child for j in run]
