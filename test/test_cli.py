@@ -128,3 +128,40 @@ def test_every_command_has_a_help_page():
     for path, parser in pages.items():
         text = parser.format_help()
         assert path.split()[-1] in text, path
+
+
+ROBOTS = Path(__file__).resolve().parent.parent / 'config' / 'robots'
+
+
+def test_the_global_robot_profile_solves_shows_and_scores_another_robot(capsys):
+    """show, score, solve (and export, precompute) take any robot as the node does."""
+    from robot_urdfs import installed_urdf
+    installed_urdf('talos')
+    robot = ['--robot-profile', str(ROBOTS / 'talos.yaml'),
+             '--gesture-file', str(ROBOTS / 'talos_gestures.yaml')]
+    code, text = run(robot + ['solve', '--fault', 'arm_right_4_joint', '--seed', '0',
+                              '--gesture', 'salute', '--json'])
+    assert code == 0, capsys.readouterr().err
+    doc = json.loads(text)
+    assert doc['robot'] == 'talos' and list(doc['locks']) == ['arm_right_4_joint']
+    code, text = run(robot + ['show'])
+    assert code == 0 and 'robot: talos' in text and '\nside_invite:' in text
+    code, text = run(robot + ['score', '--gesture', 'wai', '--right'] + ['0'] * 7)
+    assert code == 0 and text.startswith('gesture wai (keyframe 0): score ')
+    assert run(robot + ['score', '--gesture', 'wai', '--right', '0', '0'])[0] == 2
+    assert '--right: expected 7 angles in degrees, got 2' in capsys.readouterr().err
+
+
+def test_a_profile_where_a_dh_file_is_expected_says_so_on_one_line(capsys):
+    """--robot-file with a profile, and --robot-profile with a DH-only command."""
+    talos = str(ROBOTS / 'talos.yaml')
+    assert run(['--robot-file', talos, 'show'])[0] == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f'namo-recovery: error: {talos}: a recovery profile (a robot from its '
+                   'URDF), not a DH robot file; expected it as robot_profile '
+                   '(--robot-profile on the command line)')
+    assert run(['--robot-profile', talos, 'bench', 'fk'])[0] == 2
+    err = capsys.readouterr().err
+    assert '--robot-profile: namo-recovery bench runs on a DH robot file' in err
+    assert run(['--robot-profile', talos, '--robot-file', talos, 'solve'])[0] == 2
+    assert 'expected one of the two' in capsys.readouterr().err

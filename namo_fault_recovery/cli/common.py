@@ -25,6 +25,33 @@ class Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
+# The commands that take the global --robot-profile (a robot from its URDF); the others run
+# on a DH robot file and refuse it (main()).
+PROFILE_COMMANDS = ('show', 'score', 'solve', 'export', 'precompute')
+
+
+def robot_source(args):
+    """
+    Return the RobotSource of the global ``--robot-file`` or ``--robot-profile``.
+
+    The two exclude each other, as the node's ``robot_file`` and ``robot_profile`` do.
+    """
+    from ..runtime.robot_source import RobotSource
+    robot_file = getattr(args, 'robot_file', None)
+    profile = getattr(args, 'robot_profile', None)
+    if profile and robot_file:
+        raise UsageError(f'--robot-profile: {profile} is given with --robot-file '
+                         f'{robot_file}; expected one of the two (--robot-file is a DH model, '
+                         '--robot-profile builds the robot from its URDF)')
+    return RobotSource(robot_file, profile)
+
+
+def robot_models(args):
+    """Return ``(robot, library)`` of the robot options and ``--gesture-file``."""
+    from ..runtime.robot_source import load_models
+    return load_models(robot_source(args), getattr(args, 'gesture_file', None))
+
+
 def parse_faults(robot, specs):
     """
     Parse ``--fault JOINT[=DEG]`` options into ``{joint: lock angle (rad) or None}``.

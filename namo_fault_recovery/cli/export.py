@@ -10,9 +10,7 @@ recover`, no ROS).
 import math
 from pathlib import Path
 
-from .common import parse_faults, UsageError
-from ..model.gestures import load_library
-from ..model.robot import load_robot
+from .common import parse_faults, robot_models, UsageError
 from ..playback.export import dump, motions_document
 
 FORMATS = ('play_motion2',)
@@ -42,8 +40,7 @@ def receive_library(domain_id, timeout):
 
 def cmd_export(args, out):
     """Write the current library as a play_motion2 motions YAML."""
-    robot = load_robot(args.robot_file)
-    library = load_library(robot, args.gesture_file)
+    robot, library = robot_models(args)
     if args.fault:
         motions, locks = _from_solve(args, robot, library)
         source = 'solved here for ' + ', '.join(

@@ -10,11 +10,9 @@ import sys
 import numpy as np
 
 from .common import add_setting_options, engine_settings, gesture_and_keyframe
-from .common import parse_faults, Parser, UsageError
+from .common import parse_faults, Parser, PROFILE_COMMANDS, robot_models, UsageError
 from ..errors import ConfigError, EXIT_USAGE
-from ..model.gestures import load_library
-from ..model.kinematics import forward_kinematics
-from ..model.robot import load_robot
+from ..model.kinematics import arm_joint_count, forward_kinematics
 from ..objective.score import COMPONENTS, ScoreWeights, SimilarityScore
 
 
@@ -26,15 +24,9 @@ def _fmt_deg(q):
     return '[' + ', '.join(f'{x:7.2f}' for x in np.degrees(q)) + ']'
 
 
-def _load_models(args):
-    robot = load_robot(args.robot_file)
-    library = load_library(robot, args.gesture_file)
-    return robot, library
-
-
 def cmd_show(args, out):
     """Print the gesture library with every keyframe's landmarks."""
-    robot, library = _load_models(args)
+    robot, library = robot_models(args)
     out.write(f'robot: {robot.name} ({robot.source})\n')
     out.write(f'library: {len(library)} gestures ({library.source})\n')
     for side in ('right', 'left'):
@@ -58,11 +50,11 @@ def cmd_show(args, out):
     return 0
 
 
-def _parse_angles(values, option):
+def _parse_angles(values, option, count):
     if values is None:
         return None
-    if len(values) != 7:
-        raise UsageError(f'{option}: expected 7 angles in degrees, got {len(values)}')
+    if len(values) != count:
+        raise UsageError(f'{option}: expected {count} angles in degrees, got {len(values)}')
     try:
         q = np.radians([float(v) for v in values])
     except ValueError as exc:
@@ -74,10 +66,10 @@ def _parse_angles(values, option):
 
 def cmd_score(args, out):
     """Score one pose against a gesture and print the breakdown."""
-    robot, library = _load_models(args)
+    robot, library = robot_models(args)
     gesture = gesture_and_keyframe(library, args.gesture, args.keyframe)
-    q_right = _parse_angles(args.right, '--right')
-    q_left = _parse_angles(args.left, '--left')
+    q_right = _parse_angles(args.right, '--right', arm_joint_count(robot, 'right'))
+    q_left = _parse_angles(args.left, '--left', arm_joint_count(robot, 'left'))
     scorer = SimilarityScore.for_gesture(robot, gesture, args.keyframe, ScoreWeights())
     total, parts = scorer(q_right, q_left, breakdown=True)
     if args.json:
@@ -154,7 +146,7 @@ def cmd_solve(args, out):
     """Recover the library for a fault set with :func:`recover`; print the result."""
     from dataclasses import replace
     from ..benchmarks.common import recover_subset
-    robot, library = _load_models(args)
+    robot, library = robot_models(args)
     faults = parse_faults(robot, args.fault or [])
     settings, clock = solve_settings(args)
     for name in args.gesture or ():
@@ -231,6 +223,10 @@ def build_parser():
                     description='Joint-failure recovery for the Namo gesture robot.')
     parser.add_argument('--robot-file', default=None,
                         help='robot model YAML (default: the packaged Namo model)')
+    parser.add_argument('--robot-profile', default=None, metavar='FILE',
+                        help="any robot's recovery profile, its URDF named inside (as the "
+                             "node's robot_profile; commands: " + ', '.join(PROFILE_COMMANDS)
+                             + '); give its --gesture-file too')
     parser.add_argument('--gesture-file', default=None,
                         help='gesture library YAML (default: the packaged library, the '
                              'four gestures; bench motion: config/demo_motions.yaml, the '
@@ -245,9 +241,9 @@ def build_parser():
     p.add_argument('--gesture', required=True, help='gesture name, e.g. wai')
     p.add_argument('--keyframe', type=int, default=0, help='keyframe index (default 0)')
     p.add_argument('--right', nargs='+', required=True, metavar='DEG',
-                   help='right-arm angles q1..q7 in degrees')
+                   help="right-arm angles in degrees, the arm's joints in order")
     p.add_argument('--left', nargs='+', metavar='DEG',
-                   help="left-arm angles q1..q7 in degrees (default: the gesture's)")
+                   help="left-arm angles in degrees (default: the gesture's)")
     p.add_argument('--json', action='store_true', help='print one JSON document')
     p.set_defaults(func=cmd_score)
 
@@ -282,6 +278,11 @@ def main(argv=None, out=None):
     out = out or sys.stdout
     try:
         args = build_parser().parse_args(argv)
+        if args.robot_profile and args.command not in PROFILE_COMMANDS:
+            raise UsageError(f'--robot-profile: namo-recovery {args.command} runs on a DH '
+                             'robot file (--robot-file); the commands that take a profile: '
+                             f'{", ".join(PROFILE_COMMANDS)} (and bench robots / bench meshes '
+                             '--profile, retarget --to)')
         return args.func(args, out)
     except UsageError as exc:
         sys.stderr.write(f'namo-recovery: error: {exc}\n')

@@ -14,8 +14,8 @@ import argparse
 import math
 import time
 
-from .common import (add_setting_options, engine_settings, parse_faults, UsageError,
-                     writing_out)
+from .common import (add_setting_options, engine_settings, parse_faults, robot_models,
+                     UsageError, writing_out)
 
 
 def cmd_precompute(args, out):
@@ -30,7 +30,7 @@ def cmd_precompute(args, out):
         raise UsageError(f'--budget: expected a number of seconds >= 0 (0: none), got {budget}')
     budget = budget or None
     settings = engine_settings(args)
-    robot, library = _models(args)
+    robot, library = robot_models(args)
     active = parse_faults(robot, args.active or [])
     joints = None
     if args.joint:
@@ -70,16 +70,6 @@ def cmd_precompute(args, out):
     return 0
 
 
-def _models(args):
-    """Return ``(robot, library)``: the node's of ``--robot-file`` or ``--robot-profile``."""
-    from ..runtime.robot_source import load_models, RobotSource
-    profile = getattr(args, 'robot_profile', None)
-    if profile and args.robot_file:
-        raise UsageError(f'--robot-profile: {profile} is given with --robot-file '
-                         f'{args.robot_file}; expected one of the two')
-    return load_models(RobotSource(args.robot_file, profile), args.gesture_file)
-
-
 def register(sub):
     """Add the ``precompute`` subcommand to the main parser's subcommands."""
     from ..recovery.contingency import DEFAULT_SEEDS, DEFAULT_TABLE_PATH
@@ -100,10 +90,10 @@ def register(sub):
     p.add_argument('--active', action='append', metavar='JOINT[=DEG]',
                    help='a fault already in force, that every entry adds to (repeatable; '
                         'without DEG the lock strategy chooses the angle)')
-    p.add_argument('--robot-profile', default=None, metavar='FILE',
-                   help="another robot's recovery profile (as the node's robot_profile; "
-                        'default: the robot file)')
     # SUPPRESS: given after the command it wins; absent, the global option stands.
+    p.add_argument('--robot-profile', default=argparse.SUPPRESS, metavar='FILE',
+                   help="another robot's recovery profile (as the node's robot_profile; "
+                        'default: the global --robot-profile, else the robot file)')
     p.add_argument('--gesture-file', default=argparse.SUPPRESS, metavar='FILE',
                    help="the robot's gesture library (as the node's gesture_file)")
     add_setting_options(p)

@@ -240,6 +240,10 @@ def load_robot(path: str | os.PathLike | None = None) -> RobotModel:
     """Load and validate a robot file; the packaged Namo model when ``path`` is None."""
     path = Path(path) if path is not None else config_path(DEFAULT_ROBOT_FILE)
     data = chk.load_yaml(path)
+    if 'units' not in data and ('urdf' in data or 'arms' in data and 'dh' not in data):
+        raise ConfigError(path, None, 'a recovery profile (a robot from its URDF), not a DH '
+                          'robot file; expected it as robot_profile (--robot-profile on the '
+                          'command line)')
     name = str(data.get('name', path.stem))
     length_scale, angle_scale = _parse_units(data, path)
     table, ee = _parse_dh(data, path)
