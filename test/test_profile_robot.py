@@ -173,6 +173,25 @@ def test_retarget_command_writes_a_library_that_loads(tmp_path, monkeypatch):
     assert load_library(robot_from_profile(NAMO), target)['wai'].two_handed
 
 
+def test_a_retargeted_library_the_robot_refuses_is_not_written(tmp_path, monkeypatch, capsys):
+    """The unedited Talos template (upper arm capsule 160 mm): Bye's upper arms press 5 mm."""
+    monkeypatch.setattr(retarget, 'RESTARTS', 2)
+    from namo_fault_recovery.cli.main import main as cli_main
+    from namo_fault_recovery.model.profile_template import guess_profile
+    from namo_fault_recovery.model.urdf_tree import load_urdf_tree
+    from robot_urdfs import installed_urdf
+    urdf = installed_urdf('talos')
+    profile, target = tmp_path / 'my_talos.yaml', tmp_path / 'my_gestures.yaml'
+    profile.write_text(guess_profile(load_urdf_tree(urdf), str(urdf)).text)
+    argv = ['retarget', '--from', str(ROOT / 'config' / 'gestures.yaml'), '--to', str(profile),
+            '--out', str(target)]
+    assert cli_main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and f'{target} not written: ' in err, err
+    assert 'interpenetrate' in err and "profile's capsules key" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['my_talos.yaml']
+
+
 def test_bench_robots_prints_the_deadline_figures(tmp_path):
     import io
     from namo_fault_recovery.cli.main import main as cli_main

@@ -99,11 +99,40 @@ def cmd_retarget(args, out):
     if args.out is None:
         out.write(text)
         return 0
-    with writing_out(args.out):
-        Path(args.out).write_text(text, encoding='utf-8')
-    load_library(target, args.out, on_warning=lambda line: out.write(line + '\n'))
+    _write_checked(text, args.out, target, out)
     out.write(f'wrote {args.out}; it loads on {target.name}\n')
     return 0
+
+
+def _write_checked(text, path, robot, out):
+    """
+    Write the library ``text`` to ``path`` only if it loads on ``robot`` (as the node checks).
+
+    It is checked in a file beside ``path`` first: a library the node would refuse is
+    not left where the node would be pointed at it.  The refusal says which profile
+    keys to look at when a capsule pair is too deep (the capsules may be fatter than
+    the robot's body).
+    """
+    from ..errors import ConfigError
+    from ..model.gestures import load_library
+    path = Path(path)
+    trial = path.with_name(f'.{path.name}.checking')
+    with writing_out(path):
+        trial.write_text(text, encoding='utf-8')
+    try:
+        load_library(robot, trial, on_warning=lambda line: out.write(line + '\n'))
+    except ConfigError as exc:
+        trial.unlink(missing_ok=True)
+        hint = ''
+        if 'interpenetrate' in str(exc):
+            hint = ('; if the body is slimmer than its capsules, set smaller radii in the '
+                    "profile's capsules key (upper_arm, forearm, hand, torso_radius; mm) and "
+                    'retarget again (bench meshes compares them with the URDF meshes)')
+        where = f"key '{exc.key}': " if exc.key else ''
+        raise UsageError(f'{path} not written: the retargeted library does not load on '
+                         f'{robot.name}: {where}{exc.problem}{hint}') from None
+    with writing_out(path):
+        trial.replace(path)
 
 
 def register(sub):
