@@ -174,7 +174,7 @@ def test_the_checker_finds_a_cycle_and_resolves_relative_imports():
     assert find_cycle({'a': {'b'}, 'b': {'c'}, 'c': {'a'}}) == ['a', 'b', 'c', 'a']
     assert find_cycle({'a': {'b'}, 'b': {'c'}, 'c': set()}) is None
     targets = {imp.target for imp in IMPORTS[f'{PACKAGE}.cli.main']}
-    assert f'{PACKAGE}.model.robot' in targets          # from ..model.robot import ...
+    assert f'{PACKAGE}.model.kinematics' in targets     # from ..model.kinematics import ...
     assert f'{PACKAGE}.cli.node_commands' in targets    # from . import node_commands
     levels = {imp.module_level for imp in IMPORTS[f'{PACKAGE}.cli.main']}
     assert levels == {True, False}                      # both kinds are counted
