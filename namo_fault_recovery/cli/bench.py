@@ -11,7 +11,8 @@ import math
 from pathlib import Path
 import sys
 
-from .common import gesture_and_keyframe, parse_faults, Parser, UsageError
+from .common import add_setting_options, engine_settings, gesture_and_keyframe
+from .common import parse_faults, Parser, UsageError
 from ..errors import EXIT_USAGE
 
 # ``bench explore``'s runs (benchmarks.explore.RUNS, named here so that the parser does not
@@ -251,27 +252,26 @@ def cmd_plot(args, out):
     """
     from ..benchmarks import plotting
     from ..model.gestures import load_library
-    from ..recovery.engine import RecoverySettings
     robot = models_of(args)[0]
     library = load_library(robot, getattr(args, 'gesture_file', None))
     gesture = gesture_and_keyframe(library, args.gesture, args.keyframe)
     faults = parse_faults(robot, args.fault or [])
-    if not faults and not args.tool:
-        raise _usage('nothing changed: give --fault JOINT[=DEG] and/or --tool MM')
+    settings = engine_settings(args)
+    if not faults and not settings.tool_length_mm:
+        raise _usage('nothing changed: give --fault JOINT[=DEG] and/or --tool-length-mm MM')
     try:
         plotting.figure((1, 1))
     except plotting.MatplotlibMissing as exc:
         sys.stderr.write(f'namo-recovery: error: {exc}\n')
         return EXIT_USAGE
+    tool = settings.tool_length_mm
     tag = '_'.join([j.replace('_arm_joint', '') for j in faults]
-                   + ([f'tool{args.tool:g}'] if args.tool else []))
+                   + ([f'tool{tool:g}'] if tool else []))
     path = Path(args.out) if args.out else Path(f'{gesture.name}_{tag}.png')
     try:
-        settings = RecoverySettings(optimizer=args.algorithm, optimizer_preset=args.preset,
-                                    trajectory_method=args.method,
-                                    tool_length_mm=float(args.tool))
         plotting.plot_gesture(out, robot, library, gesture.name, faults, settings, path,
-                              seed=args.seed, deadline=args.deadline, keyframe=args.keyframe)
+                              seed=args.seed, deadline=settings.deadline_sec,
+                              keyframe=args.keyframe)
     except ValueError as exc:
         raise _usage(str(exc)) from None
     return 0
@@ -504,16 +504,10 @@ def _add_plot(subparsers):
     p.add_argument('--fault', action='append', metavar='JOINT[=DEG]',
                    help='failed joint, optionally with its lock angle in degrees '
                         '(default: the library average); repeatable')
-    p.add_argument('--tool', type=float, default=0.0, metavar='MM',
-                   help='a tool of this length (mm) in the right hand (default none)')
-    p.add_argument('--method', default='auto', choices=['auto', 'kriging', 'per_point'],
-                   help='motion adaptation method (default auto)')
     p.add_argument('--out', default=None, metavar='FILE',
                    help='PNG file (default: <gesture>_<faults>.png)')
-    p.add_argument('--algorithm', default='abc', choices=['abc', 'ga', 'bfoa', 'gd'])
-    p.add_argument('--preset', default='default', choices=['default', 'paper'])
     p.add_argument('--seed', type=int, default=0, help='seed (default 0)')
-    p.add_argument('--deadline', type=float, default=1.0, help='deadline in s (default 1)')
+    add_setting_options(p, deadline=True)
     p.add_argument('--keyframe', type=int, default=0, help='keyframe index (default 0)')
     p.set_defaults(func=cmd_plot)
 

@@ -10,16 +10,17 @@ recover`, no ROS).
 import math
 from pathlib import Path
 
-from .common import parse_faults, robot_models, UsageError
+from .common import add_setting_options, engine_settings, parse_faults, robot_models
+from .common import UsageError
 from ..playback.export import dump, motions_document
 
 FORMATS = ('play_motion2',)
 
 
 def _from_solve(args, robot, library):
-    from ..recovery.engine import recover, RecoverySettings
+    from ..recovery.engine import recover
     faults = parse_faults(robot, args.fault)
-    settings = RecoverySettings(deadline_sec=args.deadline)
+    settings = engine_settings(args)
     result = recover(robot, library, faults, settings, seed=args.seed)
     motions = [(g.name, robot.joint_names, g.times, g.positions) for g in result.gestures]
     return motions, result.locks
@@ -69,12 +70,11 @@ def register(subparsers):
     p.add_argument('--fault', action='append', metavar='JOINT[=DEG]',
                    help='solve here for this fault (repeatable) instead of reading the '
                         'running node')
-    p.add_argument('--deadline', type=float, default=1.0,
-                   help='solve budget in seconds (with --fault; default 1.0)')
     p.add_argument('--seed', type=int, default=None, help='seed of the solve')
     p.add_argument('--timeout', type=float, default=10.0, metavar='SEC',
                    help='how long to wait for /gesture_library (default 10 s)')
     p.add_argument('--domain-id', type=int, default=None, metavar='N',
                    help='ROS domain id (default: $ROS_DOMAIN_ID, else 0)')
+    add_setting_options(p, deadline=True)   # with --fault: the solve's settings
     p.set_defaults(func=cmd_export)
     return p

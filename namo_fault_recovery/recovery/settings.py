@@ -129,14 +129,15 @@ class RecoverySettings:
         0.0, "a tool in the hand of tool_arm lengthens it by this much (the second paper's "
         '50 and 100 mm): a structure change; setting it re-adapts the library even with no '
         'failed joint, and setting 0 restores the reference', unit='mm',
-        limits=(0.0, 300.0), bound='>= 0', metavar='MM',
+        limits=(0.0, 300.0), bound='>= 0', metavar='MM', aliases=('--tool',),
         cli_help='a tool lengthening the hand of --tool-arm (mm)')
     tool_arm: str = setting('right', 'the arm whose hand holds the tool', choices=ARMS)
     trajectory_method: str = setting(
         'auto', 'motions: kriging = VQ typical points + Kriging (the second paper); '
         'per_point = every point in order, warm-started, with a continuity penalty; auto = '
         'Kriging, then the whole trajectory (every point at once, batched analytic '
-        'gradients, a smoothness term) until the deadline', choices=METHODS)
+        'gradients, a smoothness term) until the deadline', choices=METHODS,
+        aliases=('--method',))
     vq_distortion_mm: float = setting(
         DEFAULT_DISTORTION_MM, 'quantisation distortion threshold (mm of fingertip) that '
         "sets the number of typical points of a dense motion (the paper's 60 mm)",
