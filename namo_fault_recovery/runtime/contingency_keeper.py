@@ -272,8 +272,9 @@ class ContingencyKeeper:
         self._reader = threading.Thread(target=self._receive, args=(parent, proc),
                                         name='table-builder', daemon=True)
         self._reader.start()
-        self._log('info', f'contingency table: building {len(plan)} entries in the '
-                          f'background (pid {proc.pid}, nice 19)')
+        count = f'{len(plan)} entries' if len(plan) != 1 else '1 entry'
+        self._log('info', f'contingency table: building {count} in the background (pid '
+                          f'{proc.pid}, nice 19)')
 
     def _receive(self, conn, proc):
         began = time.monotonic()
