@@ -214,7 +214,8 @@ def test_bench_robots_takes_any_profile_and_its_library(tmp_path):
             '--update-optima', '--optima-seeds', '1', '--optima', str(optima)]
     assert cli_main(argv, out=out) == 0
     text = out.getvalue()
-    assert '== talos76: every single fault x 1 seeds' in text and 'all within 1%' in text
+    assert '== talos76: the single faults of arm_left_6_joint x 1 seeds' in text
+    assert 'all within 1%' in text
     doc = yaml.safe_load(optima.read_text())
     assert list(doc['fault_sets']) == [k for k in doc['fault_sets'] if 'arm_left_6' in k]
     assert '--profile' in doc['generated_by'] and 'talos76_gestures.yaml' in doc['generated_by']

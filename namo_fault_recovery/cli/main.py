@@ -219,7 +219,7 @@ def add_solve_parser(sub):
 
 def build_parser():
     """Build the argument parser; later issues register more subcommands here."""
-    parser = Parser(prog='namo-recovery',
+    parser = Parser(prog='namo-recovery', allow_abbrev=False,
                     description='Joint-failure recovery for the Namo gesture robot.')
     parser.add_argument('--robot-file', default=None,
                         help='robot model YAML (default: the packaged Namo model)')
