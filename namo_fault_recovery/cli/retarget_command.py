@@ -122,7 +122,6 @@ def _write_checked(text, path, robot, out):
     try:
         load_library(robot, trial, on_warning=lambda line: out.write(line + '\n'))
     except ConfigError as exc:
-        trial.unlink(missing_ok=True)
         hint = ''
         if 'interpenetrate' in str(exc):
             hint = ('; if the body is slimmer than its capsules, set smaller radii in the '
@@ -131,8 +130,11 @@ def _write_checked(text, path, robot, out):
         where = f"key '{exc.key}': " if exc.key else ''
         raise UsageError(f'{path} not written: the retargeted library does not load on '
                          f'{robot.name}: {where}{exc.problem}{hint}') from None
-    with writing_out(path):
-        trial.replace(path)
+    else:
+        with writing_out(path):
+            trial.replace(path)
+    finally:
+        trial.unlink(missing_ok=True)          # refused, or anything else went wrong
 
 
 def register(sub):
