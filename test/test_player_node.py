@@ -255,3 +255,28 @@ def test_a_torso_no_controller_takes_is_said_once_and_only_when_it_leans():
     assert 'torso_2_joint' in text and 'torso_1_joint' not in text
     assert unplayed_joints(track, arms, said) == ''          # once per gesture and joints
     assert unplayed_joints(track, names, set()) == ''        # a torso controller takes it
+
+
+def test_a_goal_waits_until_a_controllers_subscription_has_settled():
+    """CommandLinks: first seen at t, ready at t + MATCH_SETTLE_SEC; gone and back: again."""
+    from namo_fault_recovery.ros.player_node import CommandLinks, MATCH_SETTLE_SEC
+
+    class Pub:
+        def __init__(self, count):
+            self.count = count
+
+        def get_subscription_count(self):
+            return self.count
+
+    right, left = Pub(1), Pub(0)
+    links = CommandLinks({'right_arm_controller': right, 'left_arm_controller': left})
+    assert links.idle() == ['left_arm_controller']
+    assert links.settled_at(10.0) == pytest.approx(10.0 + MATCH_SETTLE_SEC)
+    left.count = 1
+    assert links.idle() == []
+    assert links.settled_at(12.0) == pytest.approx(12.0 + MATCH_SETTLE_SEC)   # the newest
+    assert links.settled_at(20.0) == pytest.approx(12.0 + MATCH_SETTLE_SEC)   # long settled
+    right.count = 0
+    links.settled_at(21.0)
+    right.count = 1
+    assert links.settled_at(22.0) == pytest.approx(22.0 + MATCH_SETTLE_SEC)   # came back

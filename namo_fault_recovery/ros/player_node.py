@@ -67,6 +67,8 @@ from ..runtime.robot_source import robot_source
 NODE_NAME = 'gesture_player'
 RECOVERY_PREFIX = 'recovery_node: '
 TICK = 0.05
+# s a controller's subscription must have been seen before the first goal goes to it
+MATCH_SETTLE_SEC = 0.3
 # s: a library version that arrived this long before a fault reached the player may be
 # its answer (someone else's report can reach recovery_node first).
 EARLY_ANSWER = 0.25
@@ -253,6 +255,52 @@ def unplayed_joints(track, joints, said):
             f'({", ".join(unplayed)}): played without them')
 
 
+class CommandLinks:
+    """
+    The controllers' command publishers, and since when each has had a subscriber.
+
+    A goal published before the match would be lost.  So, we think, can one published
+    right after the publisher first sees the subscription: the controller's side may not
+    have matched this publisher yet, and a volatile reader that matches later may take
+    the goal for history.  That is our reading of one failure, not reproduced: the
+    demo's first play in one CI run of many, where the arm never moved.  A controller
+    seen for the first time, or again after it went away, is given
+    :data:`MATCH_SETTLE_SEC` before a goal goes to it.
+    """
+
+    def __init__(self, pubs):
+        self.pubs = pubs                     # controller -> JointTrajectory publisher
+        self.matched_at = {}                 # controller -> when first seen subscribed
+
+    def idle(self):
+        """Return the controllers that nobody subscribes to."""
+        return [c for c, pub in self.pubs.items() if not pub.get_subscription_count()]
+
+    def settled_at(self, now):
+        """Note the subscriptions seen at ``now``; return when the newest one is settled."""
+        for controller, pub in self.pubs.items():
+            if pub.get_subscription_count():
+                self.matched_at.setdefault(controller, now)
+            else:
+                self.matched_at.pop(controller, None)
+        return max(self.matched_at.values(), default=now) + MATCH_SETTLE_SEC
+
+    async def ready(self, wait, timeout):
+        """
+        Wait for every controller's subscription, then for it to settle; return the idle.
+
+        ``wait(deadline)`` is the node's: a future done at its next input or at
+        ``deadline``.  Gives up after ``timeout`` s without every subscription.
+        """
+        end = time.monotonic() + timeout
+        while self.idle() and time.monotonic() < end:
+            await wait(end)
+        settled = self.settled_at(time.monotonic())
+        while not self.idle() and time.monotonic() < settled:
+            await wait(settled)
+        return self.idle()
+
+
 class GesturePlayer(Node):
     """Play gestures of the current library on trajectory controllers."""
 
@@ -292,6 +340,7 @@ class GesturePlayer(Node):
         self._command_pubs = {c: self.create_publisher(JointTrajectory,
                                                        f'{c}/joint_trajectory', 10)
                               for c in self._groups}
+        self._links = CommandLinks(self._command_pubs)
         self.create_timer(TICK, self._tick, callback_group=inputs)
         self._structure = StructureWatch(self, self._robot, inputs)   # structure_watch.py
         self._exploration = explorer(self, self._robot, inputs, self._service_group)
@@ -444,11 +493,7 @@ class GesturePlayer(Node):
             design = plan if track is designed else self._plan(designed, track)   # watched
         except (KeyError, ValueError) as exc:
             return Outcome(False, f'cannot plan: {exc}')
-        end = time.monotonic() + self._waits['first_states']
-        while time.monotonic() < end and not all(
-                pub.get_subscription_count() for pub in self._command_pubs.values()):
-            await self._wait(end)   # a goal published before the match would be lost
-        idle = [c for c, pub in self._command_pubs.items() if not pub.get_subscription_count()]
+        idle = await self._links.ready(self._wait, self._waits['first_states'])
         if idle:
             return Outcome(False, f'nobody subscribes to {idle[0]}/joint_trajectory; is the '
                                   f'controller running?')
