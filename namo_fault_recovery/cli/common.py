@@ -30,26 +30,20 @@ class Parser(argparse.ArgumentParser):
 PROFILE_COMMANDS = ('show', 'score', 'solve', 'export', 'precompute')
 
 
-def robot_source(args):
-    """
-    Return the RobotSource of the global ``--robot-file`` or ``--robot-profile``.
-
-    The two exclude each other, as the node's ``robot_file`` and ``robot_profile`` do.
-    """
-    from ..runtime.robot_source import RobotSource
-    robot_file = getattr(args, 'robot_file', None)
-    profile = getattr(args, 'robot_profile', None)
-    if profile and robot_file:
-        raise UsageError(f'--robot-profile: {profile} is given with --robot-file '
-                         f'{robot_file}; expected one of the two (--robot-file is a DH model, '
-                         '--robot-profile builds the robot from its URDF)')
-    return RobotSource(robot_file, profile)
-
-
 def robot_models(args):
-    """Return ``(robot, library)`` of the robot options and ``--gesture-file``."""
-    from ..runtime.robot_source import load_models
-    return load_models(robot_source(args), getattr(args, 'gesture_file', None))
+    """
+    Return ``(robot, library)`` of ``--robot-file`` or ``--robot-profile`` and ``--gesture-file``.
+
+    The options are read as the node reads its ``robot_file`` and ``robot_profile``
+    parameters (:func:`~..runtime.robot_source.robot_source`: the two exclude each other).
+    """
+    from ..runtime.robot_source import load_models, robot_source
+    try:
+        source = robot_source({'robot_file': getattr(args, 'robot_file', None),
+                               'robot_profile': getattr(args, 'robot_profile', None)})
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    return load_models(source, getattr(args, 'gesture_file', None))
 
 
 def parse_faults(robot, specs):

@@ -264,8 +264,8 @@ class CommandLinks:
     have matched this publisher yet, and a volatile reader that matches later may take
     the goal for history.  That is our reading of one failure, not reproduced: the
     demo's first play in one CI run of many, where the arm never moved.  A controller
-    seen for the first time, or again after it went away, is given
-    :data:`MATCH_SETTLE_SEC` before a goal goes to it.
+    that a play sees subscribed for the first time, or again after a play found it
+    gone, is given :data:`MATCH_SETTLE_SEC` before a goal goes to it.
     """
 
     def __init__(self, pubs):
