@@ -4,9 +4,11 @@
 ``runtime.realtime`` is exercised in a child interpreter (the test process keeps its
 own scheduling), then on the real node: its threads run real-time, its engine process
 under the normal scheduler; where the machine refuses real-time priority, the node says
-why and runs on.
+why and runs on.  ``engine_nice``: the engine process computes a deadline run at that
+nice value and refines at its own, or says why it cannot.
 """
 
+import json
 import os
 from pathlib import Path
 import subprocess
@@ -58,7 +60,6 @@ def test_zero_changes_nothing_and_out_of_range_is_refused():
 
 
 def test_every_thread_then_new_threads_real_time_children_normal(tmp_path):
-    import json
     probe = tmp_path / 'probe.py'          # a file: a spawned child imports its main
     probe.write_text(PROBE)
     out = subprocess.run([sys.executable, str(probe)], capture_output=True, text=True,
@@ -87,6 +88,62 @@ def test_a_refusal_puts_the_changed_threads_back(monkeypatch):
                              '(Operation not permitted)'), reason
     assert 'RLIMIT_RTPRIO' in reason and '\n' not in reason
     assert calls == [(11, os.SCHED_FIFO), (12, os.SCHED_FIFO), (11, os.SCHED_OTHER)]
+
+
+NICE_PROBE = r"""
+import json, os, resource
+from namo_fault_recovery.runtime.realtime import set_nice
+
+allowed = set_nice(-3)
+seen = {'allowed': allowed, 'nice': os.getpriority(os.PRIO_PROCESS, 0)}
+os.setpriority(os.PRIO_PROCESS, 0, 0)
+resource.setrlimit(resource.RLIMIT_NICE, (0, 0))    # no allowance (lowering is allowed)
+if os.getuid() == 0:                                 # root: be nobody, without CAP_SYS_NICE
+    os.setgid(65534)
+    os.setuid(65534)
+seen['refused'] = set_nice(-3)
+seen['after'] = os.getpriority(os.PRIO_PROCESS, 0)
+print(json.dumps(seen))
+"""
+
+
+def test_set_nice_lowers_the_value_or_says_which_limit_to_raise():
+    out = subprocess.run([sys.executable, '-c', NICE_PROBE], capture_output=True, text=True,
+                         timeout=60, check=True).stdout
+    seen = json.loads(out.strip().splitlines()[-1])
+    if seen['allowed'] is None:                 # root or an allowance: done
+        assert seen['nice'] == -3
+    refused = seen['refused']
+    assert refused.startswith('engine_nice: cannot compute at nice -3 ('), refused
+    assert 'RLIMIT_NICE' in refused and 'limits.conf' in refused and '\n' not in refused
+    assert seen['after'] == 0
+    with pytest.raises(ValueError, match='engine_nice: expected -20 .. 19, got 20'):
+        realtime.set_nice(20)
+
+
+@pytest.mark.slow
+def test_the_engine_computes_a_deadline_run_at_its_nice_and_refines_at_its_own():
+    from namo_fault_recovery.recovery.settings import RecoverySettings
+    from namo_fault_recovery.runtime.engine_process import EngineProcess
+    base = os.getpriority(os.PRIO_PROCESS, 0)
+    engine = EngineProcess(nice=base - 2)
+    engine.start()
+    try:
+        engine.wait_ready(timeout=120)
+        assert os.getpriority(os.PRIO_PROCESS, engine.pid) == base     # warmed up at its own
+        settings = RecoverySettings(deadline_sec=0.3)
+        result, _ = engine.run(1, {'right_arm_joint4': None}, settings, 0, time.monotonic(),
+                               None)
+        run_nice = os.getpriority(os.PRIO_PROCESS, engine.pid)
+        if engine.nice_refused is None:
+            assert run_nice == base - 2
+        else:                                       # not permitted here: said, and runs on
+            assert 'engine_nice: cannot compute at nice' in engine.nice_refused
+            assert run_nice == base
+        engine.refine(2, result, settings, 0.2, lambda better: None)
+        assert os.getpriority(os.PRIO_PROCESS, engine.pid) == base
+    finally:
+        engine.stop()
 
 
 def _said(process, lines, timeout=120.0):

@@ -267,6 +267,13 @@ def _process_rows():
                 'needs the rtprio limit (/etc/security/limits.conf): if refused, the node '
                 'logs why and runs under the normal scheduler; 0 = off',
                 limits=(0, 99), read_only=True),
+        Setting('engine_nice', int, -5, 'nice value at which the engine process computes '
+                "a fault's deadline run, so that a busy robot's best-effort work delays a "
+                'recovery less (-5: three times the CPU share of nice 0; still the normal '
+                'scheduler); its warm-up and the background refinements compute at its own '
+                'nice; below that needs CAP_SYS_NICE or the nice limit '
+                '(/etc/security/limits.conf): if refused, the node logs why and the runs '
+                'compute at its own; 0 = the share of nice 0', limits=(-20, 19), read_only=True),
     )
 
 

@@ -190,17 +190,17 @@ class RecoveryNode(Node):
             f'started')
 
     def _start_engine(self, engine, values):
-        """Give ``engine`` its files and wait until it is ready (StartupError if not)."""
+        """Give ``engine`` its files; wait until it has warmed up (a signal ends the wait)."""
         engine.load(self._source, values['gesture_file'] or None,
-                    values['engine_start_timeout_sec'])
-        # The engine process imports, loads and warms up (about a second): the node is
-        # not ready to meet its deadline before, so it waits here (a signal still ends it).
+                    values['engine_start_timeout_sec'], values['engine_nice'])
         try:
             engine.wait_ready(timeout=values['engine_start_timeout_sec'],
                               keep_waiting=self.context.ok)
         except EngineError as exc:
             engine.stop()
             raise StartupError(f'the engine process did not start: {exc}') from None
+        if engine.nice_refused:
+            self.get_logger().warning(f'{engine.nice_refused}; its runs compute at its own')
         return engine
 
     # --- interfaces -----------------------------------------------------------------

@@ -20,7 +20,8 @@ fast unit tests that need no DDS.
   the count of those held back;
 - :mod:`.demand_tick`: a periodic tick that stops itself while it has no work;
 - :mod:`.realtime`: ``SCHED_FIFO`` for the node's own threads (``thread_priority``),
-  the normal scheduler for its child processes;
+  the normal scheduler for its child processes, and the engine's nice value
+  (``engine_nice``);
 - :mod:`.persistence`: the state file in the order the run book needs, off the hot paths;
 - :mod:`.restore`: the checks before publishing, and the restore decision;
 - :mod:`.state_store`: the persisted fault set and library (no ROS types);

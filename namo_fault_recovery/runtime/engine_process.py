@@ -7,6 +7,10 @@ one request at a time over a pipe with :func:`~namo_fault_recovery.recovery.engi
 The deadline's start travels as a ``time.monotonic()`` instant (one system-wide clock on
 Linux), and a shared counter cancels a run as soon as a newer one is wanted.  A child
 that dies or hangs is replaced, and the run is reported failed.
+
+A deadline run computes at the nice value the node gives (``engine_nice``: a fault's
+recovery comes before the robot's best-effort work); the warm-up and the background
+refinements compute at the child's own nice value.
 """
 
 import ctypes
@@ -16,7 +20,7 @@ import signal
 import time
 import traceback
 
-from .realtime import leave_fifo
+from .realtime import leave_fifo, set_nice
 
 _STOP = None
 _REFINE = 'refine'
@@ -45,7 +49,7 @@ def die_with_parent(parent_pid=None):
 
 def _load_models(conn):
     """
-    Child: return the (robot, library) the first message names; None if told to stop.
+    Child: return the (robot, library, nice) the first message names; None if told to stop.
 
     The files come over the pipe: a child started before the node knew them
     (:meth:`EngineProcess.early`) has done its imports meanwhile.
@@ -59,7 +63,29 @@ def _load_models(conn):
         return None
     # files[0]: a RobotSource (a profile and its URDF), or a DH robot file (None: Namo's).
     # The node reports the library's warnings; the engine child loads it silently.
-    return load_models(files[0], files[1], on_warning=lambda line: None)
+    return (*load_models(files[0], files[1], on_warning=lambda line: None), files[2])
+
+
+def _run_nice(nice):
+    """
+    Child: return ``(the nice value of deadline runs, the refusal or None)``.
+
+    The refusal is sent to the node (which logs it) and the runs keep the child's own.
+    """
+    base = os.getpriority(os.PRIO_PROCESS, 0)
+    if nice == base:
+        return base, None
+    refused = set_nice(nice)
+    _compute_at(base)         # back (a nice raised above base may stay: not permitted)
+    return (base, refused) if refused else (nice, None)
+
+
+def _compute_at(nice):
+    """Child: compute at ``nice`` from now on (allowed: it was tried at start)."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, nice)
+    except OSError:
+        pass
 
 
 def _serve(conn, current, parent_pid=None):
@@ -67,14 +93,16 @@ def _serve(conn, current, parent_pid=None):
     signal.signal(signal.SIGINT, signal.SIG_IGN)     # Ctrl-C is the parent's to handle
     leave_fifo()             # a real-time node's child computes under the normal scheduler
     die_with_parent(parent_pid)
-    from ..optimize.base import Clock
-    from ..recovery.engine import recover, RecoverySettings
+    # Imported before the files come: an early child does it while the node starts.
+    from ..recovery.engine import recover  # noqa: F401 - _warm_up and _run use it
     from ..recovery.motion import typical_points
 
     models = _load_models(conn)
     if models is None:
         return
-    robot, library = models
+    robot, library, nice = models
+    base = os.getpriority(os.PRIO_PROCESS, 0)
+    run_nice, refused = _run_nice(nice)
     cache = {}
 
     def quantisations(vq_distortion_mm, clock=None):
@@ -87,15 +115,8 @@ def _serve(conn, current, parent_pid=None):
             cache[vq_distortion_mm] = found      # complete: reuse it in every later run
         return found
 
-    # Warm-up: pay the one-off costs (first allocations, caches) before any fault.
-    try:
-        joint = robot.arms['right'].joint_names[0]
-        recover(robot, library, {joint: None}, RecoverySettings(trajectory_method='kriging'),
-                seed=0, clock=Clock(0.3), quantisations=quantisations(
-                    RecoverySettings().vq_distortion_mm))
-    except Exception:  # noqa: B902 - a warm-up problem is reported by the real runs
-        pass
-    conn.send(('ready', os.getpid()))
+    _warm_up(robot, library, quantisations)
+    conn.send(('ready', os.getpid(), refused))
     while True:
         try:
             request = conn.recv()
@@ -104,23 +125,45 @@ def _serve(conn, current, parent_pid=None):
         if request is _STOP:
             return
         if request[0] == _REFINE:
+            _compute_at(base)
             _refine(conn, robot, library, request[1:], current, quantisations)
-            continue
-        run_id, faults, settings, seed, start, measured, learned = request
+        else:
+            _compute_at(run_nice)
+            _run(conn, robot, library, request, current, quantisations)
 
-        def cancel(run_id=run_id):
-            return current.value != run_id
 
-        try:
-            clock = Clock(settings.deadline_sec, cancel, start=start)
-            began = time.monotonic()
-            quant = quantisations(settings.vq_distortion_mm, clock)
-            result = recover(robot.with_learned(learned), library, faults, settings,
-                             seed=seed, clock=clock, measured=measured, quantisations=quant)
-            conn.send(('ok', run_id, result, time.monotonic() - began))
-        except Exception as exc:  # noqa: B902 - report every failure to the node
-            conn.send(('error', run_id, f'{type(exc).__name__}: {exc}'[:500],
-                       traceback.format_exc(limit=5)[-2000:]))
+def _warm_up(robot, library, quantisations):
+    """Child: pay the one-off costs (first allocations, caches) before any fault."""
+    from ..optimize.base import Clock
+    from ..recovery.engine import recover, RecoverySettings
+    try:
+        joint = robot.arms['right'].joint_names[0]
+        recover(robot, library, {joint: None}, RecoverySettings(trajectory_method='kriging'),
+                seed=0, clock=Clock(0.3), quantisations=quantisations(
+                    RecoverySettings().vq_distortion_mm))
+    except Exception:  # noqa: B902 - a warm-up problem is reported by the real runs
+        pass
+
+
+def _run(conn, robot, library, request, current, quantisations):
+    """Child: answer one deadline run (its result, or why it failed)."""
+    from ..optimize.base import Clock
+    from ..recovery.engine import recover
+    run_id, faults, settings, seed, start, measured, learned = request
+
+    def cancel():
+        return current.value != run_id
+
+    try:
+        clock = Clock(settings.deadline_sec, cancel, start=start)
+        began = time.monotonic()
+        quant = quantisations(settings.vq_distortion_mm, clock)
+        result = recover(robot.with_learned(learned), library, faults, settings,
+                         seed=seed, clock=clock, measured=measured, quantisations=quant)
+        conn.send(('ok', run_id, result, time.monotonic() - began))
+    except Exception as exc:  # noqa: B902 - report every failure to the node
+        conn.send(('error', run_id, f'{type(exc).__name__}: {exc}'[:500],
+                   traceback.format_exc(limit=5)[-2000:]))
 
 
 def _refine(conn, robot, library, request, current, quantisations):
@@ -151,14 +194,15 @@ def _refine(conn, robot, library, request, current, quantisations):
 class EngineProcess:
     """A child process running the engine; one run at a time, cancellable."""
 
-    def __init__(self, robot_file=None, gesture_file=None, start_timeout=60.0):
-        self._files = (robot_file, gesture_file)
+    def __init__(self, robot_file=None, gesture_file=None, start_timeout=60.0, nice=0):
+        self._files = (robot_file, gesture_file, nice)
         self._ctx = multiprocessing.get_context('spawn')
         self._current = self._ctx.Value('q', 0, lock=False)
         self._start_timeout = start_timeout
         self._proc = None
         self._conn = None
         self.pid = None
+        self.nice_refused = None     # why the child could not take its nice value, if so
         self.restarts = 0
 
     @classmethod
@@ -189,16 +233,17 @@ class EngineProcess:
         if self._files is not None:
             self._conn.send(self._files)
 
-    def load(self, robot, gesture_file, start_timeout):
+    def load(self, robot, gesture_file, start_timeout, nice=0):
         """
-        Give the engine its robot and library and its start timeout (an early child or new).
+        Give the engine its robot, library, start timeout and nice (an early child or new).
 
         ``robot`` is a :class:`~.robot_source.RobotSource`, or a DH robot file (None:
-        Namo's); ``gesture_file`` None is the packaged library.
+        Namo's); ``gesture_file`` None is the packaged library.  Deadline runs compute at
+        ``nice`` (:attr:`nice_refused` says why not, once ready).
         """
         self._start_timeout = start_timeout
         early = self._files is None and self._proc is not None
-        self._files = (robot, gesture_file)
+        self._files = (robot, gesture_file, nice)
         if not early:
             self._kill()
             self.start()
@@ -225,7 +270,7 @@ class EngineProcess:
                 raise EngineError(f'the engine process was not ready within {timeout:.0f} s')
             try:
                 if self._conn.poll(min(remaining, 0.05)):
-                    kind, pid = self._conn.recv()
+                    kind, pid, self.nice_refused = self._conn.recv()
                     self.pid = pid
             except (EOFError, OSError):
                 raise EngineError('the engine process died while starting') from None

@@ -16,6 +16,11 @@ it too, so every child entry point of the node calls :func:`leave_fifo` first: t
 engine's and the table's computing must never run real-time, or the consumers of the
 library it computes would starve (measured: with the engine at FIFO too, a table miss
 reached a normal-priority client 134 ms late at p95).
+
+The engine's own CPU share is the other half (``engine_nice``, :func:`set_nice`): a
+deadline run computes at a lower nice value than the robot's best-effort work, still
+under the normal scheduler, so that a busy core delays a recovery less without ever
+starving anyone (SCHED_OTHER weights: nice -5 is three times nice 0's share).
 """
 
 import os
@@ -84,3 +89,31 @@ def leave_fifo() -> None:
             os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     except (AttributeError, OSError):
         pass
+
+
+MIN_NICE, MAX_NICE = -20, 19
+
+
+def set_nice(value: int, what: str = 'engine_nice') -> Optional[str]:
+    """
+    Set the calling thread's nice ``value`` (Linux: per thread); return None when done.
+
+    Else return the one-line reason it was refused, with the limit to raise: a value
+    below the thread's current one needs ``CAP_SYS_NICE`` or an ``RLIMIT_NICE`` allowance.
+    ``what`` names the setting in that line.
+    """
+    if not MIN_NICE <= value <= MAX_NICE:
+        raise ValueError(f'{what}: expected {MIN_NICE} .. {MAX_NICE}, got {value!r}')
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, value)
+    except (AttributeError, OSError) as exc:
+        try:
+            limit = resource.getrlimit(resource.RLIMIT_NICE)[0]
+            lowest = f', nice {20 - limit} at the lowest' if limit else ''
+            hint = (f'the nice limit (RLIMIT_NICE) is {limit}{lowest}; raise it for the '
+                    f'user, e.g. "@realtime - nice {value}" in /etc/security/limits.conf')
+        except (AttributeError, ValueError, OSError):
+            hint = 'this system has no nice limit to raise'
+        reason = getattr(exc, 'strerror', None) or str(exc)
+        return f'{what}: cannot compute at nice {value} ({reason}); {hint}'
+    return None
