@@ -380,3 +380,34 @@ def test_playability_runs_on_a_profile_robot_and_its_bent_paths_are_clear():
     assert part['path_contacts'] == 0 and part['unplayable'] == 0
     argv = ['bench', 'playability', '--robot', 'talos', '--library', 'demo', '--seeds', '1']
     assert cli_main(argv, out=io.StringIO()) == 2
+
+
+def test_latency_judges_each_library_as_served_against_its_locks_best_known(tmp_path):
+    from types import SimpleNamespace as NS
+    from namo_fault_recovery.benchmarks import latency
+    path = tmp_path / 'optima.yaml'
+    path.write_text(yaml.safe_dump({'fault_sets': {
+        'j2=0.500000': {'wai': 10.0, 'bye': 2.0}}}))
+    samples = latency.LatencySamples(latency.served_optima(path))
+
+    def result(locks, wai, bye):
+        return NS(locks=locks, gestures=[NS(name='wai', score_after=wai),
+                                         NS(name='bye', score_after=bye)])
+    samples.judge(result({'j2': 0.5}, 10.05, 2.0))          # 0.5 %: within
+    samples.judge(result({'j2': 0.5000000001}, 10.0, 2.1))  # the same key; 5 %
+    samples.judge(result({'j2': 0.7}, 10.0, 2.0))           # another lock: no best-known
+    samples.latencies.append(0.1)
+    samples.round_trips.append(0.1)
+    quality = samples.report(3)['served_quality']
+    assert quality == {'judged': 2, 'without_best_known': 1, 'within_1pct': 1,
+                       'max_gap_pct': pytest.approx(5.0)}
+    out = io.StringIO()
+    latency.write_latency(out, samples.report(3), [])
+    assert ("quality as served (the node's scores against the best-known): 1 of 2 "
+            'libraries with every gesture within 1 %, largest gap 5.00 %; 1 without a '
+            'best-known for their locks') in out.getvalue()
+    product_file = latency.served_optima(common.config_path('product_best_known.yaml'))
+    assert [len(next(iter(lib.values()))) for lib in product_file] == [4, 5]
+    (tmp_path / 'bad.yaml').write_text('fault_sets: 3\n')
+    with pytest.raises(common.BenchError, match=r'--optima .*bad.yaml: expected fault_sets'):
+        latency.served_optima(tmp_path / 'bad.yaml')

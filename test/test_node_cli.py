@@ -126,6 +126,19 @@ def test_bench_latency_reports_percentiles(node):
     assert report['fault_to_delivery']['p50_ms'] <= report['fault_to_library']['max_ms']
 
 
+def test_bench_latency_judges_the_libraries_as_served(node):
+    """--optima: each fault's library, as the node scored it, against its best-known."""
+    from namo_fault_recovery.resources import config_path
+    code, text = run('bench', 'latency', '-n', '2', '--joints', 'right_arm_joint2',
+                     'left_arm_joint4', '--optima',
+                     str(config_path('product_best_known.yaml')), '--json')
+    assert code == 0, text
+    quality = json.loads(text)['served_quality']
+    # The average lock of each joint is a key of the packaged library's optima.
+    assert quality['judged'] == 2 and quality['without_best_known'] == 0, quality
+    assert 0 <= quality['within_1pct'] <= 2 and math.isfinite(quality['max_gap_pct'])
+
+
 def test_bench_latency_streams_the_nodes_own_joints(node, robot):
     """--joint-states-hz: the stream carries the joints of the library the node serves."""
     code, text = run('bench', 'latency', '-n', '1', '--joint-states-hz', '100', '--json')

@@ -17,17 +17,25 @@ service. ``--settle`` waits between a clear and the next fault.
 ``--joint-states-hz`` streams ``/joint_states`` (the node's own joints) from another
 process meanwhile;
 ``--node-param`` sets a parameter of the private node (e.g. ``contingency_table:=false``
-to time the engine path only). Everything goes through
+to time the engine path only).  ``--optima`` judges the libraries as served: each
+gesture's score as the node reports it on ``/diagnostics``, against the best-known of
+its fault's locks in a ``bench robots`` / ``bench product`` optima file (the quality
+target's 1 %, measured through the node rather than in process). Everything goes through
 :class:`~namo_fault_recovery.ros.client.RecoveryClient`; ROS is imported only when the
 benchmark runs.
 """
 
+from dataclasses import dataclass
+import math
 import time
 
 import numpy as np
+import yaml
 
 from .common import BenchError
+from .product import gap, QUALITY_WITHIN
 from ..errors import EXIT_USAGE
+from ..recovery.contingency import entry_key
 from ..runtime import diagnostic_keys as keys
 from ..runtime.private_node import NodeTarget
 from ..runtime.realtime import set_fifo_priority
@@ -41,10 +49,13 @@ def percentiles(values):
             'mean_ms': float(arr.mean())}
 
 
-class _Samples:
+class LatencySamples:
     """The measurements of one benchmark run."""
 
-    def __init__(self):
+    def __init__(self, best=None):
+        self.best = best                   # [{locks key: {gesture: best-known score}}]
+        self.gaps = []                     # per judged library: its largest gesture gap
+        self.unmatched = 0                 # described libraries without a best-known
         self.latencies, self.round_trips, self.engine, self.overhead = [], [], [], []
         self.delivered = []           # fault published -> last gesture at the client's rmw
         self.figures = {key: [] for key, _ in NODE_FIGURES}
@@ -63,6 +74,19 @@ class _Samples:
             engine = 0.0 if origin in NO_ENGINE else library.result.wall_time
             self.engine.append(engine)
             self.overhead.append(self.latencies[-1] - engine)
+            if self.best is not None:
+                self.judge(library.result)
+
+    def judge(self, result):
+        """Add the largest gap of ``result``'s gestures to their best-known (``best``)."""
+        key, names = entry_key(result.locks), {g.name for g in result.gestures}
+        best = next((sets[key] for sets in self.best
+                     if result.locks and set(sets.get(key) or ()) == names), None)
+        if best is None:
+            self.unmatched += 1
+            return
+        gaps = [gap(g.score_after, float(best[g.name])) for g in result.gestures]
+        self.gaps.append(max((x if math.isfinite(x) else math.inf) for x in gaps))
 
     def report(self, count):
         """Return the report dict; raise BenchError when nothing was measured."""
@@ -73,6 +97,11 @@ class _Samples:
                   'origins': dict(self.origins), 'failures': self.failures}
         if self.table is not None:
             report['table_at_start'] = {'state': self.table[0], 'entries': self.table[1]}
+        if self.best is not None:
+            report['served_quality'] = {
+                'judged': len(self.gaps), 'without_best_known': self.unmatched,
+                'within_1pct': sum(g <= QUALITY_WITHIN for g in self.gaps),
+                'max_gap_pct': 100 * max(self.gaps) if self.gaps else None}
         if self.delivered:
             report['fault_to_delivery'] = percentiles(self.delivered)
         if self.engine:
@@ -166,16 +195,16 @@ def wait_table(client, timeout):
             int(found.get(keys.CONTINGENCY_TABLE, keys.TABLE_ENTRIES, 0)))
 
 
-def _measure(client, samples, count, joints, timeout, out, verbose=False, settle=0.0):
-    """Run ``count`` clear -> fault -> reconfigure rounds; add them to ``samples``."""
+def _measure(client, samples, rounds, timeout, out, verbose=False):
+    """Run the clear -> fault -> reconfigure ``rounds``; add them to ``samples``."""
     current = client.current_library(timeout, diagnostics_timeout=0.0)
-    joints = _checked_joints(joints, current.joint_names)
+    joints = _checked_joints(rounds.joints, current.joint_names)
     samples.table = wait_table(client, timeout)
     stamp = current.stamp
-    for i in range(count):
+    for i in range(rounds.count):
         joint = joints[i % len(joints)]
         stamp = clear_faults(client, timeout, stamp)
-        time.sleep(settle)          # the node at rest (its work after the clear done)
+        time.sleep(rounds.settle)   # the node at rest (its work after the clear done)
         library, t0, t0_ns = fault_library(client, [joint], None, timeout)
         if library is None:
             samples.failures.append(f'{joint}: no library within {timeout:g} s')
@@ -223,43 +252,78 @@ def _start_stream(client, rate, timeout):
     return stream
 
 
-def run_latency(out, count=50, joints=None, timeout=30.0, namespace='/',
-                target=NodeTarget(), joint_states_hz=0.0, verbose=False, settle=0.0,
-                client_priority=0):
+def served_optima(path):
+    """
+    Return ``[{locks key: {gesture: score}}]``: an optima file's libraries (BenchError if not).
+
+    ``bench robots`` files hold one (``fault_sets``), ``bench product``'s one per library
+    (``libraries.NAME.fault_sets.KEY.best``); a library is told by its gesture names.
+    """
+    try:
+        with open(path, encoding='utf-8') as handle:
+            doc = yaml.safe_load(handle)
+        if 'libraries' in doc:
+            found = [{key: entry['best'] for key, entry in lib['fault_sets'].items()}
+                     for lib in doc['libraries'].values()]
+        else:
+            found = [dict(doc['fault_sets'])]
+    except OSError as exc:
+        raise BenchError(f'--optima {path}: cannot read it ({exc.strerror})',
+                         EXIT_USAGE) from None
+    except (yaml.YAMLError, KeyError, TypeError, AttributeError) as exc:
+        why = ' '.join(f'{type(exc).__name__}: {exc}'.split())
+        raise BenchError(f'--optima {path}: expected fault_sets (bench robots) or '
+                         f'libraries.NAME.fault_sets (bench product); {why}'[:300],
+                         EXIT_USAGE) from None
+    return found
+
+
+@dataclass(frozen=True)
+class Rounds:
+    """What ``bench latency`` measures: which faults, how paced, under which load."""
+
+    count: int = 50                 # single-joint faults, cycling over ``joints``
+    joints: tuple = ()              # () = every joint of the served library
+    # s between the library of each clear and the next fault (0: at once, while the
+    # node still draws the clear's markers and restarts its table builder)
+    settle: float = 0.0
+    joint_states_hz: float = 0.0    # /joint_states from another process meanwhile
+    client_priority: int = 0        # > 0: the measuring client under SCHED_FIFO
+
+
+def run_latency(out, rounds: Rounds = Rounds(), timeout=30.0, namespace='/',
+                target=NodeTarget(), verbose=False, optima=None):
     """
     Measure fault-publish -> full-library-received latency against a node.
 
-    ``settle`` s pass between the library of each clear and the next fault (0: at once,
-    while the node still draws the clear's markers and restarts its table builder).
-
     ``target`` (:class:`~..runtime.private_node.NodeTarget`) is the node: with
     ``start_node`` a private one is started (its ``robot_file``, ``gesture_file`` and
-    ``node_params``) in ``domain_id`` (default a private one).  ``client_priority`` > 0
-    runs the client (not the node or the stream, started before it) under
+    ``node_params``) in ``domain_id`` (default a private one).  ``rounds.client_priority``
+    > 0 runs the client (not the node or the stream, started before it) under
     ``SCHED_FIFO`` at that priority (:func:`~..runtime.realtime.set_fifo_priority`;
-    BenchError if refused).  Returns
+    BenchError if refused).  ``optima`` (a file) judges the libraries as served.  Returns
     ``(report, failures)``: the report dict (raises BenchError when no measurement
     succeeded) and the list of failed rounds.
     """
     from ..ros.client import RecoveryClient
     stream = None
+    samples = LatencySamples(None if optima is None else served_optima(optima))
     node, domain_id = target.start(namespace, out)
-    samples = _Samples()
     try:
         # The client's middleware and executor threads inherit the policy.
-        refused = set_fifo_priority(client_priority)
+        refused = set_fifo_priority(rounds.client_priority)
         if refused:
             raise BenchError(f'--client-priority: {refused}')
         with RecoveryClient(namespace, domain_id) as client:
-            if joint_states_hz > 0:
-                stream = _start_stream(client, joint_states_hz, timeout)
-            _measure(client, samples, count, joints, timeout, out, verbose, settle)
+            if rounds.joint_states_hz > 0:
+                stream = _start_stream(client, rounds.joint_states_hz, timeout)
+            _measure(client, samples, rounds, timeout, out, verbose)
     finally:
         if stream is not None:
             stream.close()
         if node is not None:
             node.stop()
-    return samples.report(count), samples.failures
+    return samples.report(rounds.count), samples.failures
 
 
 def write_latency(out, report, failures):
@@ -278,6 +342,14 @@ def write_latency(out, report, failures):
     if table:
         out.write(f"contingency table at the first fault: {table['state']}, "
                   f"{table['entries']} entries\n")
+    quality = report.get('served_quality')
+    if quality:
+        worst = quality['max_gap_pct']
+        largest = '' if worst is None else f', largest gap {worst:.2f} %'
+        out.write("quality as served (the node's scores against the best-known): "
+                  f"{quality['within_1pct']} of {quality['judged']} libraries with every "
+                  f'gesture within 1 %{largest}; {quality["without_best_known"]} without a '
+                  'best-known for their locks\n')
     origins = report.get('origins') or {}
     if origins:
         out.write('libraries by origin: ' + ', '.join(

@@ -38,10 +38,11 @@ def cmd_latency(args, out):
     if not 0 <= args.client_priority <= MAX_PRIORITY:
         raise CommandError(f'--client-priority: expected 0 .. {MAX_PRIORITY}, got '
                            f'{args.client_priority}', EXIT_USAGE)
-    report, failures = latency.run_latency(
-        out, args.count, args.joints, args.timeout, namespace(args),
-        NodeTarget.from_args(args), joint_states_hz=args.joint_states_hz, verbose=args.verbose,
-        settle=args.settle, client_priority=args.client_priority)
+    rounds = latency.Rounds(args.count, tuple(args.joints or ()), args.settle,
+                            args.joint_states_hz, args.client_priority)
+    report, failures = latency.run_latency(out, rounds, args.timeout, namespace(args),
+                                           NodeTarget.from_args(args), args.verbose,
+                                           args.optima)
     if args.json:
         out.write(json.dumps(report, indent=2) + '\n')
     else:
@@ -167,6 +168,10 @@ def _add_latency(bench_subparsers):
                    help='run the measuring client under SCHED_FIFO at priority N, as a '
                         "robot's real-time consumer of the library runs (default 0: the "
                         'normal scheduler); see the node parameter thread_priority')
+    p.add_argument('--optima', metavar='FILE',
+                   help="judge each fault's library as served: the node's scores against "
+                        'the best-known of an optima file (config/robots/R_best_known.yaml, '
+                        'config/product_best_known.yaml)')
     add_private_node_arguments(p)
     p.add_argument('--json', action='store_true', help='print one JSON document')
     p.add_argument('-v', '--verbose', action='store_true', help='print every sample')
