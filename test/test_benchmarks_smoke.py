@@ -400,12 +400,14 @@ def test_latency_judges_each_library_as_served_against_its_locks_best_known(tmp_
     samples.round_trips.append(0.1)
     quality = samples.report(3)['served_quality']
     assert quality == {'judged': 2, 'without_best_known': 1, 'within_1pct': 1,
-                       'max_gap_pct': pytest.approx(5.0)}
+                       'max_gap_pct': pytest.approx(5.0),
+                       'beyond_1pct': ['j2=0.500000: bye 5.00 %']}
     out = io.StringIO()
     latency.write_latency(out, samples.report(3), [])
     assert ("quality as served (the node's scores against the best-known): 1 of 2 "
             'libraries with every gesture within 1 %, largest gap 5.00 %; 1 without a '
-            'best-known for their locks') in out.getvalue()
+            'best-known for their locks\n'
+            '  beyond 1 %: j2=0.500000: bye 5.00 %\n') in out.getvalue()
     product_file = latency.served_optima(common.config_path('product_best_known.yaml'))
     assert [len(next(iter(lib.values()))) for lib in product_file] == [4, 5]
     (tmp_path / 'bad.yaml').write_text('fault_sets: 3\n')

@@ -56,6 +56,7 @@ class LatencySamples:
         self.best = best                   # [{locks key: {gesture: best-known score}}]
         self.gaps = []                     # per judged library: its largest gesture gap
         self.unmatched = 0                 # described libraries without a best-known
+        self.beyond = []                   # 'locks: gesture gap %' of each beyond 1 %
         self.latencies, self.round_trips, self.engine, self.overhead = [], [], [], []
         self.delivered = []           # fault published -> last gesture at the client's rmw
         self.figures = {key: [] for key, _ in NODE_FIGURES}
@@ -85,8 +86,11 @@ class LatencySamples:
         if best is None:
             self.unmatched += 1
             return
-        gaps = [gap(g.score_after, float(best[g.name])) for g in result.gestures]
-        self.gaps.append(max((x if math.isfinite(x) else math.inf) for x in gaps))
+        gaps = {g.name: gap(g.score_after, float(best[g.name])) for g in result.gestures}
+        self.gaps.append(max((x if math.isfinite(x) else math.inf) for x in gaps.values()))
+        if self.gaps[-1] > QUALITY_WITHIN:
+            self.beyond.append(f'{key}: ' + ', '.join(
+                f'{name} {100 * x:.2f} %' for name, x in gaps.items() if x > QUALITY_WITHIN))
 
     def report(self, count):
         """Return the report dict; raise BenchError when nothing was measured."""
@@ -101,7 +105,8 @@ class LatencySamples:
             report['served_quality'] = {
                 'judged': len(self.gaps), 'without_best_known': self.unmatched,
                 'within_1pct': sum(g <= QUALITY_WITHIN for g in self.gaps),
-                'max_gap_pct': 100 * max(self.gaps) if self.gaps else None}
+                'max_gap_pct': 100 * max(self.gaps) if self.gaps else None,
+                'beyond_1pct': list(self.beyond)}
         if self.delivered:
             report['fault_to_delivery'] = percentiles(self.delivered)
         if self.engine:
@@ -350,6 +355,8 @@ def write_latency(out, report, failures):
                   f"{quality['within_1pct']} of {quality['judged']} libraries with every "
                   f'gesture within 1 %{largest}; {quality["without_best_known"]} without a '
                   'best-known for their locks\n')
+        for line in quality.get('beyond_1pct', ()):
+            out.write(f'  beyond 1 %: {line}\n')
     origins = report.get('origins') or {}
     if origins:
         out.write('libraries by origin: ' + ', '.join(
