@@ -68,16 +68,16 @@ def _load_models(conn):
 
 def _run_nice(nice):
     """
-    Child: return ``(the nice value of deadline runs, the refusal or None)``.
+    Child: return ``(its own nice, the nice value of deadline runs, the refusal or None)``.
 
     The refusal is sent to the node (which logs it) and the runs keep the child's own.
     """
     base = os.getpriority(os.PRIO_PROCESS, 0)
     if nice == base:
-        return base, None
+        return base, base, None
     refused = set_nice(nice)
     _compute_at(base)         # back (a nice raised above base may stay: not permitted)
-    return (base, refused) if refused else (nice, None)
+    return (base, base, refused) if refused else (base, nice, None)
 
 
 def _compute_at(nice):
@@ -101,8 +101,7 @@ def _serve(conn, current, parent_pid=None):
     if models is None:
         return
     robot, library, nice = models
-    base = os.getpriority(os.PRIO_PROCESS, 0)
-    run_nice, refused = _run_nice(nice)
+    base, run_nice, refused = _run_nice(nice)
     cache = {}
 
     def quantisations(vq_distortion_mm, clock=None):
