@@ -33,7 +33,7 @@ import numpy as np
 import yaml
 
 from .common import BenchError
-from .product import gap, QUALITY_WITHIN
+from .product import best_of, gap, QUALITY_WITHIN
 from ..errors import EXIT_USAGE
 from ..recovery.contingency import entry_key
 from ..runtime import diagnostic_keys as keys
@@ -268,8 +268,8 @@ def served_optima(path):
         with open(path, encoding='utf-8') as handle:
             doc = yaml.safe_load(handle)
         if 'libraries' in doc:
-            found = [{key: entry['best'] for key, entry in lib['fault_sets'].items()}
-                     for lib in doc['libraries'].values()]
+            found = [{key: best_of(doc, name, key) for key in lib['fault_sets']}
+                     for name, lib in doc['libraries'].items()]
         else:
             found = [dict(doc['fault_sets'])]
     except OSError as exc:
