@@ -30,7 +30,7 @@ class Parser(argparse.ArgumentParser):
 PROFILE_COMMANDS = ('show', 'score', 'solve', 'export', 'precompute')
 
 
-def robot_models(args):
+def option_models(args):
     """
     Return ``(robot, library)`` of ``--robot-file`` or ``--robot-profile`` and ``--gesture-file``.
 

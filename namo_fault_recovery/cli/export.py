@@ -10,7 +10,7 @@ recover`, no ROS).
 import math
 from pathlib import Path
 
-from .common import add_setting_options, engine_settings, parse_faults, robot_models
+from .common import add_setting_options, engine_settings, option_models, parse_faults
 from .common import UsageError
 from ..playback.export import dump, motions_document
 
@@ -41,7 +41,7 @@ def receive_library(domain_id, timeout):
 
 def cmd_export(args, out):
     """Write the current library as a play_motion2 motions YAML."""
-    robot, library = robot_models(args)
+    robot, library = option_models(args)
     if args.fault:
         motions, locks = _from_solve(args, robot, library)
         source = 'solved here for ' + ', '.join(

@@ -10,7 +10,7 @@ import sys
 import numpy as np
 
 from .common import add_setting_options, engine_settings, gesture_and_keyframe
-from .common import parse_faults, Parser, PROFILE_COMMANDS, robot_models, UsageError
+from .common import option_models, parse_faults, Parser, PROFILE_COMMANDS, UsageError
 from ..errors import ConfigError, EXIT_USAGE
 from ..model.kinematics import arm_joint_count, forward_kinematics
 from ..objective.score import COMPONENTS, ScoreWeights, SimilarityScore
@@ -26,7 +26,7 @@ def _fmt_deg(q):
 
 def cmd_show(args, out):
     """Print the gesture library with every keyframe's landmarks."""
-    robot, library = robot_models(args)
+    robot, library = option_models(args)
     out.write(f'robot: {robot.name} ({robot.source})\n')
     out.write(f'library: {len(library)} gestures ({library.source})\n')
     for side in ('right', 'left'):
@@ -66,7 +66,7 @@ def _parse_angles(values, option, count):
 
 def cmd_score(args, out):
     """Score one pose against a gesture and print the breakdown."""
-    robot, library = robot_models(args)
+    robot, library = option_models(args)
     gesture = gesture_and_keyframe(library, args.gesture, args.keyframe)
     q_right = _parse_angles(args.right, '--right', arm_joint_count(robot, 'right'))
     q_left = _parse_angles(args.left, '--left', arm_joint_count(robot, 'left'))
@@ -146,7 +146,7 @@ def cmd_solve(args, out):
     """Recover the library for a fault set with :func:`recover`; print the result."""
     from dataclasses import replace
     from ..benchmarks.common import recover_subset
-    robot, library = robot_models(args)
+    robot, library = option_models(args)
     faults = parse_faults(robot, args.fault or [])
     settings, clock = solve_settings(args)
     for name in args.gesture or ():

@@ -14,7 +14,7 @@ import argparse
 import math
 import time
 
-from .common import (add_setting_options, engine_settings, parse_faults, robot_models,
+from .common import (add_setting_options, engine_settings, option_models, parse_faults,
                      UsageError, writing_out)
 
 
@@ -30,7 +30,7 @@ def cmd_precompute(args, out):
         raise UsageError(f'--budget: expected a number of seconds >= 0 (0: none), got {budget}')
     budget = budget or None
     settings = engine_settings(args)
-    robot, library = robot_models(args)
+    robot, library = option_models(args)
     active = parse_faults(robot, args.active or [])
     joints = None
     if args.joint:
