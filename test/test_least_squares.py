@@ -9,6 +9,7 @@ polish crawls.
 
 from pathlib import Path
 
+from namo_fault_recovery.benchmarks.common import case_problems
 from namo_fault_recovery.model.gestures import load_library
 from namo_fault_recovery.model.profile_robot import robot_from_profile
 from namo_fault_recovery.objective.collision import CollisionModel
@@ -17,7 +18,7 @@ from namo_fault_recovery.optimize.base import Clock
 from namo_fault_recovery.optimize.polish import polish
 from namo_fault_recovery.recovery.engine import recover
 from namo_fault_recovery.recovery.keyframes import PoseProblem
-from namo_fault_recovery.recovery.least_squares import refine
+from namo_fault_recovery.recovery.least_squares import refine, refine_basins
 from namo_fault_recovery.recovery.settings import RecoverySettings
 import numpy as np
 import pytest
@@ -87,3 +88,37 @@ def test_the_engine_ends_on_that_floor_from_every_seed():
         scores += [g.score_after for g in res.gestures if g.name == 'wai']
     assert max(scores) < 29.0
     assert max(scores) - min(scores) < 0.002 * min(scores)
+
+
+# Talos's side_invite with right joint 2 locked: two basins (the design lies between).
+SIDE_INVITE_SECOND = np.radians([61.77, -140.0, -59.91, -67.19, 59.98, 4.0])   # j3 at its limit
+SIDE_INVITE_BEST = np.radians([12.85, -22.65, -80.14, -123.66, 51.52, -40.0])
+
+
+@pytest.fixture(scope='module')
+def side_invite():
+    """Return Talos's side_invite problem with right joint 2 locked, as the engine builds it."""
+    robot = robot_from_profile(ROBOTS / 'talos.yaml')
+    library = load_library(robot, ROBOTS / 'talos_gestures.yaml')
+    problem, _ = case_problems(robot, library, 'side_invite', {'arm_right_2_joint': None})
+    return problem
+
+
+def test_a_runner_up_in_the_better_basin_is_refined_too(side_invite):
+    """The colony's best polished in the second basin, a runner-up short of the first's floor."""
+    best = SIDE_INVITE_SECOND[None]
+    f_best = side_invite.evaluate(best[:, None])[:, 0]
+    alone = refine(side_invite, best, f_best, Clock(None))[1]
+    assert alone[0] > 49.5          # the second basin's floor, 3 % above the first's
+    near = SIDE_INVITE_BEST + np.radians(1.0)     # 10 % above the best, short of its floor
+    far = SIDE_INVITE_BEST + np.radians(1.5)      # 17 %: beyond RUNNER_UP_MARGIN
+    f_near, f_far = side_invite.evaluate(np.array([[near, far]]))[0]
+    assert f_best[0] < f_near < 1.15 * f_best[0] < f_far
+    runner_up = (near[None, None], np.array([[f_near]]))
+    x, f, nfev = refine_basins(side_invite, best, f_best, runner_up, Clock(None))
+    assert f[0] < 48.1 and nfev > 0
+    assert f[0] == pytest.approx(side_invite.evaluate(x[:, None])[0, 0])
+    assert abs(np.degrees(x[0, 1]) - (-22.65)) < 5.0       # joint 3 in the first basin
+    # Beyond the margin, or none at all: the best alone is refined, as before.
+    for local in ((far[None, None], np.array([[f_far]])), None, (None, None)):
+        assert refine_basins(side_invite, best, f_best, local, Clock(None))[1] == alone

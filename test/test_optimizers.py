@@ -265,3 +265,20 @@ def test_the_colony_keeps_its_best_informed_start_beside_the_known_good_one():
     res = minimize(problem, algo, seed=0)
     assert res.fun == 0.0
     np.testing.assert_array_equal(res.x, centre)
+
+
+def test_a_polishing_colony_reports_its_local_minima_and_the_others_none():
+    """``xl``/``funl``, as scipy's shgo names them: every polished start, with its value."""
+    problem = Problem([-2.0, -2.0], [2.0, 2.0], lambda x: np.sum((x ** 2 - 1.0) ** 2, axis=-1),
+                      n_batch=3)
+    res = minimize(problem, ABC(n_sources=6, max_cycles=5, limit=5, polish=3), seed=0)
+    assert res.xl.shape == (3, 3, 2) and res.funl.shape == (3, 3)
+    assert np.allclose(res.funl, problem.evaluate(res.xl))
+    assert np.allclose(res.fun, np.minimum(res.funl.min(axis=1), res.fun))
+    assert np.all(res.fun <= res.funl.min(axis=1) + 1e-12)
+    single = Problem([-2.0, -2.0], [2.0, 2.0], lambda x: np.sum(x ** 2, axis=-1))
+    res = minimize(single, ABC(n_sources=4, max_cycles=3, limit=5, polish=2), seed=0)
+    assert res.xl.shape == (2, 2) and res.funl.shape == (2,)
+    for algo in (ABC.paper(), make_algorithm('ga'), make_algorithm('gd')):
+        algo_res = minimize(problem, algo, clock=Clock(0.05), seed=0)
+        assert algo_res.xl is None and algo_res.funl is None

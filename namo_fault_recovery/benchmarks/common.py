@@ -481,7 +481,8 @@ def run_gesture(spec, robot, library, gesture, joint, seed, deadline=None):
     res = minimize(problem, algo, clock=clock, seed=int(rng.integers(2 ** 63)))
     rows = len(problem.target_ids)
     _, raw, _ = finish_search(problem, algo, np.atleast_2d(res.x), np.atleast_1d(res.fun),
-                              np.zeros(rows, dtype=int), problem.x0, clock)
+                              np.zeros(rows, dtype=int), problem.x0, clock,
+                              local=(res.xl, res.funl))
     outer = time.perf_counter() - t0
     engine = np.minimum(raw, before)
     status = {0: 'converged', 1: 'deadline', 2: 'cancelled'}[res.status]

@@ -156,6 +156,12 @@ class OptimizeResult:
     history: np.ndarray = field(repr=False)
     seed: Optional[int] = None
     algorithm: str = ''
+    # The local minima the algorithm's own local search ended at, and their values
+    # (scipy's shgo names): (batch, k, D) and (batch, k), or None for an algorithm
+    # that does not end with one.  A caller that goes on locally may take the
+    # runners-up as well as the best (the keyframe search does: recovery.keyframes).
+    xl: Optional[np.ndarray] = field(default=None, repr=False)
+    funl: Optional[np.ndarray] = field(default=None, repr=False)
 
     @property
     def success(self) -> bool:
@@ -237,8 +243,11 @@ class Algorithm:
     Base class: subclasses implement :meth:`run` and validate their options.
 
     ``run(problem, rng, clock)`` returns ``(x_best (batch, D), f_best (batch,), nit,
-    history list of (batch,) arrays)``.  It must call ``clock.expired(step_cost)``
-    between steps and return the best so far when it says so.
+    history list of (batch,) arrays)``, and an algorithm that ends with a local search
+    of several starts may add a fifth item, ``(xl (batch, k, D), funl (batch, k))``,
+    the points that search ended at (:attr:`OptimizeResult.xl`).  It must call
+    ``clock.expired(step_cost)`` between steps and return the best so far when it
+    says so.
     """
 
     name = 'algorithm'
@@ -338,12 +347,15 @@ def minimize(problem: Problem, algorithm: Algorithm, clock: Optional[Clock] = No
     rng = np.random.default_rng(seed)
     clock = Clock(None) if clock is None else Clock.until(clock.end, clock.cancel)
     problem.nfev = 0
-    x, f, nit, history = algorithm.run(problem, rng, clock)
+    x, f, nit, history, *local = algorithm.run(problem, rng, clock)
     wall = clock.elapsed()
     hist = np.array(history) if history else np.empty((0, problem.batch))
+    xl, funl = local[0] if local and local[0] is not None else (None, None)
     if problem.n_batch is None:
         x, f = x[0], float(f[0])
         hist = hist[:, 0] if hist.size else hist.reshape(0)
+        if xl is not None:
+            xl, funl = xl[0], funl[0]
     return OptimizeResult(x=x, fun=f, nfev=problem.nfev, nit=nit, status=clock.reason,
                           message=_MESSAGES[clock.reason], wall_time=wall, history=hist,
-                          seed=seed, algorithm=algorithm.name)
+                          seed=seed, algorithm=algorithm.name, xl=xl, funl=funl)

@@ -6,7 +6,8 @@ partner (``v_ij = x_ij + phi (x_ij - x_kj)``, phi ~ U(-1, 1)) with greedy select
 onlookers pick sources by roulette on fitness 1 / (1 + f); a source that fails to
 improve ``limit`` times is abandoned to a scout.  Every phase is one batched objective
 call.  Optionally, the best sources are polished with a batched L-BFGS-B at the end
-(the colony finds the basin; the polish walks to its floor).
+(the colony finds the basin; the polish walks to its floor); the polished points are
+the result's local minima (``xl``, ``funl``).
 """
 
 import numpy as np
@@ -113,16 +114,17 @@ class ABC(Algorithm):
             timer.tick()
             if self.stall_cycles is not None and stall >= self.stall_cycles:
                 break
+        local = None
         if self.polish and not clock.expired():
             starts = _distinct_best(x, f, best_x, self.polish)
             if self.use_x0 and problem.x0 is not None:
                 # The known-good start is always refined too, whatever became of it.
                 starts[:, -1] = problem.x0
-            px, pf = polish(problem, starts, clock, maxiter=self.polish_maxiter,
-                            ftol=self.polish_ftol, restart=self.polish_restart)
-            remember_best(px, pf, best_x, best_f)
+            local = polish(problem, starts, clock, maxiter=self.polish_maxiter,
+                           ftol=self.polish_ftol, restart=self.polish_restart)
+            remember_best(*local, best_x, best_f)
             history.append(best_f.copy())
-        return best_x, best_f, nit, history
+        return best_x, best_f, nit, history, local
 
     def _onlookers(self, problem, rng, x, f, trials):
         """

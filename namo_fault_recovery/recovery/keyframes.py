@@ -34,7 +34,7 @@ from . import pacing
 from .budget import ENGINE_RESERVE, STAGE1_SHARE
 from .constrained import constrained_pose
 from .figures import COLLIDES_WARNING, largest_jump
-from .least_squares import refine
+from .least_squares import refine_basins
 from .locks import clamp_lock, resolve_locks
 from .result import GestureResult, LibraryResult
 from .seeding import kinematic_starts
@@ -505,7 +505,7 @@ def _solve_once(robot, scorer, collision, batch, algo, clock, rng, stats=None):
         x = np.atleast_2d(res.x)
         f = np.atleast_1d(res.fun)
         x, f, used = finish_search(problem, algo, x, f, batch.motions[members], designed,
-                                   group_clock)
+                                   group_clock, local=(res.xl, res.funl))
         nfev += used
         if stats is not None:
             stats['nfev'] = stats.get('nfev', 0) + nfev
@@ -534,22 +534,24 @@ def _rows_problem(robot, scorer, collision, batch, free, members, x0=None):
     return problem, designed
 
 
-def finish_search(problem, algo, x, f, motions, designed, clock):
+def finish_search(problem, algo, x, f, motions, designed, clock, local=None):
     """
     Return ``(x, f, nfev)``: the local steps that follow the algorithm's own search.
 
     For algorithms that polish (the node's default), the keyframes of a motion share
     their branches (:func:`_share_branches`), then every keyframe takes the reweighted
-    Gauss-Newton refinement (:func:`~.least_squares.refine`); the paper's preset, which
-    does not polish, is left as the paper ran it.  ``x`` (B, D) and ``f`` (B,) are the
-    algorithm's best per row of ``problem``, ``motions`` (B,) each row's motion (-1:
-    none) and ``designed`` (B, D) the designed angles of the free joints.
+    Gauss-Newton refinement, with the runners-up of the algorithm's polish in other
+    basins (:func:`~.least_squares.refine_basins`; ``local``: the result's ``(xl,
+    funl)``); the paper's preset, which does not polish, is left as the paper ran it.
+    ``x`` (B, D) and ``f`` (B,) are the algorithm's best per row of ``problem``,
+    ``motions`` (B,) each row's motion (-1: none) and ``designed`` (B, D) the designed
+    angles of the free joints.
     """
     if not getattr(algo, 'polish', 0):
         return x, f, 0
     x, f, shared = _share_branches(problem, x, f, motions, designed, clock,
                                    algo.polish_maxiter, algo.polish_ftol)
-    x, f, refined = refine(problem, x, f, clock)
+    x, f, refined = refine_basins(problem, x, f, local, clock)
     return x, f, shared + refined
 
 

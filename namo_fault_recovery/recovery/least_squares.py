@@ -21,12 +21,15 @@ floor)``, the weighted least-squares step follows the sum of distances, kinks in
   the problem's exact objective (the collision term included) and kept only where it
   lowers it, and the floor shrinks where no length gains.  On the case above it reached
   28.51 in 10 iterations and 28.461 in 20, from every seed.
+- :func:`refine_basins`: :func:`refine` of each row's best and of the runners-up of
+  the colony's polish that lie in other basins, in one batched call.
 """
 
 import numpy as np
 
 from ..model.kinematics import batch_forward, batch_forward_jacobian
 from ..model.robot import ARMS
+from ..optimize.bee_colony import DISTINCT_RAD
 
 IRLS_FLOOR = 1.0        # mm or deg: a term closer than this is weighted as if this far
 DAMPING = 1e-3          # Levenberg damping, a share of the normal matrix's mean diagonal
@@ -35,6 +38,7 @@ REFINE_FLOORS = (1.0, 0.3, 0.1, 0.03, 0.01, 0.003, 0.001)   # refine's floors, i
 REFINE_STEPS = np.array([1.0, 0.5, 0.25, 0.1, 0.03])        # step lengths tried
 REFINE_DAMPING = 1e-6   # refine's damping: the line search, not the damping, keeps it safe
 REFINE_ITERATIONS = 15  # refine's iterations at most
+RUNNER_UP_MARGIN = 0.15  # refine_basins: a local minimum this far above the best is refined
 
 
 def gauss_newton(problem, x, iterations, pull=0.0):
@@ -145,3 +149,38 @@ def _bounded_step(problem, x, h, g):
     g = np.where(held, 0.0, g)
     lam = REFINE_DAMPING * np.trace(h, axis1=1, axis2=2) / dim + 1e-9
     return -np.linalg.solve(h + lam[:, None, None] * eye, g[..., None])[..., 0]
+
+
+def refine_basins(problem, x, f, local, clock):
+    """
+    Return ``(x, f, nfev)``: :func:`refine` of the best points and of their runners-up.
+
+    ``local`` is the algorithm's own local minima, ``(xl (B, k, D), funl (B, k))``
+    (:attr:`~..optimize.base.OptimizeResult.xl`; None: refine ``x`` alone).  The polish
+    stops short of a basin's floor (its iteration cap), and by how far differs from
+    basin to basin, so the best polished point is not always in the best basin.
+    Measured on Talos's side_invite with right joint 2 locked: the best basin's floor
+    is 48.26, another's (joint 3 at its limit) 49.7; in 8 seeds of 100 the colony's
+    best was in the second, with a start in the first polished only to 50.8-54.5.
+    Every local minimum more than ``DISTINCT_RAD`` from its row's best (in some joint)
+    and at most ``RUNNER_UP_MARGIN`` above it is refined with the best, all in one
+    batched call (a few more rows cost little), and each row keeps its lowest value:
+    the same seeds gave 2 such runs in 100.  No row ends worse than :func:`refine`
+    alone would leave it.
+    """
+    if local is None or local[0] is None:
+        return refine(problem, x, f, clock)
+    xl, fl = local
+    far = np.any(np.abs(xl - x[:, None, :]) > DISTINCT_RAD, axis=-1)
+    rows, which = np.nonzero(far & (fl <= f[:, None] + RUNNER_UP_MARGIN * np.abs(f[:, None])))
+    if rows.size == 0:
+        return refine(problem, x, f, clock)
+    n = len(f)
+    both = problem.subset(np.concatenate((np.arange(n), rows)))
+    xr, fr, nfev = refine(both, np.concatenate((x, xl[rows, which])),
+                          np.concatenate((f, fl[rows, which])), clock)
+    x, f = xr[:n], fr[:n]
+    for row, xv, fv in zip(rows, xr[n:], fr[n:]):   # a loop over a few runners-up
+        if fv < f[row]:
+            x[row], f[row] = xv, fv
+    return x, f, nfev
