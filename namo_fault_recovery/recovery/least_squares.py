@@ -160,7 +160,7 @@ def refine_basins(problem, x, f, local, clock):
     stops short of a basin's floor (its iteration cap), and by how far differs from
     basin to basin, so the best polished point is not always in the best basin.
     Measured on Talos's side_invite with right joint 2 locked: the best basin's floor
-    is 48.26, another's (joint 3 at its limit) 49.7; in 8 seeds of 100 the colony's
+    is 47.97, another's (joint 3 at its limit) 49.6; in 8 seeds of 100 the colony's
     best was in the second, with a start in the first polished only to 50.8-54.5.
     Every local minimum more than ``DISTINCT_RAD`` from its row's best (in some joint)
     and at most ``RUNNER_UP_MARGIN`` above it is refined with the best, all in one
