@@ -382,6 +382,40 @@ def test_playability_runs_on_a_profile_robot_and_its_bent_paths_are_clear():
     assert cli_main(argv, out=io.StringIO()) == 2
 
 
+def test_latency_scores_the_published_trajectories_itself():
+    """A node whose reported scores hide a bad gesture is judged on what it published."""
+    import dataclasses
+    from types import SimpleNamespace as NS
+    from namo_fault_recovery.benchmarks import latency
+    from namo_fault_recovery.recovery.engine import recover
+    path = common.config_path('robots/talos_best_known.yaml')
+    models = latency.served_models(path)
+    robot, library = models[0]
+    assert robot.name == 'talos' and library.names == ('wai', 'bye', 'salute', 'side_invite')
+    assert latency.served_models(common.config_path('product_best_known.yaml'))[1][1].names[-1] \
+        == 'circle'
+    result = recover(robot, library, {'arm_right_1_joint': None}, RecoverySettings(), seed=0)
+    samples = latency.LatencySamples(latency.served_optima(path), models)
+    samples.judge(result, robot.joint_names)
+    assert samples.rescored == 1 and samples.node_diff < 1e-9 and samples.gaps[0] < 0.01
+    # The same scores reported, but the wave published as the locked reference.
+    bye = next(g for g in result.gestures if g.name == 'bye')
+    locked = np.array([library['bye'].keyframes[0].positions()] * len(bye.positions))
+    locked[:, robot.joint_names.index('arm_right_1_joint')] = result.locks['arm_right_1_joint']
+    hiding = NS(locks=result.locks, gestures=[
+        dataclasses.replace(g, positions=tuple(map(tuple, locked))) if g is bye else g
+        for g in result.gestures])
+    samples.judge(hiding, robot.joint_names)
+    assert samples.gaps[1] > 0.01 and samples.beyond[0].startswith('arm_right_1_joint=')
+    assert samples.node_diff > 0.01
+    out = io.StringIO()
+    samples.latencies.append(0.1)
+    samples.round_trips.append(0.1)
+    latency.write_latency(out, samples.report(2), [])
+    assert ("quality as served (the client's scores of the published trajectories; the "
+            "node's own within ") in out.getvalue()
+
+
 def test_latency_judges_each_library_as_served_against_its_locks_best_known(tmp_path):
     from types import SimpleNamespace as NS
     from namo_fault_recovery.benchmarks import latency
@@ -401,7 +435,8 @@ def test_latency_judges_each_library_as_served_against_its_locks_best_known(tmp_
     quality = samples.report(3)['served_quality']
     assert quality == {'judged': 2, 'without_best_known': 1, 'within_1pct': 1,
                        'max_gap_pct': pytest.approx(5.0),
-                       'beyond_1pct': ['j2=0.500000: bye 5.00 %']}
+                       'beyond_1pct': ['j2=0.500000: bye 5.00 %'], 'rescored_by_client': 0,
+                       'node_score_diff_pct': None}
     out = io.StringIO()
     latency.write_latency(out, samples.report(3), [])
     assert ("quality as served (the node's scores against the best-known): 1 of 2 "

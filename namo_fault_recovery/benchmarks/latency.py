@@ -18,9 +18,12 @@ service. ``--settle`` waits between a clear and the next fault.
 process meanwhile;
 ``--node-param`` sets a parameter of the private node (e.g. ``contingency_table:=false``
 to time the engine path only).  ``--optima`` judges the libraries as served: each
-gesture's score as the node reports it on ``/diagnostics``, against the best-known of
-its fault's locks in a ``bench robots`` / ``bench product`` optima file (the quality
-target's 1 %, measured through the node rather than in process). Everything goes through
+gesture's score against the best-known of its fault's locks in a ``bench robots`` /
+``bench product`` optima file (the quality target's 1 %, measured through the node
+rather than in process).  The client scores the published trajectories itself, on the
+robot and library the file was made for (its ``robot``, or the product's libraries),
+and reports how far the node's own scores on ``/diagnostics`` differ; with a file whose
+robot it does not know, it takes the node's scores. Everything goes through
 :class:`~namo_fault_recovery.ros.client.RecoveryClient`; ROS is imported only when the
 benchmark runs.
 """
@@ -33,7 +36,8 @@ import numpy as np
 import yaml
 
 from .common import BenchError
-from .product import best_of, gap, QUALITY_WITHIN
+from .product import best_of, gap, LIBRARIES, load_models, published_scores, QUALITY_WITHIN
+from .robots import ROBOTS, shipped_robot
 from ..errors import EXIT_USAGE
 from ..recovery.contingency import entry_key
 from ..runtime import diagnostic_keys as keys
@@ -52,11 +56,14 @@ def percentiles(values):
 class LatencySamples:
     """The measurements of one benchmark run."""
 
-    def __init__(self, best=None):
+    def __init__(self, best=None, models=None):
         self.best = best                   # [{locks key: {gesture: best-known score}}]
+        self.models = models or [None] * len(best or ())   # per library: (robot, lib)
         self.gaps = []                     # per judged library: its largest gesture gap
         self.unmatched = 0                 # described libraries without a best-known
         self.beyond = []                   # 'locks: gesture gap %' of each beyond 1 %
+        self.rescored = 0                  # judged on the client's own scores
+        self.node_diff = 0.0               # their largest difference to the node's
         self.latencies, self.round_trips, self.engine, self.overhead = [], [], [], []
         self.delivered = []           # fault published -> last gesture at the client's rmw
         self.figures = {key: [] for key, _ in NODE_FIGURES}
@@ -76,17 +83,30 @@ class LatencySamples:
             self.engine.append(engine)
             self.overhead.append(self.latencies[-1] - engine)
             if self.best is not None:
-                self.judge(library.result)
+                self.judge(library.result, library.joint_names)
 
-    def judge(self, result):
-        """Add the largest gap of ``result``'s gestures to their best-known (``best``)."""
+    def judge(self, result, joint_names=None):
+        """
+        Add the largest gap of ``result``'s gestures to their best-known (``best``).
+
+        Scored by the client from the published positions (columns ``joint_names``)
+        where the library's models are known, else the node's own ``score_after``.
+        """
         key, names = entry_key(result.locks), {g.name for g in result.gestures}
-        best = next((sets[key] for sets in self.best
-                     if result.locks and set(sets.get(key) or ()) == names), None)
-        if best is None:
+        found = next((i for i, sets in enumerate(self.best)
+                      if result.locks and set(sets.get(key) or ()) == names), None)
+        if found is None:
             self.unmatched += 1
             return
-        gaps = {g.name: gap(g.score_after, float(best[g.name])) for g in result.gestures}
+        best = self.best[found][key]
+        scores = {g.name: g.score_after for g in result.gestures}
+        if self.models[found] is not None and joint_names:
+            node = scores
+            scores = published_scores(*self.models[found], joint_names, result.gestures)
+            self.rescored += 1
+            self.node_diff = max([self.node_diff] + [
+                abs(gap(node[name], score)) for name, score in scores.items()])
+        gaps = {name: gap(score, float(best[name])) for name, score in scores.items()}
         self.gaps.append(max((x if math.isfinite(x) else math.inf) for x in gaps.values()))
         if self.gaps[-1] > QUALITY_WITHIN:
             self.beyond.append(f'{key}: ' + ', '.join(
@@ -106,7 +126,8 @@ class LatencySamples:
                 'judged': len(self.gaps), 'without_best_known': self.unmatched,
                 'within_1pct': sum(g <= QUALITY_WITHIN for g in self.gaps),
                 'max_gap_pct': 100 * max(self.gaps) if self.gaps else None,
-                'beyond_1pct': list(self.beyond)}
+                'beyond_1pct': list(self.beyond), 'rescored_by_client': self.rescored,
+                'node_score_diff_pct': 100 * self.node_diff if self.rescored else None}
         if self.delivered:
             report['fault_to_delivery'] = percentiles(self.delivered)
         if self.engine:
@@ -264,14 +285,36 @@ def served_optima(path):
     ``bench robots`` files hold one (``fault_sets``), ``bench product``'s one per library
     (``libraries.NAME.fault_sets.KEY.best``); a library is told by its gesture names.
     """
+    return [best for best, _ in _optima_libraries(path)]
+
+
+def served_models(path):
+    """
+    Return, per library of :func:`served_optima`, its ``(robot, library)``, or None.
+
+    A ``bench robots`` file names its shipped robot (``robot``); the product file's
+    libraries are the packaged robot's.  Another robot's file gives None: the client
+    cannot score its trajectories, and takes the node's scores.
+    """
+    out = []
+    for _, name in _optima_libraries(path):
+        if name in ROBOTS:
+            out.append(shipped_robot(name).models())
+        else:
+            out.append(load_models(name) if name in LIBRARIES else None)
+    return out
+
+
+def _optima_libraries(path):
+    """Return ``[(best-known fault sets, robot or library name)]`` of an optima file."""
     try:
         with open(path, encoding='utf-8') as handle:
             doc = yaml.safe_load(handle)
         if 'libraries' in doc:
-            found = [{key: best_of(doc, name, key) for key in lib['fault_sets']}
+            found = [({key: best_of(doc, name, key) for key in lib['fault_sets']}, name)
                      for name, lib in doc['libraries'].items()]
         else:
-            found = [dict(doc['fault_sets'])]
+            found = [(dict(doc['fault_sets']), doc.get('robot'))]
     except OSError as exc:
         raise BenchError(f'--optima {path}: cannot read it ({exc.strerror})',
                          EXIT_USAGE) from None
@@ -312,7 +355,8 @@ def run_latency(out, rounds: Rounds = Rounds(), timeout=30.0, namespace='/',
     """
     from ..ros.client import RecoveryClient
     stream = None
-    samples = LatencySamples(None if optima is None else served_optima(optima))
+    samples = (LatencySamples() if optima is None
+               else LatencySamples(served_optima(optima), served_models(optima)))
     node, domain_id = target.start(namespace, out)
     try:
         # The client's middleware and executor threads inherit the policy.
@@ -351,7 +395,12 @@ def write_latency(out, report, failures):
     if quality:
         worst = quality['max_gap_pct']
         largest = '' if worst is None else f', largest gap {worst:.2f} %'
-        out.write("quality as served (the node's scores against the best-known): "
+        scored = ("the node's scores" if not quality.get('rescored_by_client') else
+                  "the client's scores of the published trajectories" + (
+                      '' if quality['rescored_by_client'] == quality['judged'] else
+                      f" ({quality['rescored_by_client']} of them)") +
+                  f"; the node's own within {quality['node_score_diff_pct']:.3g} %")
+        out.write(f'quality as served ({scored} against the best-known): '
                   f"{quality['within_1pct']} of {quality['judged']} libraries with every "
                   f'gesture within 1 %{largest}; {quality["without_best_known"]} without a '
                   'best-known for their locks\n')

@@ -169,9 +169,10 @@ def _add_latency(bench_subparsers):
                         "robot's real-time consumer of the library runs (default 0: the "
                         'normal scheduler); see the node parameter thread_priority')
     p.add_argument('--optima', metavar='FILE',
-                   help="judge each fault's library as served: the node's scores against "
-                        'the best-known of an optima file (config/robots/R_best_known.yaml, '
-                        'config/product_best_known.yaml)')
+                   help="judge each fault's library as served: its trajectories, scored "
+                        'by this client, against the best-known of an optima file '
+                        '(config/robots/R_best_known.yaml, config/product_best_known.yaml); '
+                        "the node's own scores where the file's robot is not a shipped one")
     add_private_node_arguments(p)
     p.add_argument('--json', action='store_true', help='print one JSON document')
     p.add_argument('-v', '--verbose', action='store_true', help='print every sample')
