@@ -394,7 +394,8 @@ def test_latency_scores_the_published_trajectories_itself():
     assert robot.name == 'talos' and library.names == ('wai', 'bye', 'salute', 'side_invite')
     assert latency.served_models(common.config_path('product_best_known.yaml'))[1][1].names[-1] \
         == 'circle'
-    result = recover(robot, library, {'arm_right_1_joint': None}, RecoverySettings(), seed=0)
+    result = recover(robot, library, {'arm_right_1_joint': None}, RecoverySettings(), seed=0,
+                     clock=Clock(None))
     samples = latency.LatencySamples(latency.served_optima(path), models)
     samples.judge(result, robot.joint_names)
     assert samples.rescored == 1 and samples.node_diff < 1e-9 and samples.gaps[0] < 0.01
@@ -402,7 +403,7 @@ def test_latency_scores_the_published_trajectories_itself():
     bye = next(g for g in result.gestures if g.name == 'bye')
     locked = np.array([library['bye'].keyframes[0].positions()] * len(bye.positions))
     locked[:, robot.joint_names.index('arm_right_1_joint')] = result.locks['arm_right_1_joint']
-    hiding = NS(locks=result.locks, gestures=[
+    hiding = NS(locks=result.locks, tool_mm=0.0, gestures=[
         dataclasses.replace(g, positions=tuple(map(tuple, locked))) if g is bye else g
         for g in result.gestures])
     samples.judge(hiding, robot.joint_names)
@@ -412,8 +413,18 @@ def test_latency_scores_the_published_trajectories_itself():
     samples.latencies.append(0.1)
     samples.round_trips.append(0.1)
     latency.write_latency(out, samples.report(2), [])
-    assert ("quality as served (the client's scores of the published trajectories; the "
-            "node's own within ") in out.getvalue()
+    assert ("quality as served (the client's scores of the published trajectories against "
+            "the best-known; the node's own scores within ") in out.getvalue()
+    # A library it cannot score (a torso lean; another count of keyframes): the node's.
+    leaned = NS(locks=result.locks, tool_mm=0.0, gestures=[
+        dataclasses.replace(g, shared={'torso_2_joint': 0.1}) if g is bye else g
+        for g in result.gestures])
+    short = NS(locks=result.locks, tool_mm=0.0, gestures=[
+        dataclasses.replace(g, positions=g.positions * 2) if g is bye else g
+        for g in result.gestures])
+    for other in (leaned, short):
+        samples.judge(other, robot.joint_names)
+    assert samples.rescored == 2 and len(samples.gaps) == 4
 
 
 def test_latency_judges_each_library_as_served_against_its_locks_best_known(tmp_path):

@@ -122,3 +122,23 @@ def test_a_runner_up_in_the_better_basin_is_refined_too(side_invite):
     # Beyond the margin, or none at all: the best alone is refined, as before.
     for local in ((far[None, None], np.array([[f_far]])), None, (None, None)):
         assert refine_basins(side_invite, best, f_best, local, Clock(None))[1] == alone
+
+
+def test_each_row_takes_its_own_runners_up(side_invite):
+    """Rows keep their own runners-up (a twin of the best is no runner-up); (k, D) too."""
+    rows = side_invite.subset([0, 0])
+    best = np.array([SIDE_INVITE_SECOND, SIDE_INVITE_SECOND])
+    f_best = rows.evaluate(best[:, None])[:, 0]
+    alone = refine(side_invite, best[:1], f_best[:1], Clock(None))[1][0]
+    near = SIDE_INVITE_BEST + np.radians(1.0)
+    far = SIDE_INVITE_BEST + np.radians(1.5)
+    twin = SIDE_INVITE_SECOND + 0.01             # within DISTINCT_RAD: the same start
+    xl = np.array([[twin, near], [far, twin]])
+    fl = rows.evaluate(xl)
+    x, f, _ = refine_basins(rows, best, f_best, (xl, fl), Clock(None))
+    assert f[0] < 48.1 and f[1] == pytest.approx(alone)
+    assert abs(np.degrees(x[0, 1]) - (-22.65)) < 5.0 and np.degrees(x[1, 1]) < -130.0
+    single = refine_basins(side_invite, best[:1], f_best[:1], (xl[0], fl[0]), Clock(None))
+    assert single[1][0] == pytest.approx(f[0])
+    expired = refine_basins(rows, best, f_best, (xl, fl), Clock(0.0))
+    assert np.array_equal(expired[1], f_best)

@@ -100,17 +100,36 @@ class LatencySamples:
             return
         best = self.best[found][key]
         scores = {g.name: g.score_after for g in result.gestures}
-        if self.models[found] is not None and joint_names:
-            node = scores
-            scores = published_scores(*self.models[found], joint_names, result.gestures)
+        client = self.client_scores(found, result, joint_names)
+        if client is not None:
             self.rescored += 1
             self.node_diff = max([self.node_diff] + [
-                abs(gap(node[name], score)) for name, score in scores.items()])
+                abs(gap(scores[name], score)) if math.isfinite(scores[name]) else math.inf
+                for name, score in client.items()])
+            scores = client
         gaps = {name: gap(score, float(best[name])) for name, score in scores.items()}
         self.gaps.append(max((x if math.isfinite(x) else math.inf) for x in gaps.values()))
         if self.gaps[-1] > QUALITY_WITHIN:
             self.beyond.append(f'{key}: ' + ', '.join(
                 f'{name} {100 * x:.2f} %' for name, x in gaps.items() if x > QUALITY_WITHIN))
+
+    def client_scores(self, found, result, joint_names):
+        """
+        Return ``{gesture: score}`` of ``result`` as published, or None (the node's count).
+
+        None without the library's models or columns, for a library that leans the
+        torso or carries a tool (the published angles alone do not say the pose), or
+        whose trajectories are not the models' (another robot's joints, another count
+        of keyframes: the client cannot score them).
+        """
+        models = self.models[found]
+        if models is None or not joint_names or result.tool_mm or any(
+                g.shared for g in result.gestures):
+            return None
+        try:
+            return published_scores(*models, joint_names, result.gestures)
+        except (ValueError, IndexError):
+            return None
 
     def report(self, count):
         """Return the report dict; raise BenchError when nothing was measured."""
@@ -298,6 +317,7 @@ def served_models(path):
     """
     out = []
     for _, name in _optima_libraries(path):
+        name = name if isinstance(name, str) else None
         if name in ROBOTS:
             out.append(shipped_robot(name).models())
         else:
@@ -395,12 +415,13 @@ def write_latency(out, report, failures):
     if quality:
         worst = quality['max_gap_pct']
         largest = '' if worst is None else f', largest gap {worst:.2f} %'
-        scored = ("the node's scores" if not quality.get('rescored_by_client') else
-                  "the client's scores of the published trajectories" + (
-                      '' if quality['rescored_by_client'] == quality['judged'] else
-                      f" ({quality['rescored_by_client']} of them)") +
-                  f"; the node's own within {quality['node_score_diff_pct']:.3g} %")
-        out.write(f'quality as served ({scored} against the best-known): '
+        scored, diff = "the node's scores", ''
+        if quality.get('rescored_by_client'):
+            scored = "the client's scores of the published trajectories" + (
+                '' if quality['rescored_by_client'] == quality['judged'] else
+                f" ({quality['rescored_by_client']} of them, the node's the others)")
+            diff = f"; the node's own scores within {quality['node_score_diff_pct']:.2g} %"
+        out.write(f'quality as served ({scored} against the best-known{diff}): '
                   f"{quality['within_1pct']} of {quality['judged']} libraries with every "
                   f'gesture within 1 %{largest}; {quality["without_best_known"]} without a '
                   'best-known for their locks\n')

@@ -156,10 +156,11 @@ class OptimizeResult:
     history: np.ndarray = field(repr=False)
     seed: Optional[int] = None
     algorithm: str = ''
-    # The local minima the algorithm's own local search ended at, and their values
-    # (scipy's shgo names): (batch, k, D) and (batch, k), or None for an algorithm
-    # that does not end with one.  A caller that goes on locally may take the
-    # runners-up as well as the best (the keyframe search does: recovery.keyframes).
+    # The points the algorithm's own local search ended at, and their values (scipy's
+    # shgo names; in the order of their starts, not sorted): (batch, k, D) and
+    # (batch, k), (k, D) and (k,) for a single problem, or None for an algorithm that
+    # does not end with one.  A caller that goes on locally may take the runners-up as
+    # well as the best (the keyframe search does: recovery.keyframes).
     xl: Optional[np.ndarray] = field(default=None, repr=False)
     funl: Optional[np.ndarray] = field(default=None, repr=False)
 
@@ -245,7 +246,7 @@ class Algorithm:
     ``run(problem, rng, clock)`` returns ``(x_best (batch, D), f_best (batch,), nit,
     history list of (batch,) arrays)``, and an algorithm that ends with a local search
     of several starts may add a fifth item, ``(xl (batch, k, D), funl (batch, k))``,
-    the points that search ended at (:attr:`OptimizeResult.xl`).  It must call
+    the points that search ended at (:attr:`OptimizeResult.xl`), or None.  It must call
     ``clock.expired(step_cost)`` between steps and return the best so far when it
     says so.
     """

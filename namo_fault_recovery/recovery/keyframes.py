@@ -540,9 +540,10 @@ def finish_search(problem, algo, x, f, motions, designed, clock, local=None):
 
     For algorithms that polish (the node's default), the keyframes of a motion share
     their branches (:func:`_share_branches`), then every keyframe takes the reweighted
-    Gauss-Newton refinement, with the runners-up of the algorithm's polish in other
-    basins (:func:`~.least_squares.refine_basins`; ``local``: the result's ``(xl,
-    funl)``); the paper's preset, which does not polish, is left as the paper ran it.
+    Gauss-Newton refinement, a single pose's with the runners-up of the algorithm's
+    polish in other basins (:func:`~.least_squares.refine_basins`; ``local``: the
+    result's ``(xl, funl)``; a motion's keyframes keep their shared branch); the
+    paper's preset, which does not polish, is left as the paper ran it.
     ``x`` (B, D) and ``f`` (B,) are the algorithm's best per row of ``problem``,
     ``motions`` (B,) each row's motion (-1: none) and ``designed`` (B, D) the designed
     angles of the free joints.
@@ -551,6 +552,11 @@ def finish_search(problem, algo, x, f, motions, designed, clock, local=None):
         return x, f, 0
     x, f, shared = _share_branches(problem, x, f, motions, designed, clock,
                                    algo.polish_maxiter, algo.polish_ftol)
+    if local is not None and local[0] is not None:
+        # A motion's keyframes keep the branch they share: another basin for one of
+        # them alone would be a jump in the motion.  Single poses take any basin.
+        alone = np.array([m < 0 or np.count_nonzero(motions == m) == 1 for m in motions])
+        local = (local[0], np.where(alone[:, None], local[1], np.inf))
     x, f, refined = refine_basins(problem, x, f, local, clock)
     return x, f, shared + refined
 

@@ -38,7 +38,7 @@ REFINE_FLOORS = (1.0, 0.3, 0.1, 0.03, 0.01, 0.003, 0.001)   # refine's floors, i
 REFINE_STEPS = np.array([1.0, 0.5, 0.25, 0.1, 0.03])        # step lengths tried
 REFINE_DAMPING = 1e-6   # refine's damping: the line search, not the damping, keeps it safe
 REFINE_ITERATIONS = 15  # refine's iterations at most
-RUNNER_UP_MARGIN = 0.15  # refine_basins: a local minimum this far above the best is refined
+RUNNER_UP_MARGIN = 0.15  # refine_basins: a runner-up at most this share of |best| above it
 
 
 def gauss_newton(problem, x, iterations, pull=0.0):
@@ -156,7 +156,8 @@ def refine_basins(problem, x, f, local, clock):
     Return ``(x, f, nfev)``: :func:`refine` of the best points and of their runners-up.
 
     ``local`` is the algorithm's own local minima, ``(xl (B, k, D), funl (B, k))``
-    (:attr:`~..optimize.base.OptimizeResult.xl`; None: refine ``x`` alone).  The polish
+    (:attr:`~..optimize.base.OptimizeResult.xl`; None: refine ``x`` alone); a runner-up
+    of value ``inf`` is never refined.  The polish
     stops short of a basin's floor (its iteration cap), and by how far differs from
     basin to basin, so the best polished point is not always in the best basin.
     Measured on Talos's side_invite with right joint 2 locked: the best basin's floor
@@ -165,12 +166,14 @@ def refine_basins(problem, x, f, local, clock):
     Every local minimum more than ``DISTINCT_RAD`` from its row's best (in some joint)
     and at most ``RUNNER_UP_MARGIN`` above it is refined with the best, all in one
     batched call (a few more rows cost little), and each row keeps its lowest value:
-    the same seeds gave 2 such runs in 100.  No row ends worse than :func:`refine`
-    alone would leave it.
+    the same seeds gave 2 such runs in 100 (and 15 in 200 against 47 on seeds 100-299).
+    Without a deadline no row ends worse than :func:`refine` alone would leave it; with
+    one, the rows share the iterations the clock allows.
     """
-    if local is None or local[0] is None:
+    if local is None or local[0] is None or clock.expired():
         return refine(problem, x, f, clock)
-    xl, fl = local
+    xl = np.reshape(local[0], (len(f), -1, x.shape[-1]))   # a single problem's (k, D)
+    fl = np.reshape(local[1], (len(f), -1))
     far = np.any(np.abs(xl - x[:, None, :]) > DISTINCT_RAD, axis=-1)
     rows, which = np.nonzero(far & (fl <= f[:, None] + RUNNER_UP_MARGIN * np.abs(f[:, None])))
     if rows.size == 0:
