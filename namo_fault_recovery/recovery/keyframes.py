@@ -38,7 +38,7 @@ from .least_squares import refine_basins
 from .locks import clamp_lock, resolve_locks
 from .result import GestureResult, LibraryResult
 from .seeding import kinematic_starts
-from .twins import best_twins
+from .twins import best_twins, pose_twins
 from ..model.kinematics import (angle_bytes, arm_columns, arm_joint_count, ArmLandmarks,
                                 batch_forward, batch_forward_jacobian, split_arms,
                                 take_landmarks)
@@ -541,9 +541,10 @@ def finish_search(problem, algo, x, f, motions, designed, clock, local=None):
     For algorithms that polish (the node's default), the keyframes of a motion share
     their branches (:func:`_share_branches`), then every keyframe takes the reweighted
     Gauss-Newton refinement, a single pose's with the runners-up of the algorithm's
-    polish in other basins (:func:`~.least_squares.refine_basins`; ``local``: the
-    result's ``(xl, funl)``; a motion's keyframes keep their shared branch); the
-    paper's preset, which does not polish, is left as the paper ran it.
+    polish in other basins and its best's kinematic twins
+    (:func:`~.least_squares.refine_basins`; ``local``: the result's ``(xl, funl)``; a
+    motion's keyframes keep their shared branch); the paper's preset, which does not
+    polish, is left as the paper ran it.
     ``x`` (B, D) and ``f`` (B,) are the algorithm's best per row of ``problem``,
     ``motions`` (B,) each row's motion (-1: none) and ``designed`` (B, D) the designed
     angles of the free joints.
@@ -554,9 +555,13 @@ def finish_search(problem, algo, x, f, motions, designed, clock, local=None):
                                    algo.polish_maxiter, algo.polish_ftol)
     if local is not None and local[0] is not None:
         # A motion's keyframes keep the branch they share: another basin for one of
-        # them alone would be a jump in the motion.  Single poses take any basin.
+        # them alone would be a jump in the motion.  Single poses take any basin, and
+        # their best's twins (twins.pose_twins) are runners-up too.
         alone = np.array([m < 0 or np.count_nonzero(motions == m) == 1 for m in motions])
-        local = (local[0], np.where(alone[:, None], local[1], np.inf))
+        twins = pose_twins(problem, x)
+        xl = np.concatenate((local[0], twins), axis=1)
+        fl = np.concatenate((local[1], problem.evaluate(twins)), axis=1)
+        local = (xl, np.where(alone[:, None], fl, np.inf))
     x, f, refined = refine_basins(problem, x, f, local, clock)
     return x, f, shared + refined
 

@@ -59,6 +59,36 @@ def twin_angles(q: np.ndarray, triple: tuple, mirror: float, design: np.ndarray,
     return out
 
 
+def pose_twins(problem, x: np.ndarray) -> np.ndarray:
+    """
+    Return the single twins of each row of ``x`` (B, D), a PoseProblem's free joints.
+
+    One per twin triple whose three joints the problem moves, shape (B, m, D); each
+    joint reads its twin angle within its limits nearest the design (the problem's
+    anchor).  A row without such a reading keeps its own angles there.  The keyframe
+    search refines them beside its best (``keyframes.finish_search``): a twin has the
+    same landmarks, but not the same limits, and the branch the colony did not take
+    may reach lower where its own is held by a limit (TIAGo++'s side_invite with right
+    joint 4 locked: joint 7 at its 120 deg limit, 1.55 % above the floor of the other
+    branch, in 21 seeds of 200).
+    """
+    design = problem.anchor if problem.anchor is not None else problem.x0
+    found = []
+    for side in ARMS:
+        column = {j: k for k, (s, j) in enumerate(problem.free) if s == side}
+        for *triple, mirror in equivalent_twins(problem.robot, side):
+            if not all(j in column for j in triple):
+                continue
+            twin = np.array(x, dtype=float)
+            for b in range(len(twin)):   # a loop over rows: twin_angles is all or none
+                taken = twin_angles(twin[b:b + 1], tuple(column[j] for j in triple), mirror,
+                                    design[b:b + 1], problem.lower, problem.upper)
+                if taken is not None:
+                    twin[b] = taken[0]
+            found.append(twin)
+    return np.stack(found, axis=1) if found else np.empty((len(x), 0, np.shape(x)[-1]))
+
+
 def side_twins(robot, side: str) -> list:
     """Return ``(columns (3,), mirror)`` of the arm's twin triples, in whole-robot columns."""
     first = arm_columns(robot)[side].start
