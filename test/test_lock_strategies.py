@@ -106,7 +106,9 @@ def test_stage_two_never_worse_than_stage_one(robot, library, joint):
         assert any(j.startswith('left') for j in wai.free_joints)
     off = reconfigure_library(robot, library, {joint: None}, PAPER.with_changes(bimanual='off'),
                               seed=2, gestures=['wai'])
-    assert off['wai'].stage == 1 and off['wai'].stage1_score == off['wai'].score_after
+    # The same value, up to the rounding of a batched evaluation (one row or several).
+    assert off['wai'].stage == 1
+    assert off['wai'].stage1_score == pytest.approx(off['wai'].score_after, rel=1e-12)
 
 
 def test_bimanual_mode_is_checked(robot, library):
