@@ -71,6 +71,13 @@ class LatencySamples:
         self.origins = {}                  # library_origin -> count ('' if not described)
         self.table = None                  # the contingency table at the first fault
 
+    @classmethod
+    def from_optima(cls, path):
+        """Return the samples of a run judged against an optima file (read once)."""
+        libraries = _optima_libraries(path)
+        return cls([best for best, _ in libraries],
+                   [_library_models(name) for _, name in libraries])
+
     def add_library(self, client, library, t0, t0_ns=None):
         """Add the latency of a fault's ``library`` (published at ``t0``) and its split."""
         self.latencies.append(library.received - t0)
@@ -315,14 +322,16 @@ def served_models(path):
     libraries are the packaged robot's.  Another robot's file gives None: the client
     cannot score its trajectories, and takes the node's scores.
     """
-    out = []
-    for _, name in _optima_libraries(path):
-        name = name if isinstance(name, str) else None
-        if name in ROBOTS:
-            out.append(shipped_robot(name).models())
-        else:
-            out.append(load_models(name) if name in LIBRARIES else None)
-    return out
+    return [_library_models(name) for _, name in _optima_libraries(path)]
+
+
+def _library_models(name):
+    """Return ``(robot, library)`` of a shipped robot's or a packaged library's name, or None."""
+    if not isinstance(name, str):
+        return None
+    if name in ROBOTS:
+        return shipped_robot(name).models()
+    return load_models(name) if name in LIBRARIES else None
 
 
 def _optima_libraries(path):
@@ -375,8 +384,7 @@ def run_latency(out, rounds: Rounds = Rounds(), timeout=30.0, namespace='/',
     """
     from ..ros.client import RecoveryClient
     stream = None
-    samples = (LatencySamples() if optima is None
-               else LatencySamples(served_optima(optima), served_models(optima)))
+    samples = LatencySamples() if optima is None else LatencySamples.from_optima(optima)
     node, domain_id = target.start(namespace, out)
     try:
         # The client's middleware and executor threads inherit the policy.

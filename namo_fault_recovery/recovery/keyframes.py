@@ -553,17 +553,25 @@ def finish_search(problem, algo, x, f, motions, designed, clock, local=None):
         return x, f, 0
     x, f, shared = _share_branches(problem, x, f, motions, designed, clock,
                                    algo.polish_maxiter, algo.polish_ftol)
-    if local is not None and local[0] is not None:
-        # A motion's keyframes keep the branch they share: another basin for one of
-        # them alone would be a jump in the motion.  Single poses take any basin, and
-        # their best's twins (twins.pose_twins) are runners-up too.
-        alone = np.array([m < 0 or np.count_nonzero(motions == m) == 1 for m in motions])
+    # A motion's keyframes keep the branch they share: another basin for one of them
+    # alone would be a jump in the motion.  Single poses take any basin, and their
+    # best's twins (twins.pose_twins) are runners-up too.
+    alone = ~in_motion(motions)
+    if local is None or local[0] is None or not alone.any():
+        local = None
+    else:
         twins = pose_twins(problem, x)
         xl = np.concatenate((local[0], twins), axis=1)
         fl = np.concatenate((local[1], problem.evaluate(twins)), axis=1)
         local = (xl, np.where(alone[:, None], fl, np.inf))
     x, f, refined = refine_basins(problem, x, f, local, clock)
     return x, f, shared + refined
+
+
+def in_motion(motions: np.ndarray) -> np.ndarray:
+    """Return which rows are keyframes of a motion of several (``motions`` (B,), -1: none)."""
+    return np.array([m >= 0 and np.count_nonzero(motions == m) > 1 for m in motions],
+                    dtype=bool)
 
 
 def _share_branches(problem, x, f, motions, designed, clock, maxiter, ftol):
@@ -589,7 +597,7 @@ def _share_branches(problem, x, f, motions, designed, clock, maxiter, ftol):
     ``motions`` (B,) their motion (-1: none) and ``designed`` (B, D) the designed angles
     of the free joints.  Returns (x, f, objective evaluations).
     """
-    rows = np.nonzero([m >= 0 and np.count_nonzero(motions == m) > 1 for m in motions])[0]
+    rows = np.nonzero(in_motion(motions))[0]
     if rows.size == 0:
         return x, f, 0
     x, f = x.copy(), f.copy()

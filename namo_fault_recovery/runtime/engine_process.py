@@ -82,10 +82,7 @@ def _run_nice(nice):
 
 def _compute_at(nice):
     """Child: compute at ``nice`` from now on (allowed: it was tried at start)."""
-    try:
-        os.setpriority(os.PRIO_PROCESS, 0, nice)
-    except OSError:
-        pass
+    set_nice(nice)
 
 
 def _serve(conn, current, parent_pid=None):
