@@ -152,6 +152,20 @@ def test_polish_walks_to_the_floor():
     assert x.shape == start.shape and np.all(f < 1e-8)
 
 
+def test_polish_calls_back_after_every_iteration_with_its_points():
+    """As scipy's ``callback``: each start's best so far, (batch, k, D), once per iteration."""
+    problem = sphere_problem(batch=2)
+    start = problem.random(np.random.default_rng(0), 3)
+    seen = []
+    x, f = polish(problem, start, Clock(None), maxiter=4, ftol=0.0,
+                  callback=lambda xk: seen.append(xk.copy()))
+    assert len(seen) == 4 and all(s.shape == start.shape for s in seen)
+    assert np.array_equal(seen[-1], x)
+    values = [problem.evaluate(s) for s in seen]
+    assert np.all(np.diff(np.stack(values), axis=0) <= 0.0)     # never worse
+    assert np.all(values[0] < problem.evaluate(start))
+
+
 @pytest.mark.parametrize('make, message', [
     (lambda: ABC(n_sources=-1), 'ABC n_sources: expected an integer >= 2, got -1'),
     (lambda: ABC(limit=0), 'ABC limit: expected an integer >= 1, got 0'),

@@ -17,7 +17,7 @@ _ARMIJO = 1e-4
 _FIRST_STEP = 0.1   # radians moved by the first iteration of a start
 
 
-def polish(problem, x0, clock, maxiter=100, ftol=1e-10, restart=False):
+def polish(problem, x0, clock, maxiter=100, ftol=1e-10, restart=False, callback=None):
     """
     Refine starts ``x0`` (batch, k, D) locally; return ``(x, f)`` for every start.
 
@@ -31,6 +31,8 @@ def polish(problem, x0, clock, maxiter=100, ftol=1e-10, restart=False):
     goes bad long before the floor.  Measured on TIAGo++'s Wai with its right joint 3
     locked, 100 random starts: median 91.7 without, 42.5 with it (best 36.6 and 31.6).
     It costs iterations where many starts crawl along a kink or a bound.
+
+    ``callback(x)``, as scipy's, gets every start's best so far after each iteration.
     """
     batch, k, dim = x0.shape
     n_steps = len(_STEPS)
@@ -71,6 +73,8 @@ def polish(problem, x0, clock, maxiter=100, ftol=1e-10, restart=False):
         x = np.where(moved[..., None], x_new, x)
         g = np.where(moved[..., None], g_new, g)
         f = np.where(moved, f_new, f)
+        if callback is not None:
+            callback(x)
     # The gradient may be of a smoothed objective: report the exact value.
     return x, problem.evaluate(x)
 
