@@ -129,7 +129,8 @@ def test_a_tiny_budget_never_returns_a_step_beyond_the_velocity_limits(
             assert _played(robot, res) == pytest.approx(1.0)
 
 
-def test_the_bye_whose_keyframes_end_in_two_wrist_branches_is_repaired(robot, product_library):
+def test_the_bye_whose_keyframes_end_in_two_wrist_branches_is_repaired(
+        robot, product_library, monkeypatch):
     # Right joint 5 locked: at this budget and seed the keyframe search leaves Bye's
     # waves in two branches of the wrist (seed 6 did before the colony started from
     # kinematic sources; seeds 0 and 1 do since): the player would stretch it; the engine
@@ -139,10 +140,14 @@ def test_the_bye_whose_keyframes_end_in_two_wrist_branches_is_repaired(robot, pr
     # this crippled budget the repaired Bye is within 1 % of the best-known at half of
     # the seeds (0-29, measured 2026-12-06, as before the colony kept its best start);
     # seed 1 is one of them (seed 0, the seed here until then, is 6.9 % above since).
+    boxes = []
+    reach_boxes = pacing.reach_boxes
+    monkeypatch.setattr(pacing, 'reach_boxes', lambda *a: boxes.append(1) or reach_boxes(*a))
     res = recover(robot, product_library, {'right_arm_joint5': None}, RecoverySettings(),
                   seed=1, clock=Clock(None),
                   optimizer_overrides={'max_cycles': 1, 'polish': 0})
     assert any(n.startswith('bye: ') and PACED_NOTE in n for n in res.notes)
+    assert boxes                    # searched within reach: the colony was not polished
     bye = res['bye']
     assert bye.speed_ratio <= 1.0 + 1e-9
     assert _played(robot, res) == pytest.approx(1.0)
@@ -172,7 +177,10 @@ def test_the_branch_restarts_offer_their_points_along_the_polish(monkeypatch):
         assert res['bye'].speed_ratio <= 1.0 + 1e-9
         return res['bye'].score_after
 
+    boxes = []
+    monkeypatch.setattr(pacing, 'reach_boxes', lambda *a: boxes.append(a))
     assert bye() < 6.1
+    assert not boxes               # a polished search: no search within reach
     monkeypatch.setattr(keyframes, 'RESTART_MAXITER_POLISHED', 20)
     assert bye() < 6.1                          # the points after 5 iterations are kept
     monkeypatch.setattr(keyframes, 'RESTART_KEEP', ())
