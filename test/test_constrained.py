@@ -84,8 +84,9 @@ def _wai_problem(robot, library):
 def test_the_constrained_pose_is_clear_and_finds_the_best_wai_on_talos(talos):
     robot, library = talos
     problem, scorer, checker = _wai_problem(robot, library)
-    x = constrained_pose(problem, checker, Clock(None))
-    qr, ql = problem.assemble(x[None])
+    res = constrained_pose(problem, checker, Clock(None))
+    assert res.success and res.nit > 0
+    qr, ql = problem.assemble(res.x[None])
     lm_r, lm_l = batch_forward(robot, qr, 'right'), batch_forward(robot, ql, 'left')
     assert not checker.collides(lm_r, lm_l, np.array([0]))[0]
     assert scorer.evaluate(lm_r, lm_l, np.array([0]))[0] < 37.7       # 38.86+ penalised
@@ -97,7 +98,8 @@ def test_an_expired_clock_returns_at_most_the_clear_poses_evaluated(talos):
     clock = Clock(1e-9)
     while not clock.expired():
         pass
-    assert constrained_pose(problem, checker, clock) is None
+    res = constrained_pose(problem, checker, clock)
+    assert res.x is None and not res.success and res.message == 'the clock ran out'
 
 
 def test_the_engine_reaches_the_best_clear_wai(talos):

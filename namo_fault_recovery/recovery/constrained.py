@@ -19,10 +19,10 @@ runs out, with the best clear pose it has evaluated.  The keyframe search runs i
 on a colliding pose (``keyframes._solve``); the judge keeps the best clear candidate.
 """
 
-from typing import Optional, TYPE_CHECKING
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.optimize import minimize
+from scipy.optimize import minimize, OptimizeResult
 
 from ..optimize.base import Clock, Problem
 
@@ -72,23 +72,27 @@ class _Evaluations:
 
 
 def constrained_pose(problem: Problem, checker: 'CollisionModel', clock: Clock,
-                     maxiter: int = MAXITER) -> Optional[np.ndarray]:
+                     maxiter: int = MAXITER) -> OptimizeResult:
     """
-    Return the best clear pose (D,) SLSQP reaches from ``problem``'s start, or None.
+    Return scipy's ``OptimizeResult`` of the SLSQP solve from ``problem``'s start.
 
     ``problem`` is a one-row :class:`~.keyframes.PoseProblem` without a collision
     model (its ``x0`` the start), ``checker`` the
     :class:`~..objective.collision.CollisionModel` whose clearances constrain it.
-    None when no evaluated pose was clear.
+    ``x`` is the best clear pose (D,) evaluated, None when none was clear; ``fun``
+    its value of ``problem``; ``success`` True when SLSQP converged (not cut by the
+    clock or ``maxiter``) and ``x`` is a pose: a clear local optimum of the score.
     """
     ev = _Evaluations(problem, checker, clock)
     x0 = np.asarray(problem.x0[0], dtype=float)
     try:
-        minimize(lambda x: ev(x)[:2], x0, jac=True, method='SLSQP',
-                 bounds=list(zip(problem.lower, problem.upper)),
-                 constraints=[{'type': 'ineq', 'fun': lambda x: ev(x)[2],
-                               'jac': lambda x: ev(x)[3]}],
-                 options={'maxiter': maxiter, 'ftol': FTOL})
+        res = minimize(lambda x: ev(x)[:2], x0, jac=True, method='SLSQP',
+                       bounds=list(zip(problem.lower, problem.upper)),
+                       constraints=[{'type': 'ineq', 'fun': lambda x: ev(x)[2],
+                                     'jac': lambda x: ev(x)[3]}],
+                       options={'maxiter': maxiter, 'ftol': FTOL})
+        converged, message, nit = bool(res.success), str(res.message), int(res.nit)
     except _OutOfTime:
-        pass
-    return ev.best_x
+        converged, message, nit = False, 'the clock ran out', -1
+    return OptimizeResult(x=ev.best_x, fun=ev.best_f, nit=nit, message=message,
+                          success=converged and ev.best_x is not None)
