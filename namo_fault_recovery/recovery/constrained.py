@@ -16,7 +16,8 @@ constraints slides along the contact from the starting pose to 37.66.
 joints' bounds, and every checked pair's clearance (:meth:`~..objective.collision.
 CollisionModel.clearance`, analytic derivatives) at least 0.  It stops when the clock
 runs out, with the best clear pose it has evaluated.  The keyframe search runs it first
-on a colliding pose (``keyframes._solve``); the judge keeps the best clear candidate.
+on a colliding pose (``keyframes._solve``) and settles a converged clear pose; otherwise
+the pose is one more candidate, and the judge keeps the best clear one.
 """
 
 from typing import TYPE_CHECKING
@@ -81,7 +82,8 @@ def constrained_pose(problem: Problem, checker: 'CollisionModel', clock: Clock,
     :class:`~..objective.collision.CollisionModel` whose clearances constrain it.
     ``x`` is the best clear pose (D,) evaluated, None when none was clear; ``fun``
     its value of ``problem``; ``success`` True when SLSQP converged (not cut by the
-    clock or ``maxiter``) and ``x`` is a pose: a clear local optimum of the score.
+    clock or ``maxiter``) and ``x`` is a pose: a clear local optimum of the score.  When
+    the clock ran out ``nit`` is -1 (and ``fun`` inf if no pose was clear).
     """
     ev = _Evaluations(problem, checker, clock)
     x0 = np.asarray(problem.x0[0], dtype=float)

@@ -378,8 +378,10 @@ def _settle_constrained(robot, scorer, checker, batch, rows, plain, algo, clock)
     2026-12-07: the penalised search after it had gained 0.0-0.3 % (it rests within the
     capsules' tolerance, where the constrained pose keeps every pair clear) in every
     row measured (Talos right joint 4, TIAGo++ and Namo's colliding Wai, 5 seeds each),
-    for 50-60 ms of the slowest faults'.  The rows left go to the penalised search, with their
-    constrained poses as one more candidate (the list returned).  Only with a polishing
+    for 50-60 ms of the slowest faults'.  (A converged solve of a worse basin than the
+    penalised search's would be settled too; none was seen in those rows.)  The rows
+    left go to the penalised search, with their constrained poses as one more candidate
+    (the list returned).  Only with a polishing
     algorithm (the node's preset; the paper's runs as it ran) and up to
     :data:`CONSTRAINED_ROWS` rows (the solve is per row; the colony is batched).
     """
@@ -401,7 +403,7 @@ def _settle_constrained(robot, scorer, checker, batch, rows, plain, algo, clock)
 
 def _constrained(robot, scorer, checker, batch, rows, clock):
     """
-    Return (right, left) of ``rows``, each solved from its start with hard constraints.
+    Return (right, left, converged) of ``rows``, each solved with hard constraints.
 
     The capsules' clearances as SLSQP's constraints (:mod:`.constrained`), with the
     torso's shape where ``checker`` has it (as the penalised repair: only where the
@@ -1025,10 +1027,11 @@ def _pace(setup, rows, clock, rng):
         if pacing.feasible(q, limits):
             continue
         base = np.concatenate((rows.base_r[ks], rows.base_l[ks]), axis=1)
-        extra = [] if _searched_to_floor(setup, rows, ks) else _within_reach(
+        floor = _searched_to_floor(setup, rows, ks)
+        extra = [] if floor else _within_reach(
             setup, rows, owner, ks, (q, limits, lower, upper), clock, rng)
         if not clock.expired():
-            extra += list(_branch_restarts(setup, rows, owner, ks,
+            extra += list(_branch_restarts(setup, rows, (owner, ks, floor),
                                            pacing.candidates(q, base, limits, lower, upper),
                                            clock))
         best, _ = pacing.repair(q, base, limits, lower, upper,
@@ -1052,8 +1055,9 @@ def _searched_to_floor(setup, rows, ks):
     TIAGo++ and Namo (60 repairs) a motion from within reach won 26 times, each time
     with the same worst keyframe as the best other candidate (to 1e-9; the sums 0.01
     apart at most), which the tubes' polish then takes to the same floor; the search
-    cost 25-28 ms of the slowest faults' 110-150.  A search cut short (a deadline, a
-    crippled colony, the paper's preset without a polish) still searches within reach.
+    cost 25-28 ms of the slowest faults' 110-150.  A search cut by the deadline or
+    cancelled, or one without a polish (the paper's preset, or the tests' crippled
+    colony), still searches within reach.
     """
     return bool(getattr(setup.algo, 'polish', 0)) and not any(
         rows.status[k] in ('deadline', 'cancelled') for k in ks)
@@ -1138,7 +1142,7 @@ def _within_reach(setup, rows, owner, ks, motion, clock, rng):
     return out
 
 
-def _branch_restarts(setup, rows, owner, ks, starts, clock):
+def _branch_restarts(setup, rows, motion, starts, clock):
     """
     Polish a motion's keyframes from each feasible start; return the motions (M, K, J).
 
@@ -1146,21 +1150,22 @@ def _branch_restarts(setup, rows, owner, ks, starts, clock):
     through one solved keyframe); polishing each of its keyframes freely keeps them in
     that branch, so the polished motion is usually feasible, and a much better one than
     the start (the caller clips it into reach).  All starts of all keyframes are one
-    batched polish.
+    batched polish.  ``motion`` is (owner, rows ``ks``, searched to their floors).
 
-    The points after iterations ``RESTART_KEEP`` are returned too (M = N x the points
-    kept): the polish is free and the repair clips its points into reach afterwards, so
-    a longer polish is not a better motion once clipped.  On TIAGo++ with right joint 1
-    locked, Bye repaired from 1, 3, 5, 10 and 20 iterations scored 6.74, 6.59, 5.98,
-    6.37 and 6.82 (the best-known was 6.81).  After a search that polished its
-    keyframes (the node's default) the restarts polish ``RESTART_MAXITER_POLISHED``
-    iterations: over every single fault x 5 seeds of Talos and TIAGo++ no Bye was worse
-    than with 20, and the slowest faults' restarts took 7 ms instead of 27-37.  After a
-    search without a polish (the paper's preset, or a colony cut short) they polish
-    ``RESTART_MAXITER``: there the restarts do the search's work (Namo's right joint 5
-    at one colony cycle: Bye within 1 % of the best-known at 15 of seeds 0-29 with 20
-    iterations, 3 with 5).
+    The points after iterations ``RESTART_KEEP`` (those before the last) are returned
+    too (M = N x the points kept): the polish is free and the repair clips its points
+    into reach afterwards, so a longer polish is not a better motion once clipped.  On
+    TIAGo++ with right joint 1 locked, Bye repaired from 1, 3, 5, 10 and 20 iterations
+    scored 6.74, 6.59, 5.98, 6.37 and 6.82 (the best-known was 6.81).  After a search
+    that polished its keyframes (the node's default) the restarts polish
+    ``RESTART_MAXITER_POLISHED`` iterations: over every single fault x 5 seeds of Talos
+    and TIAGo++ no Bye was worse than with 20, and the slowest faults' restarts took 7
+    ms instead of 27-37.  After a search without a polish (the paper's preset) or cut
+    short they polish ``RESTART_MAXITER``: there the restarts do the search's work
+    (Namo's right joint 5 at one colony cycle: Bye within 1 % of the best-known at 15 of
+    seeds 0-29 with 20 iterations, 3 with 5).
     """
+    owner, ks, floor = motion
     free = _motion_layout(setup, rows, owner, ks)
     if not free:
         return ()
@@ -1171,14 +1176,13 @@ def _branch_restarts(setup, rows, owner, ks, starts, clock):
     def keep(x):
         shots.append(x.copy())
 
-    polished = getattr(setup.algo, 'polish', 0)
     x, _ = polish(problem, problem.clip(np.swapaxes(starts[:, :, col], 0, 1)), clock,
-                  maxiter=RESTART_MAXITER_POLISHED if polished else RESTART_MAXITER,
+                  maxiter=RESTART_MAXITER_POLISHED if floor else RESTART_MAXITER,
                   ftol=getattr(setup.algo, 'polish_ftol', 1e-7), callback=keep)
     kept = [shots[i - 1] for i in RESTART_KEEP if i < len(shots)] + [x]
     out = np.repeat(np.concatenate((rows.right[ks], rows.left[ks]), axis=1)[None],
                     len(starts) * len(kept), axis=0)
-    out[:, :, col] = np.concatenate([np.swapaxes(k, 0, 1) for k in kept])
+    out[:, :, col] = np.concatenate([np.swapaxes(xs, 0, 1) for xs in kept])
     return out
 
 
