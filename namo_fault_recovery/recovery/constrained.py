@@ -16,8 +16,7 @@ constraints slides along the contact from the starting pose to 37.66.
 joints' bounds, and every checked pair's clearance (:meth:`~..objective.collision.
 CollisionModel.clearance`, analytic derivatives) at least 0.  It stops when the clock
 runs out, with the best clear pose it has evaluated.  The keyframe search runs it first
-on a colliding pose (``keyframes._solve``) and settles a converged clear pose; otherwise
-the pose is one more candidate, and the judge keeps the best clear one.
+on a colliding pose (``keyframes._solve``); the judge keeps the best clear candidate.
 """
 
 from typing import TYPE_CHECKING

@@ -67,9 +67,9 @@ REACH_MAXITER = 20         # polish iterations of a repair's searches within rea
 STIFF_PENALTY = 10.0       # a stuck repair's penalty, times the capsules' own weight
 # Colliding rows are solved with the capsules as hard constraints first (recovery.
 # constrained), when there are at most CONSTRAINED_ROWS of them (the solve takes 20-70 ms a
-# row; the penalised colony is batched); a row whose constrained pose is clear and either
-# converged or scores within CONSTRAINED_GAP of its plain result (the search without the
-# contacts, as low as a clear pose normally gets) is settled.
+# row; the penalised colony is batched); a row whose constrained pose scores within
+# CONSTRAINED_GAP of its plain result (the search without the contacts, as low as a clear
+# pose normally gets) is settled.
 CONSTRAINED_ROWS = 2
 CONSTRAINED_GAP = 0.01
 PUSH_MAXITER = 15          # polish iterations that push an idle arm out of the body
@@ -287,8 +287,8 @@ def _solve(robot, scorer, checker, batch, algo, clock, rng, stats=None):
     The collision constraint is lazy: the plain score is optimised first (fast, and
     most results do not collide), the results are checked, and only the rows that
     collide are solved again: with the capsules as hard constraints from their
-    starting pose (:func:`_settle_constrained`), and, unless that converged or came
-    within ``CONSTRAINED_GAP`` of the plain result, with the capsule penalty from their
+    starting pose (:func:`_settle_constrained`), and, unless that came within
+    ``CONSTRAINED_GAP`` of the plain result, with the capsule penalty from their
     collision-free starting pose and from the plain optimum (:func:`_repair`).
     Return (best right, best left, status names).
     """
@@ -371,28 +371,27 @@ def _settle_constrained(robot, scorer, checker, batch, rows, plain, algo, clock)
     Solve colliding ``rows`` with hard constraints first; return (rows left, candidates).
 
     ``plain`` is (right, left, status) of the plain search, updated in place: a row
-    whose constrained pose (:func:`_constrained`) is clear, and a converged solve or
-    within :data:`CONSTRAINED_GAP` of its plain result (which searched without the
-    contacts, so a clear pose rarely scores lower), takes that pose and is settled,
-    unless the plain search was cut short.  A converged solve is settled since
-    2026-12-07: the penalised search after it had gained 0.0-0.3 % (it rests within the
-    capsules' tolerance, where the constrained pose keeps every pair clear) in every
-    row measured (Talos right joint 4, TIAGo++ and Namo's colliding Wai, 5 seeds each),
-    for 50-60 ms of the slowest faults'.  (A converged solve of a worse basin than the
-    penalised search's would be settled too; none was seen in those rows.)  The rows
-    left go to the penalised search, with their constrained poses as one more candidate
-    (the list returned).  Only with a polishing
+    whose constrained pose (:func:`_constrained`) is clear and within
+    :data:`CONSTRAINED_GAP` of its plain result (which searched without the contacts,
+    so a clear pose rarely scores lower) takes that pose and is settled, unless the
+    plain search was cut short.  The rows left go to the penalised search, with their
+    constrained poses as one more candidate (the list returned).  Only with a polishing
     algorithm (the node's preset; the paper's runs as it ran) and up to
     :data:`CONSTRAINED_ROWS` rows (the solve is per row; the colony is batched).
+
+    A converged solve alone is not settled: it can end in a far worse basin than the
+    penalised search's (Namo's Wai with right joint 3 stuck at 15 deg: 83.67 against
+    48.27, every seed), though on the rows measured first (Talos's right joint 4,
+    TIAGo++'s and Namo's colliding Wai at their average locks) the penalised search
+    gained only 0.0-0.3 % after it.
     """
     best_r, best_l, status = plain
     if not getattr(algo, 'polish', 0) or len(rows) > CONSTRAINED_ROWS:
         return rows, []
-    *found, converged = _constrained(robot, scorer, checker, batch, rows, clock)
+    found = _constrained(robot, scorer, checker, batch, rows, clock)
     scores, _, hits = _judge(robot, scorer, checker, batch.target_ids[rows],
                              [(best_r[rows], best_l[rows]), found])
-    near = converged | (scores[1] <= scores[0] * (1.0 + CONSTRAINED_GAP))
-    settled = ~hits[1] & near & np.array(
+    settled = ~hits[1] & (scores[1] <= scores[0] * (1.0 + CONSTRAINED_GAP)) & np.array(
         [status[k] not in ('deadline', 'cancelled') for k in rows], dtype=bool)
     for i in np.nonzero(settled)[0]:
         best_r[rows[i]], best_l[rows[i]] = found[0][i], found[1][i]
@@ -403,18 +402,16 @@ def _settle_constrained(robot, scorer, checker, batch, rows, plain, algo, clock)
 
 def _constrained(robot, scorer, checker, batch, rows, clock):
     """
-    Return (right, left, converged) of ``rows``, each solved with hard constraints.
+    Return (right, left) of ``rows``, each solved from its start with hard constraints.
 
     The capsules' clearances as SLSQP's constraints (:mod:`.constrained`), with the
     torso's shape where ``checker`` has it (as the penalised repair: only where the
     rows touch it; it costs a third more per evaluation, and the judge checks it
     anyway), from the row's starting pose, each row within a share of the clock that
     leaves the penalised search one too; a row without free joints, or for which no
-    clear pose was found, keeps its starting pose.  The third item says which rows'
-    solves converged (a clear local optimum of the constrained score).
+    clear pose was found, keeps its starting pose.
     """
     right, left = batch.right[rows].copy(), batch.left[rows].copy()
-    converged = np.zeros(len(rows), dtype=bool)
     for i, k in enumerate(rows):
         if not batch.layouts[k]:
             continue
@@ -422,8 +419,8 @@ def _constrained(robot, scorer, checker, batch, rows, clock):
         res = constrained_pose(problem, checker, clock.child(share=1.0 / (len(rows) - i + 1)))
         if res.x is not None:
             qr, ql = problem.assemble(res.x[None])
-            right[i], left[i], converged[i] = qr[0], ql[0], res.success
-    return right, left, converged
+            right[i], left[i] = qr[0], ql[0]
+    return right, left
 
 
 def _judge(robot, scorer, checker, ids, candidates):
