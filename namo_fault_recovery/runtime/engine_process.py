@@ -76,13 +76,8 @@ def _run_nice(nice):
     if nice == base:
         return base, base, None
     refused = set_nice(nice)
-    _compute_at(base)         # back (a nice raised above base may stay: not permitted)
+    set_nice(base)            # back (a nice raised above base may stay: not permitted)
     return (base, base, refused) if refused else (base, nice, None)
-
-
-def _compute_at(nice):
-    """Child: compute at ``nice`` from now on (allowed: it was tried at start)."""
-    set_nice(nice)
 
 
 def _serve(conn, current, parent_pid=None):
@@ -120,11 +115,12 @@ def _serve(conn, current, parent_pid=None):
             return                                   # the node went away
         if request is _STOP:
             return
+        # Each run computes at its own nice (allowed: both were tried at start).
         if request[0] == _REFINE:
-            _compute_at(base)
+            set_nice(base)
             _refine(conn, robot, library, request[1:], current, quantisations)
         else:
-            _compute_at(run_nice)
+            set_nice(run_nice)
             _run(conn, robot, library, request, current, quantisations)
 
 
