@@ -455,7 +455,7 @@ class RecoveryClient(SpunClient):
         self.domain_id = domain_id
         self._joint_state = JointState
         client_name = client_name or f'namo_recovery_client_{os.getpid()}_{next(_COUNTER)}'
-        self._spun = SpunNode(client_name, domain_id, self.namespace, lean=True)
+        self._spun = SpunNode(client_name, domain_id, self.namespace)
         self.context, self.node = self._spun.context, self._spun.node
         latched = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
                              reliability=ReliabilityPolicy.RELIABLE,

@@ -26,14 +26,8 @@ import time
 class SpunNode:
     """An rclpy node, its own context and the thread that spins it."""
 
-    def __init__(self, name, domain_id=None, namespace=None, lean=False):
-        """
-        Create the context and the node (not spinning yet: see :meth:`start`).
-
-        A ``lean`` node has no parameter services, type-description service or
-        ``/rosout``: its executor waits on the caller's entities alone, so that each
-        message costs it less Python (as :mod:`.state_listener`'s helper node).
-        """
+    def __init__(self, name, domain_id=None, namespace=None):
+        """Create the context and the node (not spinning yet: see :meth:`start`)."""
         import rclpy
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
@@ -44,14 +38,7 @@ class SpunNode:
         # '--node-param x:=y' would otherwise be read as a ROS remap rule).
         rclpy.init(args=[], context=self.context, domain_id=domain_id)
         try:
-            options = {}
-            if lean:
-                from rclpy.parameter import Parameter
-                options = {'start_parameter_services': False, 'enable_rosout': False,
-                           'parameter_overrides': [
-                               Parameter('start_type_description_service', value=False)]}
-            self.node = rclpy.create_node(name, namespace=namespace, context=self.context,
-                                          **options)
+            self.node = rclpy.create_node(name, namespace=namespace, context=self.context)
         except Exception:
             rclpy.try_shutdown(context=self.context)
             raise
