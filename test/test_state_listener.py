@@ -42,3 +42,39 @@ def test_helper_named_after_the_renamed_node_and_remapped_with_it(tmp_path):
     finally:
         probe.close()
         assert node.stop() == 0, node.describe()
+
+
+def test_a_period_spaces_the_samples_taken_and_keeps_the_newest():
+    """
+    With a period, the helper takes at most one sample per period, the newest then.
+
+    A 500 Hz stream cost the node's process 29-34 % of a core taken sample by sample,
+    5-8 % at the node's 0.02 s (2026-12-07, 10 s, the bench's stream process).
+    """
+    import time
+
+    from namo_fault_recovery.ros.state_listener import StateListener
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import Int32
+
+    qos = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
+                     reliability=ReliabilityPolicy.BEST_EFFORT)
+    parent = SpunNode('namo_test_period_parent', DOMAIN)
+    taken = []
+    listener = StateListener(parent.node, Int32, 'namo_test_period', taken.append, qos,
+                             period=0.05)
+    publisher = parent.node.create_publisher(Int32, 'namo_test_period', qos)
+    try:
+        wait_until(lambda: publisher.get_subscription_count() > 0, 10.0)
+        began, sent = time.monotonic(), 0
+        while time.monotonic() - began < 1.0:
+            sent += 1
+            publisher.publish(Int32(data=sent))
+            time.sleep(0.002)
+        time.sleep(0.2)
+    finally:
+        listener.stop()
+        parent.close()
+    assert sent > 200
+    assert 5 <= len(taken) <= 1.0 / 0.05 + 3, len(taken)
+    assert taken[-1].data >= sent - 0.05 / 0.002 - 5, (taken[-1].data, sent)
