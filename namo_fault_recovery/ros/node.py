@@ -61,7 +61,7 @@ NODE_NAME = 'recovery_node'
 PARTS = ('_states', '_table', '_explored', '_state', '_answers', '_markers')
 FAULT_QUEUE_DEPTH = 10_000        # reports the subscription holds while the intake catches up
 STATES_PARSE_PERIOD = 0.1         # s: the latest raw joint state is parsed at most this often
-STATE_PERIOD_SEC = 0.02           # s: a /joint_states sample is taken at most this often
+STATES_TAKE_PERIOD = 0.02         # s: a /joint_states sample is taken at most this often
 MARKER_DELAY = 0.05               # s: markers are drawn this long after a publication
 RELIABLE = {'reliability': ReliabilityPolicy.RELIABLE, 'history': HistoryPolicy.KEEP_LAST}
 LATCHED = dict(RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)     # late joiners too
@@ -217,7 +217,7 @@ class RecoveryNode(Node):
                                  QoSProfile(depth=FAULT_QUEUE_DEPTH, **RELIABLE),
                                  callback_group=MutuallyExclusiveCallbackGroup())
         self._states = StateListener(self, JointState, 'joint_states', self._inputs.joint_state,
-                                     STATES_QOS, raw=True, period=STATE_PERIOD_SEC)
+                                     STATES_QOS, raw=True, period=STATES_TAKE_PERIOD)
         services = ReentrantCallbackGroup()
         service_qos = QoSProfile(depth=1000, **RELIABLE)
         self.create_service(Trigger, 'reconfigure_gestures', self._on_reconfigure,

@@ -11,8 +11,8 @@ nothing else (no parameter services, no ``/rosout``), spun by its own executor, 
 ``tf2_ros.TransformListener`` takes ``/tf``; the callback is the same O(1) keep-the-latest.
 
 With a ``period``, the thread takes at most one sample per period: after a sample it
-waits out the rest of the period, and the subscription's depth of one (keep last) lets
-the middleware keep only the newest sample meanwhile.  The node reads the latest
+waits one period, and the subscription's depth of one (keep last) lets the middleware
+keep only the newest sample meanwhile.  The node reads the latest
 sample on a 10 Hz tick and at a fault, so a 500 Hz stream needs no more than that;
 each sample taken still costs the process's interpreter about half a millisecond.
 """
