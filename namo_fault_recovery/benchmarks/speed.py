@@ -23,6 +23,7 @@ import time
 import numpy as np
 
 from . import common
+from ..recovery.result import CUT_SHORT
 
 TARGET_MEDIAN_S = 0.100
 TARGET_P95_S = 0.200
@@ -142,7 +143,7 @@ def summarise(robot, library, runs, best, joints):
         timing[k] = {'n': len(t), 'median': common.percentile(t, 50),
                      'p95': common.percentile(t, 95), 'max': float(np.max(t)) if t else math.nan,
                      'mean': float(np.mean(t)) if t else math.nan,
-                     'deadline_hits': sum(any(s in ('deadline', 'cancelled')
+                     'deadline_hits': sum(any(s in CUT_SHORT
                                               for s in r['statuses']) for r in rs)}
     ratio = {'median': timing['abc-paper']['median'] / timing['abc-default']['median'],
              'p95': timing['abc-paper']['p95'] / timing['abc-default']['p95']}

@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 
 from . import pacing
-from .result import GestureResult
+from .result import CUT_SHORT, GestureResult
 from ..model.kinematics import batch_forward, split_arms
 from ..model.robot import ARMS
 from ..objective.collision import CollisionModel
@@ -169,7 +169,7 @@ def _joined(message, note):
 def _locked_message(result, collides):
     """Return ``result``'s message for publishing the locked design in its place."""
     parts = [p for p in (result.message or '').split('; ') if p and p != COLLIDES_WARNING]
-    if result.status in ('deadline', 'cancelled'):
+    if result.status in CUT_SHORT:
         parts.append('the search was cut short before it beat the design with the locks '
                      'applied; that design is published')
     else:

@@ -36,7 +36,7 @@ from .constrained import constrained_pose
 from .figures import COLLIDES_WARNING, largest_jump
 from .least_squares import refine_basins
 from .locks import clamp_lock, resolve_locks
-from .result import GestureResult, LibraryResult
+from .result import CUT_SHORT, GestureResult, LibraryResult
 from .seeding import kinematic_starts
 from .twins import best_twins, pose_twins
 from ..model.kinematics import (angle_bytes, arm_columns, arm_joint_count, ArmLandmarks,
@@ -335,7 +335,7 @@ def _solve(robot, scorer, checker, batch, algo, clock, rng, stats=None):
         pick = (int(np.argmin(np.where(free, scores[:, i], np.inf))) if free.any()
                 else int(np.argmin(pens[:, i])))
         best_r[k], best_l[k] = candidates[pick][0][i], candidates[pick][1][i]
-        if st2[i] in ('deadline', 'cancelled'):
+        if st2[i] in CUT_SHORT:
             status[k] = st2[i]
     return best_r, best_l, status
 
@@ -392,7 +392,7 @@ def _settle_constrained(robot, scorer, checker, batch, rows, plain, algo, clock)
     scores, _, hits = _judge(robot, scorer, checker, batch.target_ids[rows],
                              [(best_r[rows], best_l[rows]), found])
     settled = ~hits[1] & (scores[1] <= scores[0] * (1.0 + CONSTRAINED_GAP)) & np.array(
-        [status[k] not in ('deadline', 'cancelled') for k in rows], dtype=bool)
+        [status[k] not in CUT_SHORT for k in rows], dtype=bool)
     for i in np.nonzero(settled)[0]:
         best_r[rows[i]], best_l[rows[i]] = found[0][i], found[1][i]
         if clock.expired():
@@ -1057,7 +1057,7 @@ def _searched_to_floor(setup, rows, ks):
     colony), still searches within reach.
     """
     return bool(getattr(setup.algo, 'polish', 0)) and not any(
-        rows.status[k] in ('deadline', 'cancelled') for k in ks)
+        rows.status[k] in CUT_SHORT for k in ks)
 
 
 def _paced(setup, gesture):
@@ -1225,7 +1225,7 @@ def _stage2(setup, rows, clock, rng):
                                                     best_r[k], best_l[k], ids[k]):
             best_r[k], best_l[k], after[k] = r2[i], l2[i], f2[i]
             rows.stage[k] = 2
-        if st2[i] in ('deadline', 'cancelled'):
+        if st2[i] in CUT_SHORT:
             rows.status[k] = st2[i]
 
 
@@ -1504,7 +1504,7 @@ def _library_result(setup, locks, out, notes, wall, nfev):
             **_path_figures(setup, out, ks)))
     notes = list(notes) + [f'{setup.selected[g].name}: {PACED_NOTE}'
                            for g in sorted({owners[k] for k in ids if out['paced'][k]})]
-    deadline_met = not any(g.status in ('deadline', 'cancelled') for g in results)
+    deadline_met = not any(g.status in CUT_SHORT for g in results)
     return LibraryResult(
         gestures=tuple(results), faults=setup.faults,
         locks={j: float(a) for j, a in locks.items()}, frozen_arms=setup.frozen,
@@ -1561,7 +1561,7 @@ def _expand(setup, rows, clock, rng, stats):
             rows.expansion[k] = level
             if f2[i] <= after[k]:
                 best_r[k], best_l[k], after[k] = r2[i], l2[i], f2[i]
-            if st2[i] in ('deadline', 'cancelled') or status[k] == 'unchanged':
+            if st2[i] in CUT_SHORT or status[k] == 'unchanged':
                 status[k] = st2[i]
 
 

@@ -30,7 +30,7 @@ from .budget import PUBLISH_RESERVE
 from .keyframes import (DEFAULT_EXPANSION_THRESHOLD, PoseProblem, reconfigure_library,
                         SearchOptions)
 from .locks import clamp_lock
-from .result import LibraryResult
+from .result import CUT_SHORT, LibraryResult
 from ..model.gestures import GestureLibrary
 from ..model.kinematics import batch_forward
 from ..model.robot import ARMS
@@ -142,7 +142,7 @@ def _solve_leans(robot, library, result, settings, leans, clock, rng, stay_close
     found = {}
     for gesture in out.gestures:
         name, t = names[gesture.name]
-        if gesture.status in ('deadline', 'cancelled'):    # cut short: not published
+        if gesture.status in CUT_SHORT:    # cut short: not published
             continue
         if name not in found or gesture.score_after < found[name][1].score_after:
             found[name] = (t, gesture)

@@ -41,7 +41,7 @@ from .keyframes import (apply_locks, free_layout, joint_bounds, joint_set, layou
                         PoseProblem, reconfigure_library, SearchOptions)
 from .kriging import OrdinaryKriging
 from .locks import frozen_arms, resolve_locks
-from .result import LibraryResult
+from .result import CUT_SHORT, LibraryResult
 from .trajectory_opt import (designed_step_deg, optimise_motion, optimise_trajectory,
                              TrajectoryProblem)
 from .vq import quantise
@@ -340,7 +340,7 @@ def _adapt(job, locks, seed, search):
         # clamped into theirs, so clipping leaves them as they are).
         m.q_r, m.q_l = ctx.model.arms['right'].clip(m.q_r), ctx.model.arms['left'].clip(m.q_l)
         results.append(describe_motion(ctx, m, job.picks[gesture.name]))
-    deadline_met = not any(g.status in ('deadline', 'cancelled') for g in results)
+    deadline_met = not any(g.status in CUT_SHORT for g in results)
     return LibraryResult(
         gestures=tuple(results), locks={j: float(a) for j, a in locks.items()},
         frozen_arms=frozen_arms(robot, locks), deadline_met=deadline_met,
@@ -439,7 +439,7 @@ def _whole_trajectory(ctx, m, budget, notes):
             if k:
                 m.stage, m.free = level, tuple(robot.arms[s].joint_names[j] for s, j in lay)
         m.nfev += out.nfev
-        if out.status in ('deadline', 'cancelled'):
+        if out.status in CUT_SHORT:
             m.cut = out.status          # the message says so; the library's status stays
             notes.append(f'{m.gesture.name}: the whole-trajectory pass was cut short '
                          f'({out.status}) after {out.nfev} evaluations; the best '

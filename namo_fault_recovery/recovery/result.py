@@ -15,7 +15,8 @@ them all).  The main ones:
 - ``deadline`` / ``deadline_met``: the deadline a fault set was answered within; a
   refined version keeps its deadline result's, and ``refined_after`` says how long after
   that result the refinement found it;
-- ``status``: ``converged``, ``deadline``, ``cancelled``, ``frozen`` or ``unchanged``.
+- ``status``: ``converged``, ``deadline``, ``cancelled``, ``frozen`` or ``unchanged``
+  (:data:`CUT_SHORT`: the two of a search cut short).
 
 The stages of the engine build these types too: the keyframe search
 (:func:`.keyframes.reconfigure_library`) and the motion adaptation
@@ -33,6 +34,9 @@ from typing import Optional
 import numpy as np
 
 from . import pacing
+
+# The statuses of a search the deadline or a cancel request cut short (its best so far).
+CUT_SHORT = ('deadline', 'cancelled')
 
 
 class MalformedResult(ValueError):

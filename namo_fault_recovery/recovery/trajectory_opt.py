@@ -33,6 +33,7 @@ import numpy as np
 from scipy.linalg import solveh_banded
 from scipy.optimize import minimize
 
+from .result import CUT_SHORT
 from ..model.kinematics import batch_forward, batch_forward_jacobian, take_landmarks
 from ..model.robot import ARMS
 
@@ -557,7 +558,7 @@ def optimise_motion(robot, scorer, target_ids, start_right, start_left, layout, 
         out = optimise_trajectory(problem, clock, solver='newton', ftol=ftol)
         q, nfev, nit, status = (out.q_right, out.q_left), nfev + out.nfev, nit + out.nit, \
             out.status
-        if status in ('deadline', 'cancelled'):
+        if status in CUT_SHORT:
             break
     final = TrajectoryProblem(robot, scorer, target_ids, (start_right, start_left), layout,
                               smooth=MOTION_SMOOTHING[-1], **kw)
