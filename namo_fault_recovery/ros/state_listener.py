@@ -12,9 +12,9 @@ nothing else (no parameter services, no ``/rosout``), spun by its own executor, 
 
 With a ``period``, the thread takes at most one sample per period: after a sample it
 waits one period, and the subscription's depth of one (keep last) lets the middleware
-keep only the newest sample meanwhile.  The node reads the latest
-sample on a 10 Hz tick and at a fault, so a 500 Hz stream needs no more than that;
-each sample taken still costs the process's interpreter about half a millisecond.
+keep only the newest sample meanwhile.  The node reads the latest sample on a 10 Hz
+tick and at a fault, so a 500 Hz stream needs no more than that; each sample taken
+still costs the process's interpreter about half a millisecond.
 """
 
 import threading
