@@ -26,7 +26,7 @@ top of the paper's method:
 import copy
 from dataclasses import dataclass, replace
 import time
-from typing import Optional, Union
+from typing import NamedTuple, Optional, Union
 
 import numpy as np
 
@@ -994,6 +994,23 @@ def joint_bounds(robot):
             np.concatenate([robot.arms[s].upper for s in ARMS]))
 
 
+class _Motion(NamedTuple):
+    """One motion being paced: its gesture (``owner``), its rows ``ks`` and their floors."""
+
+    owner: int
+    ks: np.ndarray
+    floor: bool         # searched to their floors (:func:`_searched_to_floor`)
+
+
+class _Reach(NamedTuple):
+    """A motion's joint angles (K, J), step limits and joint bounds, as pacing reads them."""
+
+    q: np.ndarray
+    limits: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+
+
 def _pace(setup, rows, clock, rng):
     """
     Keep every motion of ``rows`` within the joints' velocity limits (in place).
@@ -1024,11 +1041,11 @@ def _pace(setup, rows, clock, rng):
         if pacing.feasible(q, limits):
             continue
         base = np.concatenate((rows.base_r[ks], rows.base_l[ks]), axis=1)
-        floor = _searched_to_floor(setup, rows, ks)
-        extra = [] if floor else _within_reach(
-            setup, rows, owner, ks, (q, limits, lower, upper), clock, rng)
+        motion = _Motion(owner, ks, _searched_to_floor(setup, rows, ks))
+        extra = [] if motion.floor else _within_reach(
+            setup, rows, motion, _Reach(q, limits, lower, upper), clock, rng)
         if not clock.expired():
-            extra += list(_branch_restarts(setup, rows, (owner, ks, floor),
+            extra += list(_branch_restarts(setup, rows, motion,
                                            pacing.candidates(q, base, limits, lower, upper),
                                            clock))
         best, _ = pacing.repair(q, base, limits, lower, upper,
@@ -1083,17 +1100,17 @@ def _motion_problem(setup, rows, ks, free):
                        collision=setup.checker, anchor=anchor, continuity=pull)
 
 
-def _within_reach(setup, rows, owner, ks, motion, clock, rng):
+def _within_reach(setup, rows, motion, reach, clock, rng):
     """
     Search every other keyframe again within its neighbours' reach; return the motions.
 
-    ``motion`` is (q (K, J), step limits, lower, upper).  For each parity, the
-    keyframes of that parity may each move within the box its two kept neighbours
-    allow (:func:`.pacing.reach_boxes`, the problem's bounds): a keyframe flipped into
-    another branch finds the best pose its neighbours can reach in time, and every
-    point searched is feasible.  The boxes of both parities depend on ``q`` alone, so
-    all of them are one batched search by the run's algorithm; each parity's results,
-    with the other keyframes kept, make one motion.
+    ``motion`` is the :class:`_Motion`, ``reach`` its :class:`_Reach`.  For each
+    parity, the keyframes of that parity may each move within the box its two kept
+    neighbours allow (:func:`.pacing.reach_boxes`, the problem's bounds): a keyframe
+    flipped into another branch finds the best pose its neighbours can reach in time,
+    and every point searched is feasible.  The boxes of both parities depend on ``q``
+    alone, so all of them are one batched search by the run's algorithm; each parity's
+    results, with the other keyframes kept, make one motion.
 
     The search's polish is one batched call for all its starts, plain (a polish
     restarted from steepest descent crawls along the box faces to its iteration cap:
@@ -1105,7 +1122,8 @@ def _within_reach(setup, rows, owner, ks, motion, clock, rng):
     of it in the repair, whose search had polished twice for 40 iterations: the
     colony's five starts, then the neighbours' two); see README "Other robots".
     """
-    q, limits, lower, upper = motion
+    owner, ks, _ = motion
+    q, limits, lower, upper = reach
     free = _motion_layout(setup, rows, owner, ks)
     parts = [pacing.reach_boxes(q, limits, lower, upper, parity) for parity in (0, 1)]
     parts = [p for p in parts if p is not None]
@@ -1147,7 +1165,7 @@ def _branch_restarts(setup, rows, motion, starts, clock):
     through one solved keyframe); polishing each of its keyframes freely keeps them in
     that branch, so the polished motion is usually feasible, and a much better one than
     the start (the caller clips it into reach).  All starts of all keyframes are one
-    batched polish.  ``motion`` is (owner, rows ``ks``, searched to their floors).
+    batched polish.  ``motion`` is the :class:`_Motion`.
 
     The points after iterations ``RESTART_KEEP`` (those before the last) are returned
     too (M = N x the points kept): the polish is free and the repair clips its points
