@@ -264,6 +264,11 @@ def test_product_bench_offline_parts(tmp_path):
     assert 'circle' in summary['demo']['runs'][0]['scores']
     # The seeds of the stored optimum, rerun, are at the optimum (gap 0).
     assert all(math.isfinite(g) for g in summary['quality']['runs'][0]['gaps'].values())
+    # How far a run beat the best-known is reported beside the count (0 when none did).
+    lowest = min(summary['quality']['runs'][0]['gaps'].values())
+    idle = summary['quality']['conditions']['idle']
+    assert idle['below_best_known_max_pct'] == pytest.approx(-100 * min(0.0, lowest))
+    assert idle['below_best_known'] == int(lowest < -1e-6)
 
 
 def test_optima_of_one_library_keep_the_others():

@@ -388,6 +388,7 @@ def _quality_condition(rs, names):
             'wall_p95_ms': 1000 * common.percentile([r['wall_s'] for r in rs], 95),
             'wall_max_ms': 1000 * max(r['wall_s'] for r in rs),
             'below_best_known': sum(min(r['gaps'].values()) < -1e-6 for r in rs),
+            'below_best_known_max_pct': -100 * min(0.0, *(min(r['gaps'].values()) for r in rs)),
             'per_gesture': per_gesture, 'misses_by_fault': misses}
 
 
@@ -456,8 +457,9 @@ def print_quality(out, s):
                               sorted(c['misses_by_fault'].items(), key=lambda kv: -kv[1]))
             out.write(f'  {cond}: runs with a gesture beyond 1%, by fault: {worst}\n')
         if c['below_best_known']:
-            out.write(f"  {cond}: {c['below_best_known']} run(s) beat the best-known "
-                      f'(regenerate with more seeds)\n')
+            out.write(f"  {cond}: {c['below_best_known']} run(s) beat the best-known, by at "
+                      f"most {c['below_best_known_max_pct']:.4f} % (regenerate with more "
+                      f'seeds)\n')
 
 
 # --- part 3: the table ---------------------------------------------------------------
