@@ -464,3 +464,26 @@ def test_latency_judges_each_library_as_served_against_its_locks_best_known(tmp_
     (tmp_path / 'bad.yaml').write_text('fault_sets: 3\n')
     with pytest.raises(common.BenchError, match=r'--optima .*bad.yaml: expected fault_sets'):
         latency.served_optima(tmp_path / 'bad.yaml')
+
+
+@pytest.mark.parametrize('library', ['product', 'demo'])
+def test_the_packaged_optima_were_made_for_the_packaged_model_and_settings(library):
+    """
+    A quality figure is a gap to a stored best-known, which must fit what is measured.
+
+    Optima made for another model, library or settings are a stale yardstick (the
+    product's of 2026-12-04 were beaten by up to 1.29 % before they were made again).  A
+    change that moves the fingerprint regenerates them: ``bench product --update-optima
+    --optima-libraries LIBRARY``.
+    """
+    robot, lib = product.load_models(library)
+    doc = product.load_product_best_known()
+    assert product.fingerprint_warning(doc, library, robot, lib, product.node_settings()) == ''
+
+
+@pytest.mark.parametrize('name', ['talos', 'tiago_dual'])
+def test_the_other_robots_optima_were_made_for_their_models(name):
+    from namo_fault_recovery.benchmarks.robots import load_optima, shipped_robot
+    robot, lib = shipped_robot(name).models()
+    assert load_optima(shipped_robot(name))['model_fingerprint'] == \
+        common.model_fingerprint(robot, lib)
