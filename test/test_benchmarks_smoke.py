@@ -483,7 +483,6 @@ def test_the_packaged_optima_were_made_for_the_packaged_model_and_settings(libra
 
 @pytest.mark.parametrize('name', ['talos', 'tiago_dual'])
 def test_the_other_robots_optima_were_made_for_their_models(name):
-    from namo_fault_recovery.benchmarks.robots import load_optima, shipped_robot
-    robot, lib = shipped_robot(name).models()
-    assert load_optima(shipped_robot(name))['model_fingerprint'] == \
-        common.model_fingerprint(robot, lib)
+    from namo_fault_recovery.benchmarks.robots import load_optima, optima_warning, shipped_robot
+    bench = shipped_robot(name)
+    assert optima_warning(bench, load_optima(bench), *bench.models()) == ''

@@ -158,6 +158,13 @@ def load_optima(bench: BenchRobot):
         return yaml.safe_load(handle)
 
 
+def optima_warning(bench: BenchRobot, best_doc, robot, lib) -> str:
+    """Return a line if ``best_doc`` was made for another model than ``robot``, else ''."""
+    if best_doc.get('model_fingerprint') != common.model_fingerprint(robot, lib):
+        return f'warning: {bench.optima} was made for another model; rerun with --update-optima'
+    return ''
+
+
 def run_quality(out, bench: BenchRobot, best_doc, seeds=10, joints=None, deadline=None,
                 expand_shared=False):
     """
@@ -169,9 +176,9 @@ def run_quality(out, bench: BenchRobot, best_doc, seeds=10, joints=None, deadlin
     if deadline is not None:
         settings = settings.with_changes(deadline_sec=float(deadline))
     robot, lib = bench.models()
-    if best_doc.get('model_fingerprint') != common.model_fingerprint(robot, lib):
-        out.write(f'warning: {bench.optima} was made for another model; rerun with '
-                  '--update-optima\n')
+    warning = optima_warning(bench, best_doc, robot, lib)
+    if warning:
+        out.write(warning + '\n')
     quant = typical_points(robot, lib, settings.vq_distortion_mm)
     faults_of = _single_faults(robot, lib, settings, joints)
     recover(robot, lib, next(iter(faults_of.values())), settings, seed=0,
