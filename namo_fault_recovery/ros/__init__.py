@@ -12,8 +12,10 @@ the node's runtime, ``runtime/``):
 - :mod:`.description_wait`: the URDF from the ``robot_description`` topic, waited for
   (and said on ``/diagnostics``) when the robot's profile names none;
 - :mod:`.input_monitor`: the latest joint state, measured angles and rejected inputs;
-- :mod:`.state_listener`: ``/joint_states`` taken on a helper node and executor of their
-  own, so that a 500 Hz stream does not wake the node's executor;
+- :mod:`.topic_listener`: one subscription taken on a helper node, in a thread and on a
+  wait set of its own, without an executor: the node's ``/joint_states`` (a 500 Hz
+  stream does not wake the node's executor) and ``/actuator_fault``, and every client's
+  ``/gesture_library``;
 - :mod:`.diagnostics`: ``/diagnostics`` built from a snapshot;
 - :mod:`.messages`: results to and from ROS messages, and the RViz markers.
 

@@ -30,6 +30,7 @@ import time
 
 from .messages import duration_seconds, stamp_key
 from .spun_node import call_service, SpunClient, SpunNode, wait_on, wait_until
+from .topic_listener import TopicListener
 from ..recovery.result import GestureResult, LibraryResult
 from ..runtime import diagnostic_keys as keys
 
@@ -460,8 +461,8 @@ class RecoveryClient(SpunClient):
         latched = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
                              reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self._library_sub = self.node.create_subscription(
-            JointTrajectory, LIBRARY_TOPIC, self.inbox.add_delivered, latched)
+        self._library_listener = TopicListener(self.node, JointTrajectory, LIBRARY_TOPIC,
+                                               self.inbox.add_delivered, latched, info=True)
         self.node.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC,
                                       self.inbox.add_diagnostics, 50)
         self._fault_pub = self.node.create_publisher(JointState, FAULT_TOPIC, 10)
@@ -469,6 +470,11 @@ class RecoveryClient(SpunClient):
         self._spun.start()
 
     # --- life cycle and names ---------------------------------------------------------
+
+    def close(self) -> None:
+        """Stop the library's listener, then spinning, and shut the context down."""
+        self._library_listener.stop()
+        super().close()
 
     @property
     def fault_topic(self) -> str:
@@ -478,7 +484,7 @@ class RecoveryClient(SpunClient):
     @property
     def library_topic(self) -> str:
         """Return the resolved name of the library topic."""
-        return self._library_sub.topic_name
+        return self._library_listener.topic
 
     def resolve_service(self, name: str) -> str:
         """Return a service name resolved in the client's namespace."""

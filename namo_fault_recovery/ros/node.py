@@ -40,7 +40,7 @@ from .explored_intake import ExploredIntake
 from .input_monitor import InputMonitor
 from .parameters import (check_parameter, declare_parameters, DEFAULT_STATE_DIR, MARKER_PARAMS,
                          node_config, one_line, parameter_specs, RERUN_PARAMS, StartupError)
-from .state_listener import StateListener
+from .topic_listener import TopicListener
 from ..errors import ConfigError, shorten
 from ..recovery.result import reference_result, summary
 from ..runtime import diagnostic_keys as dk
@@ -58,7 +58,7 @@ from ..runtime.run_book import Outcome, RunBook
 
 NODE_NAME = 'recovery_node'
 # The node's parts with threads or files, stopped in this order (after the engine).
-PARTS = ('_states', '_table', '_explored', '_state', '_answers', '_markers')
+PARTS = ('_faults', '_states', '_table', '_explored', '_state', '_answers', '_markers')
 FAULT_QUEUE_DEPTH = 10_000        # reports the subscription holds while the intake catches up
 STATES_PARSE_PERIOD = 0.1         # s: the latest raw joint state is parsed at most this often
 STATES_TAKE_PERIOD = 0.02         # s: a /joint_states sample is taken at most this often
@@ -213,10 +213,9 @@ class RecoveryNode(Node):
         self._marker_pub = self.create_publisher(MarkerArray, 'gesture_markers',
                                                  QoSProfile(depth=1, **LATCHED))
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(JointState, 'actuator_fault', self._on_fault,
-                                 QoSProfile(depth=FAULT_QUEUE_DEPTH, **RELIABLE),
-                                 callback_group=MutuallyExclusiveCallbackGroup())
-        self._states = StateListener(self, JointState, 'joint_states', self._inputs.joint_state,
+        self._faults = TopicListener(self, JointState, 'actuator_fault', self._on_fault,
+                                     QoSProfile(depth=FAULT_QUEUE_DEPTH, **RELIABLE))
+        self._states = TopicListener(self, JointState, 'joint_states', self._inputs.joint_state,
                                      STATES_QOS, raw=True, period=STATES_TAKE_PERIOD)
         services = ReentrantCallbackGroup()
         service_qos = QoSProfile(depth=1000, **RELIABLE)

@@ -14,7 +14,7 @@ One definition here, instead of one per caller::
     spun.close()
 
 The node is rclpy's full node, parameter services included.  Made lean (as the
-helper of :mod:`.state_listener` is), the player-on-simulator test's carry-on failed 4
+helper of :mod:`.topic_listener` is), the player-on-simulator test's carry-on failed 4
 times in 25 runs (the reconfigured library came 0.95 s late, and the blend then met the
 torso), against 0 in 28 with full nodes; the cause was not found.
 """
