@@ -63,6 +63,9 @@ def stamp_of(text):
     return int(sec) * 1_000_000_000 + int(nanosec)
 
 
+ROOMY_DEADLINE = 5.0     # s: for a test of what a run computes, not of its time
+
+
 def reset(client):
     """Clear every fault; return the reference version that follows."""
     before = client.latest().stamp
@@ -279,10 +282,17 @@ def test_measured_lock_strategy_uses_joint_states(client):
 
 
 def test_tool_length_set_at_run_time_re_adapts_the_motions(client, robot):
-    """A structure change without any failed joint: a 50 mm tool in the right hand."""
+    """
+    A structure change without any failed joint: a 50 mm tool in the right hand.
+
+    At a roomy deadline: this is a test of the tool's adaptation, not of the 1 s
+    deadline, which ``bench latency`` measures (on a host three times slower than usual,
+    2026-12-08, the dense circle's search was cut at the 1 s deadline, and the answer
+    said so).
+    """
     reference = reset(client)
-    results = client.set_parameters(tool_length_mm=50.0)
-    assert results[0].successful, results[0].reason
+    result = client.set_parameters_atomically(tool_length_mm=50.0, deadline_sec=ROOMY_DEADLINE)
+    assert result.successful, result.reason
     try:
         adapted = client.wait_library(after=reference.stamp, what='the library for the tool')
         statuses = client.wait_diag(
@@ -313,7 +323,7 @@ def test_tool_length_set_at_run_time_re_adapts_the_motions(client, robot):
         response = client.trigger('/clear_faults')
         assert response.success and 'adapted to the 50 mm tool' in response.message
     finally:
-        assert client.set_parameters(tool_length_mm=0.0)[0].successful
+        assert client.set_parameters_atomically(tool_length_mm=0.0, deadline_sec=1.0).successful
     back = client.wait_library(lambda v: v.positions('circle') == reference.positions('circle'),
                                what='the reference library once the tool is removed')
     for name in GESTURES:
