@@ -140,3 +140,4 @@ class TopicListener:
         self._wake()
         self._thread.join(timeout=2.0)
         self.node.destroy_node()
+        self._guard.destroy()
